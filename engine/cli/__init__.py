@@ -1,0 +1,94 @@
+"""The ``winder`` command line.
+
+``winder`` with no arguments opens the GUI.  Every module in this package except this one is a
+sub-command: it defines ``NAME`` (str), ``HELP`` (one line), ``add_arguments(parser)`` and
+``run(args) -> int``.  Sub-commands are discovered, so adding one touches no other file.
+
+Exit codes: 0 success, 1 a computed result violates a limit (reported), 2 bad input
+(:class:`engine.errors.InputError`: a one-line message naming the place), 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import pkgutil
+import sys
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from engine import __version__
+from engine.errors import InputError
+
+
+def _subcommand_modules() -> list[Any]:
+    mods = []
+    for info in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name):
+        if info.name.startswith("_"):
+            continue
+        mods.append(importlib.import_module(f"{__name__}.{info.name}"))
+    return mods
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full argument parser with every discovered sub-command."""
+    parser = argparse.ArgumentParser(
+        prog="winder",
+        description="Filament-winding CAD/CAM. Without a sub-command, opens the desktop application.",
+    )
+    parser.add_argument("--version", action="version", version=f"winder {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for mod in _subcommand_modules():
+        p = sub.add_parser(mod.NAME, help=mod.HELP, description=mod.HELP)
+        mod.add_arguments(p)
+        p.set_defaults(_run=mod.run)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``winder``; returns the process exit code."""
+    args_list = list(sys.argv[1:] if argv is None else argv)
+    gui_flags = {"--selftest"}
+    if not args_list or (args_list[0].startswith("-") and set(args_list) <= gui_flags | {"--"}) or (
+        args_list and args_list[0].endswith(".toml") and len(args_list) == 1
+    ):
+        from winder_gui.app import main as gui_main  # lazy: the CLI never needs Qt
+
+        return int(gui_main(args_list))
+    parser = build_parser()
+    args = parser.parse_args(args_list)
+    if not getattr(args, "_run", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args._run(args) or 0)
+    except InputError as exc:
+        print(f"winder {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("winder: interrupted", file=sys.stderr)
+        return 130
+
+
+def _json_default(obj: Any) -> Any:
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, set | frozenset | tuple):
+        return list(obj)
+    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
+
+
+def dump_json(obj: Any, stream: Any = None) -> None:
+    """Print ``obj`` as JSON (numpy arrays and scalars converted) to ``stream`` (stdout)."""
+    stream = stream if stream is not None else sys.stdout
+    json.dump(obj, stream, indent=2, default=_json_default, allow_nan=False)
+    stream.write("\n")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
