@@ -1,0 +1,641 @@
+"""Mandrel generatrix r(z) of a shell of revolution (MATH.md §A1).
+
+A :class:`Mandrel` is a chain of segments on consecutive z intervals.  Each segment evaluates
+r, r', r'' in closed form (lines, circle arcs, ellipse arcs), from a Chebyshev representation
+(isotensoid domes) or from a C2 cubic spline (user sketches, tables, imported profiles).  All
+evaluation is vectorised over z.
+
+Conventions
+-----------
+* ``z`` along the rotation axis, ``r`` the distance from it; both in mm.
+* The mandrel spans the winding zone ``[z_min, z_max]``; ``r(z_min)`` and ``r(z_max)`` are the
+  polar-opening radii (``pole_radii``).  Inside the zone r > 0 is required.
+* At a joint of two segments r and r' are continuous (checked); r'' may jump where the geometry
+  itself does (cylinder to hemisphere); spline mandrels are C2 throughout.  At a joint, evaluation
+  takes the segment to the right.
+
+Constructors: :meth:`Mandrel.vessel` (cylinder + hemispherical / elliptical / isotensoid domes,
+unequal pole openings), :meth:`Mandrel.cone`, :meth:`Mandrel.pipe`, :meth:`Mandrel.bottle`
+(concave waisted neck), :meth:`Mandrel.from_points` (C2 spline through user points).  Importers
+for CSV/DXF/STEP are in :mod:`engine.mandrel_io`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.polynomial import chebyshev as C
+from numpy.typing import ArrayLike, NDArray
+
+from engine.errors import InputError
+
+FloatArray = NDArray[np.float64]
+
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(64)
+
+
+def _gauss(a: float, b: float, n_sub: int = 8) -> tuple[FloatArray, FloatArray]:
+    """Composite 64-point Gauss-Legendre nodes and weights on [a, b]."""
+    edges = np.linspace(a, b, n_sub + 1)
+    half = 0.5 * np.diff(edges)
+    mid = 0.5 * (edges[:-1] + edges[1:])
+    x = (mid[:, None] + half[:, None] * _GL_X[None, :]).ravel()
+    w = (half[:, None] * _GL_W[None, :]).ravel()
+    return x, w
+
+
+# ------------------------------------------------------------------------------------------------
+# Segments
+# ------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Segment:
+    """One piece of the generatrix on ``[z0, z1]`` (mm)."""
+
+    z0: float
+    z1: float
+    kind: ClassVar[str] = "segment"
+
+    def eval(self, z: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """r, dr/dz, d2r/dz2 at ``z`` (mm, -, 1/mm)."""
+        raise NotImplementedError
+
+    def param_nodes(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Quadrature in a smooth parameter: (r, dz/dp, ds/dp, weights) for area and volume."""
+        z, w = _gauss(self.z0, self.z1)
+        r, dr, _ = self.eval(z)
+        return r, np.ones_like(z), np.sqrt(1.0 + dr * dr), w
+
+    def spec(self) -> dict[str, Any]:
+        """A JSON/TOML-able description (for reports)."""
+        return {"kind": self.kind, "z0": self.z0, "z1": self.z1}
+
+
+@dataclass(frozen=True)
+class LineSegment(Segment):
+    """Straight generatrix from (z0, r0) to (z1, r1): cylinder or cone."""
+
+    r0: float = 0.0
+    r1: float = 0.0
+    kind: ClassVar[str] = "line"
+
+    def eval(self, z: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        k = (self.r1 - self.r0) / (self.z1 - self.z0)
+        return self.r0 + k * (z - self.z0), np.full_like(z, k), np.zeros_like(z)
+
+
+@dataclass(frozen=True)
+class SmoothStepSegment(Segment):
+    """r = r0 + (r1 − r0)·P(u), u = (z − z0)/(z1 − z0), P = 10u³ − 15u⁴ + 6u⁵.
+
+    r' and r'' vanish at both ends, so the segment joins lines (and other smooth steps) C2.
+    """
+
+    r0: float = 0.0
+    r1: float = 0.0
+    kind: ClassVar[str] = "smoothstep"
+
+    def eval(self, z: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        h = self.z1 - self.z0
+        u = (z - self.z0) / h
+        d = self.r1 - self.r0
+        p = u**3 * (10.0 - 15.0 * u + 6.0 * u * u)
+        dp = 30.0 * u**2 * (1.0 - u) ** 2
+        d2p = 60.0 * u * (1.0 - u) * (1.0 - 2.0 * u)
+        return self.r0 + d * p, d * dp / h, d * d2p / (h * h)
+
+
+@dataclass(frozen=True)
+class ArcSegment(Segment):
+    """Circle arc r = rc + sqrt(a² − (z − zc)²) (upper half), radius ``a`` (mm)."""
+
+    zc: float = 0.0
+    rc: float = 0.0
+    a: float = 1.0
+    kind: ClassVar[str] = "arc"
+
+    def eval(self, z: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        u = z - self.zc
+        q = np.sqrt(np.maximum(self.a * self.a - u * u, 0.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            dr = -u / q
+            d2r = -(self.a * self.a) / (q * q * q)
+        return self.rc + q, dr, d2r
+
+    def _angles(self) -> tuple[float, float]:
+        t0 = math.acos(np.clip((self.z0 - self.zc) / self.a, -1, 1))
+        t1 = math.acos(np.clip((self.z1 - self.zc) / self.a, -1, 1))
+        return t0, t1
+
+    def param_nodes(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        # z = zc + a cos t, r = rc + a sin t, t decreasing from t0 to t1
+        t0, t1 = self._angles()
+        t, w = _gauss(t1, t0)
+        r = self.rc + self.a * np.sin(t)
+        return r, self.a * np.sin(t), np.full_like(t, self.a), w
+
+
+@dataclass(frozen=True)
+class EllipseSegment(Segment):
+    """Ellipse arc r = b·sqrt(1 − ((z − zc)/a)²): axial semi-axis a, radial semi-axis b (mm)."""
+
+    zc: float = 0.0
+    a: float = 1.0
+    b: float = 1.0
+    kind: ClassVar[str] = "ellipse"
+
+    def eval(self, z: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        u = (z - self.zc) / self.a
+        q = np.sqrt(np.maximum(1.0 - u * u, 0.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            dr = -self.b * u / (self.a * q)
+            d2r = -self.b / (self.a * self.a * q * q * q)
+        return self.b * q, dr, d2r
+
+    def param_nodes(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        t0 = math.acos(np.clip((self.z0 - self.zc) / self.a, -1, 1))
+        t1 = math.acos(np.clip((self.z1 - self.zc) / self.a, -1, 1))
+        t, w = _gauss(t1, t0)
+        r = self.b * np.sin(t)
+        dz = self.a * np.sin(t)
+        ds = np.hypot(self.a * np.sin(t), self.b * np.cos(t))
+        return r, dz, ds, w
+
+
+@dataclass(frozen=True)
+class SplineSegment(Segment):
+    """C2 cubic spline r(z) through points (scipy ``CubicSpline``, not-a-knot ends)."""
+
+    z_pts: tuple[float, ...] = ()
+    r_pts: tuple[float, ...] = ()
+    kind: ClassVar[str] = "spline"
+
+    @cached_property
+    def _spline(self) -> Any:
+        from scipy.interpolate import CubicSpline
+
+        return CubicSpline(np.asarray(self.z_pts), np.asarray(self.r_pts), bc_type="not-a-knot")
+
+    def eval(self, z: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        s = self._spline
+        return s(z), s(z, 1), s(z, 2)
+
+    def param_nodes(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        x = np.asarray(self.z_pts)
+        zs, ws = [], []
+        for a, b in zip(x[:-1], x[1:]):  # exact per polynomial piece
+            z, w = _gauss(float(a), float(b), 1)
+            zs.append(z)
+            ws.append(w)
+        z = np.concatenate(zs)
+        r, dr, _ = self.eval(z)
+        return r, np.ones_like(z), np.sqrt(1.0 + dr * dr), np.concatenate(ws)
+
+    def spec(self) -> dict[str, Any]:
+        return {**super().spec(), "points": len(self.z_pts)}
+
+
+@dataclass(frozen=True)
+class IsotensoidSegment(Segment):
+    """Geodesic-isotensoid dome (netting theory) joined to a cylinder of radius ``R`` at ``zc``.
+
+    With ρ = r/R and ρ0 = C/R the Clairaut constant of the geodesic, the meridian obeys
+    dζ/dρ = −ρ³·sqrt(1 − ρ0²) / sqrt(ρ² − ρ0² − ρ⁶(1 − ρ0²)), ζ = (z − zc)/R.  The dome runs from
+    the equator (ρ = 1) to the pole ρ_p where the meridian is again parallel to the axis, with
+    ρ0² = (ρ_p² − ρ_p⁶)/(1 − ρ_p⁶).  The substitution ρ = 1 − (1 − ρ_p)(1 − cos t)/2 removes both
+    square-root singularities, so ζ(t) is analytic and is held as a Chebyshev series.
+    ``direction`` is +1 for a dome at the right end (z grows towards the pole), −1 at the left.
+    """
+
+    zc: float = 0.0
+    R: float = 1.0
+    rho_p: float = 0.2
+    direction: int = 1
+    kind: ClassVar[str] = "isotensoid"
+
+    @staticmethod
+    def dome_length(R: float, pole_radius: float) -> float:
+        """Axial length (mm) of the isotensoid dome of radius ``R`` ending at ``pole_radius``."""
+        return R * IsotensoidSegment._series(pole_radius / R)[2]
+
+    @staticmethod
+    def _series(rho_p: float) -> tuple[Any, Any, float]:
+        return _isotensoid_series(round(float(rho_p), 15))
+
+    def _t_of_z(self, z: FloatArray) -> FloatArray:
+        zeta_c, dzeta_c, length = self._series(self.rho_p)
+        zeta = np.clip(self.direction * (z - self.zc) / self.R, 0.0, length)
+        t_tab = np.linspace(0.0, math.pi, 513)
+        t = np.interp(zeta, C.chebval(_to_cheb(t_tab), zeta_c), t_tab)
+        for _ in range(6):
+            f = C.chebval(_to_cheb(t), zeta_c) - zeta
+            t = np.clip(t - f / C.chebval(_to_cheb(t), dzeta_c), 0.0, math.pi)
+        return t
+
+    def eval(self, z: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        zeta_c, dzeta_c, _ = self._series(self.rho_p)
+        t = self._t_of_z(np.asarray(z, dtype=float))
+        h = 0.5 * (1.0 - self.rho_p)
+        rho = 1.0 - h * (1.0 - np.cos(t))
+        drho = -h * np.sin(t)
+        d2rho = -h * np.cos(t)
+        zt = C.chebval(_to_cheb(t), dzeta_c)
+        ztt = C.chebval(_to_cheb(t), C.chebder(dzeta_c)) * (2.0 / math.pi)
+        slope = drho / zt  # dρ/dζ
+        curv = (d2rho * zt - drho * ztt) / zt**3  # d²ρ/dζ²
+        d = self.direction
+        return self.R * rho, d * slope, curv / self.R
+
+    def param_nodes(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        _, dzeta_c, _ = self._series(self.rho_p)
+        t, w = _gauss(0.0, math.pi)
+        h = 0.5 * (1.0 - self.rho_p)
+        r = self.R * (1.0 - h * (1.0 - np.cos(t)))
+        dz = self.R * C.chebval(_to_cheb(t), dzeta_c)
+        dr = self.R * h * np.sin(t)
+        return r, dz, np.hypot(dz, dr), w
+
+    def spec(self) -> dict[str, Any]:
+        return {**super().spec(), "R": self.R, "pole_radius": self.R * self.rho_p}
+
+
+def _to_cheb(t: FloatArray) -> FloatArray:
+    return np.asarray(t) * (2.0 / math.pi) - 1.0
+
+
+_ISO_CACHE: dict[float, tuple[Any, Any, float]] = {}
+
+
+def _isotensoid_series(rho_p: float) -> tuple[Any, Any, float]:
+    """Chebyshev series (in x = 2t/π − 1) of ζ(t) and dζ/dt, and the dome length ζ(π)."""
+    if rho_p in _ISO_CACHE:
+        return _ISO_CACHE[rho_p]
+    rp2 = rho_p * rho_p
+    rho0_sq = (rp2 - rp2**3) / (1.0 - rp2**3)
+    # D(ρ) = −(1 − ρ0²)ρ⁶ + ρ² − ρ0² = (ρ − 1)(ρ − ρ_p)·q(ρ)
+    D = np.zeros(7)
+    D[6], D[2], D[0] = -(1.0 - rho0_sq), 1.0, -rho0_sq  # increasing powers
+    q, rem = np.polynomial.polynomial.polydiv(D, np.polynomial.polynomial.polyfromroots([1.0, rho_p]))
+    h = 0.5 * (1.0 - rho_p)
+    deg = 80
+    x = np.cos(np.pi * (np.arange(deg + 1) + 0.5) / (deg + 1))  # Chebyshev nodes in [-1, 1]
+    t = (x + 1.0) * (math.pi / 2.0)
+    rho = 1.0 - h * (1.0 - np.cos(t))
+    qv = np.polynomial.polynomial.polyval(rho, q)
+    # dζ/dt = ρ³·sqrt(1−ρ0²)/sqrt(−q(ρ))  (the sqrt((1−ρ)(ρ−ρ_p)) factor cancels with dρ/dt)
+    dzdt = rho**3 * math.sqrt(1.0 - rho0_sq) / np.sqrt(-qv)
+    dz_c = C.chebfit(x, dzdt, deg)
+    z_c = C.chebint(dz_c, lbnd=-1.0) * (math.pi / 2.0)
+    length = float(C.chebval(1.0, z_c))
+    out = (z_c, dz_c, length)
+    _ISO_CACHE[rho_p] = out
+    return out
+
+
+# ------------------------------------------------------------------------------------------------
+# Mandrel
+# ------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Zone:
+    """A z interval (mm) with a label, e.g. a concave zone."""
+
+    z_from: float
+    z_to: float
+
+
+@dataclass(frozen=True)
+class Mandrel:
+    """Generatrix r(z) of the mandrel over the winding zone; see the module docstring."""
+
+    segments: tuple[Segment, ...]
+    name: str = "mandrel"
+    source: str = ""
+    meta: dict[str, Any] = field(default_factory=dict, compare=False)
+
+    def __post_init__(self) -> None:
+        if not self.segments:
+            raise InputError("the generatrix has no segments")
+        for a, b in zip(self.segments[:-1], self.segments[1:]):
+            if abs(a.z1 - b.z0) > 1e-9 * max(1.0, abs(a.z1)):
+                raise InputError(f"segments do not join: {a.z1} != {b.z0} mm")
+        for s in self.segments:
+            if not s.z1 > s.z0:
+                raise InputError(f"segment {s.kind} has zero or negative length: z {s.z0}..{s.z1} mm")
+        self._check_radius()
+
+    # -- evaluation ------------------------------------------------------------------------------
+    @cached_property
+    def _edges(self) -> FloatArray:
+        return np.array([s.z0 for s in self.segments] + [self.segments[-1].z1])
+
+    @property
+    def z_min(self) -> float:
+        """Start of the winding zone (mm)."""
+        return float(self._edges[0])
+
+    @property
+    def z_max(self) -> float:
+        """End of the winding zone (mm)."""
+        return float(self._edges[-1])
+
+    @property
+    def length(self) -> float:
+        """Axial length of the winding zone (mm)."""
+        return self.z_max - self.z_min
+
+    def evaluate(self, z: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """r (mm), r' (-), r'' (1/mm) at ``z`` (mm); z is clipped to [z_min, z_max]."""
+        zz = np.clip(np.asarray(z, dtype=float), self.z_min, self.z_max)
+        shape = zz.shape
+        zz = zz.ravel()
+        idx = np.clip(np.searchsorted(self._edges, zz, side="right") - 1, 0, len(self.segments) - 1)
+        r = np.empty_like(zz)
+        dr = np.empty_like(zz)
+        d2r = np.empty_like(zz)
+        for i, seg in enumerate(self.segments):
+            m = idx == i
+            if m.any():
+                r[m], dr[m], d2r[m] = seg.eval(zz[m])
+        return r.reshape(shape), dr.reshape(shape), d2r.reshape(shape)
+
+    def r(self, z: ArrayLike) -> FloatArray:
+        """Radius r(z) in mm."""
+        return self.evaluate(z)[0]
+
+    def dr(self, z: ArrayLike) -> FloatArray:
+        """Slope dr/dz."""
+        return self.evaluate(z)[1]
+
+    def d2r(self, z: ArrayLike) -> FloatArray:
+        """Second derivative d²r/dz² in 1/mm."""
+        return self.evaluate(z)[2]
+
+    def sample(self, n: int = 400) -> tuple[FloatArray, FloatArray]:
+        """``n`` points (z, r) spread over every segment (joints included), for plots and export."""
+        zs = []
+        total = self.length
+        for s in self.segments:
+            k = max(8, int(math.ceil(n * (s.z1 - s.z0) / total)))
+            zs.append(np.linspace(s.z0, s.z1, k, endpoint=False))
+        z = np.concatenate([*zs, [self.z_max]])
+        return z, self.r(z)
+
+    # -- properties ------------------------------------------------------------------------------
+    @property
+    def pole_radii(self) -> tuple[float, float]:
+        """Polar-opening radii (r at z_min, r at z_max) in mm."""
+        r = self.r(np.array([self.z_min, self.z_max]))
+        return float(r[0]), float(r[1])
+
+    @cached_property
+    def r_min(self) -> float:
+        """Smallest radius in the winding zone (mm)."""
+        z, r = self.sample(4000)
+        return float(r.min())
+
+    @cached_property
+    def r_max(self) -> float:
+        """Largest radius in the winding zone (mm)."""
+        z, r = self.sample(4000)
+        return float(r.max())
+
+    @cached_property
+    def area_mm2(self) -> float:
+        """Lateral surface area ∫ 2π r ds (mm²)."""
+        total = 0.0
+        for s in self.segments:
+            r, _, ds, w = s.param_nodes()
+            total += float(np.sum(2.0 * math.pi * r * ds * w))
+        return total
+
+    @cached_property
+    def volume_mm3(self) -> float:
+        """Volume enclosed by the surface between the end planes, ∫ π r² dz (mm³)."""
+        total = 0.0
+        for s in self.segments:
+            r, dz, _, w = s.param_nodes()
+            total += float(np.sum(math.pi * r * r * dz * w))
+        return total
+
+    def concave_zones(self, n: int = 4000, tol: float = 1e-9) -> list[Zone]:
+        """Maximal z intervals where r'' > 0 (the generatrix is concave seen from outside)."""
+        z = np.linspace(self.z_min, self.z_max, n)
+        _, _, d2 = self.evaluate(z)
+        mask = d2 > tol
+        zones: list[Zone] = []
+        if not mask.any():
+            return zones
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(int), [0]])))
+        for a, b in zip(edges[0::2], edges[1::2]):
+            zones.append(Zone(float(z[a]), float(z[b - 1])))
+        return zones
+
+    def summary(self) -> dict[str, Any]:
+        """The mandrel summary printed by ``winder mandrel --json``."""
+        return {
+            "name": self.name,
+            "source": self.source,
+            "z_min": self.z_min,
+            "z_max": self.z_max,
+            "length_mm": self.length,
+            "r_min": self.r_min,
+            "r_max": self.r_max,
+            "pole_radii": list(self.pole_radii),
+            "area_mm2": self.area_mm2,
+            "volume_mm3": self.volume_mm3,
+            "concave_zones": [[zn.z_from, zn.z_to] for zn in self.concave_zones()],
+            "segments": [s.spec() for s in self.segments],
+        }
+
+    def _check_radius(self) -> None:
+        z = np.linspace(self.z_min, self.z_max, 2001)
+        r, dr, d2r = self.evaluate(z)
+        bad = ~np.isfinite(r)
+        if bad.any():
+            raise InputError(f"the generatrix is not finite at z = {z[bad][0]:.6g} mm")
+        inside = r[1:-1]
+        if (inside <= 0).any():
+            zi = z[1:-1][inside <= 0][0]
+            raise InputError(
+                f"the generatrix meets the axis inside the winding zone at z = {zi:.6g} mm "
+                f"(r = {r[1:-1][inside <= 0][0]:.6g} mm); radii must be > 0 between the poles"
+            )
+        if r[0] < 0 or r[-1] < 0:
+            raise InputError(f"negative pole radius: r(z_min) = {r[0]:.6g}, r(z_max) = {r[-1]:.6g} mm")
+
+    # -- constructors ----------------------------------------------------------------------------
+    @classmethod
+    def pipe(cls, radius: float, length: float, name: str = "pipe") -> Mandrel:
+        """Plain cylinder (mm); the poles are the full radius (winding turns on end pins)."""
+        _positive(radius=radius, length=length)
+        return cls((LineSegment(0.0, length, radius, radius),), name=name, source="pipe")
+
+    @classmethod
+    def cone(cls, r0: float, r1: float, length: float, name: str = "cone") -> Mandrel:
+        """Frustum from radius ``r0`` at z = 0 to ``r1`` at z = ``length`` (mm)."""
+        _positive(r0=r0, r1=r1, length=length)
+        return cls((LineSegment(0.0, length, r0, r1),), name=name, source="cone")
+
+    @classmethod
+    def vessel(
+        cls,
+        radius: float,
+        cylinder_length: float,
+        dome: str = "hemisphere",
+        pole_radii: tuple[float, float] | float = (0.0, 0.0),
+        dome_ratio: float | tuple[float, float] = 1.0,
+        name: str = "vessel",
+    ) -> Mandrel:
+        """Cylinder of ``radius`` and ``cylinder_length`` (mm) closed by two domes.
+
+        Parameters
+        ----------
+        dome:
+            ``"hemisphere"``, ``"ellipse"`` (axial/radial semi-axis ratio ``dome_ratio``, any
+            positive value) or ``"isotensoid"``; a pair gives the left and right dome.
+        pole_radii:
+            Polar-opening radii (mm) at the left and right end; 0 closes a hemispherical or
+            elliptical dome (not possible for an isotensoid).
+        """
+        kinds = (dome, dome) if isinstance(dome, str) else tuple(dome)
+        poles = (pole_radii, pole_radii) if np.isscalar(pole_radii) else tuple(pole_radii)  # type: ignore[arg-type]
+        ratios = (dome_ratio, dome_ratio) if np.isscalar(dome_ratio) else tuple(dome_ratio)  # type: ignore[arg-type]
+        _positive(radius=radius)
+        if cylinder_length < 0:
+            raise InputError(f"cylinder length must be >= 0, got {cylinder_length} mm", field="cylinder_length")
+        for side, rp in zip(("left", "right"), poles):
+            if not 0.0 <= float(rp) < radius:
+                raise InputError(
+                    f"{side} pole opening radius must be in [0, {radius}) mm (the cylinder radius), got {rp}",
+                    field="pole_radius_mm",
+                )
+        left = _dome(kinds[0], radius, float(poles[0]), float(ratios[0]), zc=0.0, direction=-1)
+        right = _dome(kinds[1], radius, float(poles[1]), float(ratios[1]), zc=cylinder_length, direction=+1)
+        segs: list[Segment] = [left]
+        if cylinder_length > 0:
+            segs.append(LineSegment(0.0, cylinder_length, radius, radius))
+        segs.append(right)
+        return cls(tuple(segs), name=name, source=f"vessel:{kinds[0]}/{kinds[1]}")
+
+    @classmethod
+    def from_points(
+        cls, z: ArrayLike, r: ArrayLike, name: str = "spline", source: str = "points", file: str | None = None
+    ) -> Mandrel:
+        """C2 cubic spline through points (z strictly increasing, r > 0 inside), mm."""
+        zz = np.asarray(z, dtype=float)
+        rr = np.asarray(r, dtype=float)
+        validate_points(zz, rr, file=file)
+        seg = SplineSegment(float(zz[0]), float(zz[-1]), tuple(map(float, zz)), tuple(map(float, rr)))
+        return cls((seg,), name=name, source=source)
+
+    @classmethod
+    def bottle(
+        cls,
+        radius: float = 60.0,
+        body_length: float = 160.0,
+        shoulder_length: float = 40.0,
+        waist_radius: float = 18.0,
+        neck_length: float = 40.0,
+        neck_radius: float = 24.0,
+        bottom_pole_radius: float = 15.0,
+        name: str = "bottle",
+    ) -> Mandrel:
+        """A bottle: elliptical bottom, cylindrical body, shoulder, a waisted (concave) neck.
+
+        Shoulder (radius -> waist) and neck (waist -> neck radius) are quintic smooth steps, C2
+        with the body and with each other, so the waist region is concave (r'' > 0).  mm.
+        """
+        _positive(radius=radius, body_length=body_length, shoulder_length=shoulder_length,
+                  waist_radius=waist_radius, neck_length=neck_length, neck_radius=neck_radius,
+                  bottom_pole_radius=bottom_pole_radius)
+        if not waist_radius < neck_radius < radius:
+            raise InputError(
+                f"a bottle needs waist_radius < neck_radius < radius, got {waist_radius}, {neck_radius}, {radius}",
+                field="waist_radius")
+        if not bottom_pole_radius < radius:
+            raise InputError(f"bottom pole radius {bottom_pole_radius} mm must be below the radius {radius} mm",
+                             field="bottom_pole_radius")
+        bottom = _dome("ellipse", radius, bottom_pole_radius, 0.5, zc=0.0, direction=-1)
+        z1 = body_length
+        z2 = z1 + shoulder_length
+        z3 = z2 + neck_length
+        segs = (
+            bottom,
+            LineSegment(0.0, z1, radius, radius),
+            SmoothStepSegment(z1, z2, r0=radius, r1=waist_radius),
+            SmoothStepSegment(z2, z3, r0=waist_radius, r1=neck_radius),
+        )
+        return cls(segs, name=name, source="bottle")
+
+
+def _positive(**values: float) -> None:
+    for k, v in values.items():
+        if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
+            raise InputError(f"{k} must be a positive number of mm, got {v!r}", field=k)
+
+
+def _dome(kind: str, R: float, rp: float, ratio: float, zc: float, direction: int) -> Segment:
+    if kind == "hemisphere":
+        h = math.sqrt(R * R - rp * rp)
+        z_end = zc + direction * h
+        z0, z1 = sorted((zc, z_end))
+        return ArcSegment(z0, z1, zc=zc, rc=0.0, a=R)
+    if kind == "ellipse":
+        if not (math.isfinite(ratio) and ratio > 0):
+            raise InputError(f"elliptical dome axis ratio must be > 0, got {ratio}", field="dome_ratio")
+        a = ratio * R
+        h = a * math.sqrt(1.0 - (rp / R) ** 2)
+        z0, z1 = sorted((zc, zc + direction * h))
+        return EllipseSegment(z0, z1, zc=zc, a=a, b=R)
+    if kind == "isotensoid":
+        if not 0.02 <= rp / R <= 0.9:
+            raise InputError(
+                f"isotensoid dome needs a pole opening between 2 % and 90 % of the radius, got {rp} mm",
+                field="pole_radius_mm",
+            )
+        h = IsotensoidSegment.dome_length(R, rp)
+        z0, z1 = sorted((zc, zc + direction * h))
+        return IsotensoidSegment(z0, z1, zc=zc, R=R, rho_p=rp / R, direction=direction)
+    raise InputError(f"unknown dome '{kind}'; use hemisphere, ellipse or isotensoid", field="dome")
+
+
+def validate_points(z: FloatArray, r: FloatArray, file: str | None = None, lines: Sequence[int] | None = None) -> None:
+    """Check generatrix points: finite, z strictly increasing, r >= 0 at the ends and > 0 inside.
+
+    ``lines`` maps point index to a source line number for the message.
+    """
+
+    def where(i: int) -> int | None:
+        return None if lines is None else int(lines[i])
+
+    if z.ndim != 1 or z.shape != r.shape:
+        raise InputError("z and r must be 1-D arrays of equal length", file=file)
+    if len(z) < 4:
+        raise InputError(f"need at least 4 points for a C2 generatrix, got {len(z)}", file=file)
+    for name, arr in (("z", z), ("r", r)):
+        bad = np.flatnonzero(~np.isfinite(arr))
+        if bad.size:
+            i = int(bad[0])
+            raise InputError(f"{name} is not a finite number ({arr[i]!r}) at point {i + 1}", file=file,
+                             line=where(i), field=name)
+    dz = np.diff(z)
+    bad = np.flatnonzero(dz <= 0)
+    if bad.size:
+        i = int(bad[0]) + 1
+        raise InputError(f"z must increase strictly: z = {z[i]:g} mm after {z[i - 1]:g} mm (point {i + 1})",
+                         file=file, line=where(i), field="z")
+    bad = np.flatnonzero(r < 0)
+    if bad.size:
+        i = int(bad[0])
+        raise InputError(f"negative radius r = {r[i]:g} mm at point {i + 1}", file=file, line=where(i), field="r")
+    inner = np.flatnonzero(r[1:-1] <= 0)
+    if inner.size:
+        i = int(inner[0]) + 1
+        raise InputError(
+            f"the generatrix meets the axis inside the winding zone: r = {r[i]:g} mm at z = {z[i]:g} mm "
+            f"(point {i + 1}); only the end points may have r = 0",
+            file=file, line=where(i), field="r")
