@@ -1,0 +1,461 @@
+"""The winding job document: one TOML file holds everything needed to produce an NC program.
+
+Sections: ``[mandrel]`` (generatrix), ``[band]`` (band/material), ``[winding]`` (winding-line
+parameters), ``[payout]`` (payout-eye law), ``[machine]`` (machine template and limit overrides),
+``[timelaw]`` (time parametrization), ``[post]`` (controller post-processor and NC output).
+
+The document is schema-versioned (``schema_version``) and validated with pydantic; every error
+names the file, the line and the field (``InputError``).  ``load_job(save_job(job))`` returns an
+equal job (floats are written with ``repr`` precision), and saving is atomic.
+
+Example::
+
+    schema_version = 1
+    name = "Vessel 200"
+    [mandrel]
+    kind = "vessel"
+    radius_mm = 100.0
+    cylinder_length_mm = 300.0
+    dome = "isotensoid"
+    pole_radius_mm = [25.0, 40.0]
+    [band]
+    width_mm = 8.0
+"""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import tomli_w
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from engine.errors import InputError
+from engine.fileio import atomic_write_text
+
+SCHEMA_VERSION = 1
+
+PositiveMM = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+NonNegMM = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
+
+
+# ------------------------------------------------------------------------------------------------
+# Mandrel
+# ------------------------------------------------------------------------------------------------
+DomeKind = Literal["hemisphere", "ellipse", "isotensoid"]
+
+
+class VesselSpec(_Model):
+    """Cylinder with two domes; pole openings and dome shapes may differ left/right."""
+
+    kind: Literal["vessel"] = "vessel"
+    radius_mm: PositiveMM
+    cylinder_length_mm: NonNegMM
+    dome: DomeKind | tuple[DomeKind, DomeKind] = "hemisphere"
+    dome_ratio: PositiveMM | tuple[PositiveMM, PositiveMM] = 1.0
+    pole_radius_mm: NonNegMM | tuple[NonNegMM, NonNegMM] = 0.0
+
+
+class ConeSpec(_Model):
+    """Frustum from r0 at z = 0 to r1 at z = length."""
+
+    kind: Literal["cone"] = "cone"
+    r0_mm: PositiveMM
+    r1_mm: PositiveMM
+    length_mm: PositiveMM
+
+
+class PipeSpec(_Model):
+    """Plain cylinder."""
+
+    kind: Literal["pipe"] = "pipe"
+    radius_mm: PositiveMM
+    length_mm: PositiveMM
+
+
+class BottleSpec(_Model):
+    """Bottle with an elliptical bottom and a waisted (concave) neck."""
+
+    kind: Literal["bottle"] = "bottle"
+    radius_mm: PositiveMM = 60.0
+    body_length_mm: PositiveMM = 160.0
+    shoulder_length_mm: PositiveMM = 40.0
+    waist_radius_mm: PositiveMM = 18.0
+    neck_length_mm: PositiveMM = 40.0
+    neck_radius_mm: PositiveMM = 24.0
+    bottom_pole_radius_mm: PositiveMM = 15.0
+
+
+class PointsSpec(_Model):
+    """A sketched generatrix: C2 spline through points (z increasing)."""
+
+    kind: Literal["points"] = "points"
+    z_mm: list[Finite]
+    r_mm: list[Finite]
+
+    @model_validator(mode="after")
+    def _same_length(self) -> PointsSpec:
+        if len(self.z_mm) != len(self.r_mm):
+            raise ValueError(f"z_mm has {len(self.z_mm)} values but r_mm has {len(self.r_mm)}")
+        return self
+
+
+class FileSpec(_Model):
+    """A generatrix imported from a CSV table, a DXF profile or a STEP solid (path relative to the job)."""
+
+    kind: Literal["file"] = "file"
+    path: str
+
+    @field_validator("path")
+    @classmethod
+    def _suffix(cls, v: str) -> str:
+        if Path(v).suffix.lower() not in {".csv", ".txt", ".dxf", ".step", ".stp"}:
+            raise ValueError(f"'{v}': expected a .csv, .dxf or .step file")
+        return v
+
+
+MandrelSpec = Annotated[
+    VesselSpec | ConeSpec | PipeSpec | BottleSpec | PointsSpec | FileSpec, Field(discriminator="kind")
+]
+
+
+# ------------------------------------------------------------------------------------------------
+# Process sections
+# ------------------------------------------------------------------------------------------------
+class BandSpec(_Model):
+    """The band (tow/roving group) laid on the mandrel."""
+
+    width_mm: PositiveMM = 6.0
+    thickness_mm: PositiveMM = 0.25
+    friction: NonNegMM = 0.2
+    """Band-on-mandrel friction coefficient μ: a line needing |λ| > μ slips."""
+    material: str = "carbon/epoxy"
+
+
+class AngleRequirement(_Model):
+    """A winding angle required on the parallel at ``z_mm``."""
+
+    z_mm: Finite
+    angle_deg: Annotated[float, Field(gt=0, lt=90)]
+
+
+class WindingSpec(_Model):
+    """Winding-line parameters (see engine.winding)."""
+
+    mode: Literal["auto", "geodesic", "constant-lambda", "piecewise-lambda", "minimax"] = "auto"
+    pole_c_mm: tuple[NonNegMM, NonNegMM] | None = None
+    """Clairaut constants at the two poles; default: pole radius + band width / 2."""
+    angles: list[AngleRequirement] = Field(default_factory=list)
+    dwell_deg: tuple[NonNegMM, NonNegMM] = (0.0, 0.0)
+    """Extra mandrel rotation at the left/right turnaround."""
+    points_per_pass: Annotated[int, Field(ge=50, le=200_000)] = 2000
+    circuits: Annotated[int, Field(ge=1)] | None = None
+    pattern_p: Annotated[int, Field(ge=1)] | None = None
+    pattern_q: Annotated[int, Field(ge=1)] | None = None
+    layers: Annotated[int, Field(ge=1)] = 1
+    lead: Literal["leading", "lagging"] = "leading"
+
+
+class PayoutSpec(_Model):
+    """Payout-eye law (see engine.payout)."""
+
+    law: Literal["parallel", "equidistant", "equal-tangent", "curve", "min-range"] = "min-range"
+    impregnation_k: Literal[0, 1] = 1
+    clearance_mm: NonNegMM = 20.0
+    """Minimum distance of the eye from the mandrel surface."""
+    eye_radius_mm: PositiveMM | None = None
+    """Eye distance from the axis for the 'parallel' law; default: r_max + clearance."""
+    free_length_max_mm: PositiveMM = 400.0
+    curve_zr_mm: list[tuple[Finite, Finite]] | None = None
+    """Eye path for the 'curve' law: (Z, R) points."""
+    grid_points: Annotated[int, Field(ge=50, le=100_000)] = 1000
+    u_min: NonNegMM = 0.0
+
+
+class AxisOverride(_Model):
+    """Limits of one machine axis that replace the template's."""
+
+    min: Finite | None = None
+    max: Finite | None = None
+    max_speed: PositiveMM | None = None
+    max_accel: PositiveMM | None = None
+    max_speed_jump: PositiveMM | None = None
+
+
+class MachineSpec(_Model):
+    """Machine template (a file name in resources/machines, or a path) and limit overrides."""
+
+    template: str = "lathe_2axis"
+    axes: dict[str, AxisOverride] = Field(default_factory=dict)
+
+
+class TimeLawSpec(_Model):
+    """Time parametrization (see engine.timeparam)."""
+
+    method: Literal["blocks", "tube", "dp", "toppra"] = "blocks"
+    levels: Annotated[int, Field(ge=5, le=5000)] = 100
+    penalty: NonNegMM = 0.5e-11
+    tube_share: Annotated[float, Field(gt=0, lt=1)] = 0.1
+    stop_percent: Annotated[float, Field(gt=0)] = 0.5
+    sdot_max: PositiveMM | None = None
+    sddot_max: PositiveMM | None = None
+
+
+class PostSpec(_Model):
+    """NC output."""
+
+    post: str = "linuxcnc"
+    controller: str | None = None
+    tolerance_mm: PositiveMM = 0.05
+    min_block_time_s: PositiveMM = 0.004
+    output: str | None = None
+
+
+class Job(_Model):
+    """A complete winding job."""
+
+    schema_version: Literal[1] = SCHEMA_VERSION
+    name: str = "untitled"
+    description: str = ""
+    mandrel: MandrelSpec
+    band: BandSpec = Field(default_factory=BandSpec)
+    winding: WindingSpec = Field(default_factory=WindingSpec)
+    payout: PayoutSpec = Field(default_factory=PayoutSpec)
+    machine: MachineSpec = Field(default_factory=MachineSpec)
+    timelaw: TimeLawSpec = Field(default_factory=TimeLawSpec)
+    post: PostSpec = Field(default_factory=PostSpec)
+
+    def to_toml(self) -> str:
+        """The document as TOML text."""
+        data = self.model_dump(mode="json", exclude_none=True, by_alias=True)
+        return tomli_w.dumps(_order(data))
+
+    def replace(self, **changes: Any) -> Job:
+        """A copy with top-level sections replaced (validated)."""
+        data = self.model_dump(mode="python")
+        data.update(changes)
+        return Job.model_validate(data)
+
+
+def _order(data: dict[str, Any]) -> dict[str, Any]:
+    head = {k: v for k, v in data.items() if not isinstance(v, dict)}
+    tail = {k: v for k, v in data.items() if isinstance(v, dict)}
+    return {**head, **tail}
+
+
+# ------------------------------------------------------------------------------------------------
+# Load / save
+# ------------------------------------------------------------------------------------------------
+def parse_job(text: str, file: str | Path | None = None) -> Job:
+    """Parse and validate TOML text; errors name ``file``, the line and the field."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        msg = str(exc)
+        m = re.search(r"line (\d+)", msg)
+        raise InputError(f"not valid TOML: {msg}", file=file, line=int(m.group(1)) if m else None) from None
+    if "schema_version" in data and data["schema_version"] != SCHEMA_VERSION:
+        raise InputError(
+            f"schema_version {data['schema_version']!r} is not supported (this program reads {SCHEMA_VERSION})",
+            file=file,
+            line=_find_line(text, ("schema_version",)),
+            field="schema_version",
+        )
+    try:
+        return Job.model_validate(data)
+    except ValidationError as exc:
+        raise _validation_error(exc, text, file) from None
+
+
+def load_job(path: str | Path) -> Job:
+    """Read a job file (.toml)."""
+    p = Path(path)
+    try:
+        raw = p.read_bytes()
+    except FileNotFoundError:
+        raise InputError("file not found", file=p) from None
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", file=p) from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw[: exc.start].count(b"\n") + 1
+        raise InputError("not a UTF-8 text file (is this a job .toml?)", file=p, line=line) from None
+    if not text.strip():
+        raise InputError("the job file is empty", file=p)
+    return parse_job(text, file=p)
+
+
+def save_job(job: Job, path: str | Path) -> Path:
+    """Write ``job`` to ``path`` atomically (temporary file + rename)."""
+    return atomic_write_text(path, job.to_toml())
+
+
+def _validation_error(exc: ValidationError, text: str, file: str | Path | None) -> InputError:
+    errs = sorted(exc.errors(), key=lambda e: e["type"] != "extra_forbidden")  # a typo explains 'missing'
+    first = errs[0]
+    loc = _clean_loc(first["loc"])
+    field = ".".join(str(p) for p in loc)
+    msg = first["msg"]
+    if first["type"] == "missing":
+        msg = "required field is missing"
+    elif first["type"] == "extra_forbidden":
+        msg = f"unknown field (typo?); allowed: {_allowed(tuple(first['loc']))}"
+    elif first["type"] == "union_tag_invalid":
+        msg = f"unknown kind {first.get('ctx', {}).get('tag')!r}; expected {first.get('ctx', {}).get('expected_tags')}"
+    elif first["type"] == "literal_error":
+        msg = f"{msg} (got {first.get('input')!r})"
+    elif "input" in first and not isinstance(first["input"], dict | list):
+        msg = f"{msg} (got {first['input']!r})"
+    if len(errs) > 1:
+        msg += f" (and {len(errs) - 1} more problem{'s' if len(errs) > 2 else ''})"
+    line = _find_line(text, loc)
+    return InputError(msg, file=file, line=line, field=field)
+
+
+def _clean_loc(loc: tuple[Any, ...]) -> tuple[Any, ...]:
+    # drop discriminator tags (e.g. ('mandrel', 'vessel', 'radius_mm')) and tuple/union members
+    out: list[Any] = []
+    for i, part in enumerate(loc):
+        if i > 0 and loc[0] == "mandrel" and i == 1 and part in {"vessel", "cone", "pipe", "bottle", "points", "file"}:
+            continue
+        if isinstance(part, str) and ("[" in part or part in {"tuple", "float", "function-after"}):
+            continue
+        out.append(part)
+    return tuple(out)
+
+
+def _allowed(loc: tuple[Any, ...]) -> str:
+    models: dict[str, type[BaseModel]] = {
+        "band": BandSpec,
+        "winding": WindingSpec,
+        "payout": PayoutSpec,
+        "machine": MachineSpec,
+        "timelaw": TimeLawSpec,
+        "post": PostSpec,
+    }
+    kinds: dict[str, type[BaseModel]] = {
+        "vessel": VesselSpec,
+        "cone": ConeSpec,
+        "pipe": PipeSpec,
+        "bottle": BottleSpec,
+        "points": PointsSpec,
+        "file": FileSpec,
+    }
+    if len(loc) >= 3 and loc[0] == "mandrel" and loc[1] in kinds:
+        return ", ".join(kinds[loc[1]].model_fields)
+    if len(loc) >= 2 and loc[0] in models:
+        return ", ".join(models[loc[0]].model_fields)
+    if len(loc) == 1:
+        return ", ".join(Job.model_fields)
+    return "see the documentation"
+
+
+_HEADER = re.compile(r"^\s*\[\[?\s*([^\]]+?)\s*\]\]?\s*(#.*)?$")
+_KEY = re.compile(r"^\s*([A-Za-z0-9_\-\"']+)\s*=")
+
+
+def _find_line(text: str, loc: tuple[Any, ...]) -> int | None:
+    """Best-effort line number (1-based) of the TOML key at ``loc``; the section header if absent."""
+    keys = [p for p in loc if isinstance(p, str)]
+    if not keys:
+        return None
+    section, key = keys[:-1], keys[-1]
+    sec_name = ".".join(section)
+    current = ""
+    header_line: int | None = None
+    for i, line in enumerate(text.splitlines(), start=1):
+        h = _HEADER.match(line)
+        if h:
+            current = h.group(1).strip()
+            if current == sec_name and header_line is None:
+                header_line = i
+            if current == ".".join(keys):
+                return i
+            continue
+        k = _KEY.match(line)
+        if k and current == sec_name and k.group(1).strip("\"'") == key:
+            return i
+        if k and not section and current == "" and k.group(1) == key:
+            return i
+    # dotted/inline: 'mandrel.radius_mm = ...' or key in a table of the same name
+    return header_line
+
+
+def build_mandrel(job: Job, job_path: str | Path | None = None) -> Any:
+    """The :class:`engine.mandrel.Mandrel` described by ``job.mandrel``.
+
+    Errors carry the job file and the ``mandrel.*`` field they come from.
+    """
+    from engine.mandrel import Mandrel
+
+    spec = job.mandrel
+    try:
+        if isinstance(spec, VesselSpec):
+            return Mandrel.vessel(
+                spec.radius_mm,
+                spec.cylinder_length_mm,
+                dome=spec.dome,  # type: ignore[arg-type]
+                pole_radii=spec.pole_radius_mm,  # type: ignore[arg-type]
+                dome_ratio=spec.dome_ratio,  # type: ignore[arg-type]
+                name=job.name,
+            )
+        if isinstance(spec, ConeSpec):
+            return Mandrel.cone(spec.r0_mm, spec.r1_mm, spec.length_mm, name=job.name)
+        if isinstance(spec, PipeSpec):
+            return Mandrel.pipe(spec.radius_mm, spec.length_mm, name=job.name)
+        if isinstance(spec, BottleSpec):
+            return Mandrel.bottle(
+                radius=spec.radius_mm,
+                body_length=spec.body_length_mm,
+                shoulder_length=spec.shoulder_length_mm,
+                waist_radius=spec.waist_radius_mm,
+                neck_length=spec.neck_length_mm,
+                neck_radius=spec.neck_radius_mm,
+                bottom_pole_radius=spec.bottom_pole_radius_mm,
+                name=job.name,
+            )
+        if isinstance(spec, PointsSpec):
+            return Mandrel.from_points(spec.z_mm, spec.r_mm, name=job.name, source="points")
+        if isinstance(spec, FileSpec):
+            from engine.mandrel_io import load_mandrel_file
+
+            base = Path(job_path).parent if job_path else Path(".")
+            return load_mandrel_file(base / spec.path)
+    except InputError as exc:
+        if exc.location.file:  # a problem inside an imported profile file: keep its own location
+            raise
+        f = exc.location.field
+        loc = ("mandrel", _spec_field(f)) if f else ("mandrel",)
+        line = None
+        if job_path is not None and Path(job_path).is_file():
+            line = _find_line(Path(job_path).read_text(encoding="utf-8", errors="replace"), loc)
+        raise InputError(exc.message, file=job_path, line=line, field=".".join(loc)) from None
+    raise InputError(f"unknown mandrel kind {spec!r}", file=job_path, field="mandrel.kind")
+
+
+def _spec_field(engine_name: str) -> str:
+    mapping = {
+        "radius": "radius_mm",
+        "length": "length_mm",
+        "cylinder_length": "cylinder_length_mm",
+        "pole_radius_mm": "pole_radius_mm",
+        "dome_ratio": "dome_ratio",
+        "r0": "r0_mm",
+        "r1": "r1_mm",
+        "z": "z_mm",
+        "r": "r_mm",
+    }
+    return mapping.get(engine_name, engine_name)
+
+
+def default_job(name: str = "untitled") -> Job:
+    """A new job: a small vessel with hemispherical domes."""
+    return Job(name=name, mandrel=VesselSpec(radius_mm=100.0, cylinder_length_mm=300.0, pole_radius_mm=30.0))
