@@ -1,0 +1,933 @@
+"""Machine kinematics: templates, inverse and forward kinematics (MATH.md §A4, eq. (16)).
+
+Frames (all lengths mm, angles rad inside the engine)
+-----------------------------------------------------
+*Mandrel frame* M: fixed to the mandrel, its z axis is the mandrel's rotation axis.  The payout stage
+gives the eye path, the contact point and the free-fibre direction in this frame.
+
+*Machine frame* W: fixed to the machine bed.  Its z axis coincides with the mandrel axis, x is
+horizontal (towards the eye side, the cross-feed direction), y is vertical (up).
+
+The two sides of eq. (16) are products of 4x4 homogeneous transforms:
+
+* mandrel chain:  ``p_W = Rz(theta) p_M`` (theta = mandrel angle, internal units rad);
+* eye chain:      ``T_W,eye = E_1(q_1) E_2(q_2) ... E_n(q_n)`` - translations along / rotations about
+  fixed unit vectors (cartesian winders) or a linear track, a base transform and Denavit-Hartenberg
+  joints (robot cells), followed by a fixed tool transform.
+
+The *eye frame*'s z axis is the **eye axis**; when the machine can orient the eye, it is aligned with
+the fibre direction (from the contact point to the eye).  The robot's eye-frame x axis is the band's
+width direction ``w = normalise(fibre x n)`` with ``n`` the radial direction at the contact point
+(the band normal of a cylinder; an approximation on doubly curved parts).
+
+What forward kinematics reproduces (``MachineTemplate.fibre_mode``)
+-------------------------------------------------------------------
+* ``"line"`` (2- and 3-axis winders, no eye rotation): the eye is a ring; the fibre direction is the
+  direction from the contact point on the rotated mandrel to the eye,
+  ``normalise(FK_eye(q) - contact)``; :func:`forward_kinematics` returns it when ``contact_xyz`` is
+  given.
+* ``"projected"`` (4-axis, eye roll about the cross-feed axis): the eye axis equals the fibre
+  direction projected onto the plane normal to the roll axis, normalised.
+* ``"full"`` (6-axis gantry, robot cell): the eye axis equals the fibre direction.
+
+A machine whose eye cannot leave a fixed radius (2-axis lathe winder) reproduces the *fibre line*:
+the eye is slid along the free fibre to the machine's eye radius (``AxisPath.eye_shift``, mm); the
+laid line is unchanged, and ``AxisPath.eye_xyz`` is the eye position the machine actually realises.
+
+Controller values
+-----------------
+``q_controller = sign * scale(units) * q_internal + offset`` with internal units rad / mm, e.g. a
+mandrel axis in degrees with ``sign = -1`` counts up while the mandrel winds (the mandrel angle is
+``theta = psi_eye - V``, decreasing as the twist angle V grows).
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from engine.errors import InfeasibleError, InputError
+from engine.state import State, check_cancel
+
+MACHINES_DIR = Path(__file__).resolve().parents[1] / "resources" / "machines"
+
+ROLES_CARTESIAN = ("mandrel", "carriage", "cross", "vertical", "yaw", "roll")
+ROLES_ROBOT = ("mandrel", "track", "joint1", "joint2", "joint3", "joint4", "joint5", "joint6")
+UNIT_SCALE = {"deg": 180.0 / math.pi, "rad": 1.0, "rev": 1.0 / (2.0 * math.pi), "mm": 1.0,
+              "inch": 1.0 / 25.4, "m": 1e-3}
+ROTARY_UNITS = ("deg", "rad", "rev")
+LINEAR_UNITS = ("mm", "inch", "m")
+
+
+# --------------------------------------------------------------------------------------------------
+# Violations
+# --------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Violation:
+    """One limit violation, located.
+
+    Attributes
+    ----------
+    kind:
+        ``"position"``, ``"speed"``, ``"jump"``, ``"workspace"``, ``"singular"``, ``"reverse"`` or
+        ``"ik"`` (numerical inverse kinematics did not converge).
+    axis:
+        Controller axis name, or ``None`` for whole-machine problems.
+    index:
+        First path point of the run of offending points (``None`` when the violation is per block).
+    block:
+        First offending block (``None`` when per path point).
+    count:
+        Number of consecutive offending points/blocks in this run.
+    amount:
+        Worst excess over the limit in the run, controller units (``value - limit``, signed).
+    value, limit:
+        The worst value and the limit it exceeds.
+    """
+
+    kind: str
+    axis: str | None
+    amount: float
+    value: float
+    limit: float
+    index: int | None = None
+    block: int | None = None
+    count: int = 1
+    message: str = ""
+
+    def __str__(self) -> str:
+        return self.message or f"{self.kind} violation on {self.axis}: {self.amount:g}"
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """Contiguous runs of True in a 1-D mask as (start, stop) pairs."""
+    m = np.asarray(mask, dtype=bool)
+    if not m.any():
+        return []
+    d = np.diff(np.concatenate(([0], m.view(np.int8), [0])))
+    starts = np.flatnonzero(d == 1)
+    stops = np.flatnonzero(d == -1)
+    return list(zip(starts.tolist(), stops.tolist()))
+
+
+def violations_from_mask(kind: str, axis: str | None, mask: np.ndarray, value: np.ndarray,
+                         limit: np.ndarray | float, unit: str = "", where: str = "point",
+                         what: str = "") -> list[Violation]:
+    """Group a per-point (or per-block) violation mask into located :class:`Violation` runs."""
+    out: list[Violation] = []
+    value = np.asarray(value, dtype=float)
+    lim = np.broadcast_to(np.asarray(limit, dtype=float), value.shape)
+    for a, b in _runs(mask):
+        seg = value[a:b] - lim[a:b]
+        k = a + int(np.argmax(np.abs(seg)))
+        amount = float(value[k] - lim[k])
+        label = f"axis {axis}" if axis else "machine"
+        desc = what or kind
+        msg = (f"{label}: {desc} {value[k]:.6g}{unit} exceeds the limit {lim[k]:.6g}{unit} by "
+               f"{abs(amount):.6g}{unit} at {where} {k} ({b - a} {where}s from {where} {a})")
+        kw: dict[str, Any] = {"index": a} if where == "point" else {"block": a}
+        out.append(Violation(kind, axis, amount, float(value[k]), float(lim[k]), count=b - a,
+                             message=msg, **kw))
+    return out
+
+
+# --------------------------------------------------------------------------------------------------
+# Machine templates
+# --------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Axis:
+    """One controlled coordinate of a machine, bound to an element of the kinematic scheme.
+
+    Attributes
+    ----------
+    name: controller's axis name (letter), e.g. ``"A"``.
+    role: element of the scheme (``mandrel``, ``carriage``, ``cross``, ``vertical``, ``yaw``,
+        ``roll``, ``track``, ``joint1`` .. ``joint6``).
+    type: ``"rotary"`` or ``"linear"``.
+    sign: +1 or -1.
+    units: ``deg``/``rad``/``rev`` (rotary) or ``mm``/``inch``/``m`` (linear).
+    offset: controller value at the internal zero (datum), controller units.
+    min, max: position limits, controller units.
+    max_speed: controller units/s.  max_accel: units/s^2.  max_jump: allowed speed jump between
+        neighbouring NC blocks, units/s.
+    """
+
+    name: str
+    role: str
+    type: str
+    sign: float
+    units: str
+    offset: float
+    min: float
+    max: float
+    max_speed: float
+    max_accel: float
+    max_jump: float
+
+    @property
+    def scale(self) -> float:
+        """Controller units per internal unit (rad or mm), including the sign."""
+        return self.sign * UNIT_SCALE[self.units]
+
+
+@dataclass(frozen=True)
+class DH:
+    """Standard Denavit-Hartenberg row: ``Rz(theta + theta0) Tz(d) Tx(a) Rx(alpha)`` (mm, rad)."""
+
+    a: float
+    alpha: float
+    d: float
+    theta0: float
+
+
+@dataclass(frozen=True)
+class MachineTemplate:
+    """A real machine bound to the generalised kinematic scheme (16).
+
+    Attributes
+    ----------
+    name, title: identifier (file stem) and a human title.
+    kind: ``"cartesian"`` (lathe-type winders) or ``"robot"`` (6R arm on a linear track).
+    axes: the controlled coordinates in program order.
+    fibre_mode: ``"line"``, ``"projected"`` or ``"full"`` (see module docstring).
+    mandrel_phase: ``"eye"`` - the eye stays at machine azimuth ``phase`` (rad);
+        ``"contact"`` - the contact point stays at machine azimuth ``phase``.
+    eye_radius: fixed eye distance from the mandrel axis when there is no cross-feed axis, mm.
+    min_block_time: tau of eq. (17), s.
+    base: robot base transform (4x4, machine frame, at track position 0).
+    dh: robot DH rows.  tool: fixed flange-to-eye transform (4x4).  home: robot joint seed, rad.
+    source: file the template was read from.
+    """
+
+    name: str
+    title: str
+    kind: str
+    axes: tuple[Axis, ...]
+    fibre_mode: str
+    mandrel_phase: str = "eye"
+    phase: float = 0.0
+    eye_radius: float | None = None
+    min_block_time: float = 0.002
+    base: np.ndarray | None = None
+    dh: tuple[DH, ...] = ()
+    tool: np.ndarray | None = None
+    home: tuple[float, ...] = ()
+    source: str = ""
+
+    @property
+    def axis_names(self) -> tuple[str, ...]:
+        return tuple(a.name for a in self.axes)
+
+    @property
+    def roles(self) -> tuple[str, ...]:
+        return tuple(a.role for a in self.axes)
+
+    def axis_index(self, role: str) -> int | None:
+        """Index of the axis bound to ``role``, or ``None``."""
+        for i, a in enumerate(self.axes):
+            if a.role == role:
+                return i
+        return None
+
+    def limits(self, what: str) -> np.ndarray:
+        """Per-axis array of ``min``/``max``/``max_speed``/``max_accel``/``max_jump``."""
+        return np.array([getattr(a, what) for a in self.axes], dtype=float)
+
+    @property
+    def scales(self) -> np.ndarray:
+        return np.array([a.scale for a in self.axes], dtype=float)
+
+    @property
+    def offsets(self) -> np.ndarray:
+        return np.array([a.offset for a in self.axes], dtype=float)
+
+    def to_internal(self, q: np.ndarray) -> np.ndarray:
+        """Controller values -> internal values (rad, mm)."""
+        return (np.asarray(q, dtype=float) - self.offsets) / self.scales
+
+    def to_controller(self, q_int: np.ndarray) -> np.ndarray:
+        """Internal values (rad, mm) -> controller values."""
+        return np.asarray(q_int, dtype=float) * self.scales + self.offsets
+
+
+def list_machines(directory: str | Path | None = None) -> list[str]:
+    """Names of the shipped (or ``directory``'s) machine templates, sorted."""
+    d = Path(directory) if directory is not None else MACHINES_DIR
+    return sorted(p.stem for p in d.glob("*.toml"))
+
+
+def _need(data: dict, key: str, typ: type | tuple[type, ...], file: str, prefix: str = "") -> Any:
+    if key not in data:
+        raise InputError(f"missing required field '{prefix}{key}'", file=file, field=prefix + key)
+    val = data[key]
+    if isinstance(val, bool) or not isinstance(val, typ):
+        tn = typ.__name__ if isinstance(typ, type) else "/".join(t.__name__ for t in typ)
+        raise InputError(f"'{prefix}{key}' must be {tn}, got {val!r}", file=file, field=prefix + key)
+    return val
+
+
+def _num(data: dict, key: str, file: str, prefix: str = "", default: float | None = None,
+         positive: bool = False) -> float:
+    if key not in data and default is not None:
+        return float(default)
+    v = float(_need(data, key, (int, float), file, prefix))
+    if not math.isfinite(v):
+        raise InputError(f"'{prefix}{key}' must be finite, got {v!r}", file=file, field=prefix + key)
+    if positive and v <= 0:
+        raise InputError(f"'{prefix}{key}' must be > 0, got {v!r}", file=file, field=prefix + key)
+    return v
+
+
+def _mat(val: Any, file: str, fld: str) -> np.ndarray:
+    """A 4x4 transform from ``{xyz=[..], rpy_deg=[..]}`` (rotation Rz(yaw) Ry(pitch) Rx(roll))."""
+    if not isinstance(val, dict):
+        raise InputError(f"'{fld}' must be a table with xyz and rpy_deg", file=file, field=fld)
+    xyz = val.get("xyz", [0.0, 0.0, 0.0])
+    rpy = val.get("rpy_deg", [0.0, 0.0, 0.0])
+    for nm, v in (("xyz", xyz), ("rpy_deg", rpy)):
+        if (not isinstance(v, list) or len(v) != 3
+                or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)):
+            raise InputError(f"'{fld}.{nm}' must be a list of 3 numbers, got {v!r}", file=file,
+                             field=f"{fld}.{nm}")
+    r, p, y = np.radians(np.asarray(rpy, dtype=float))
+    T = np.eye(4)
+    T[:3, :3] = _rot("z", y) @ _rot("y", p) @ _rot("x", r)
+    T[:3, 3] = xyz
+    return T
+
+
+def _rot(ax: str, a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    if ax == "x":
+        return np.array([[1, 0, 0], [0, c, -s], [0, s, c]], dtype=float)
+    if ax == "y":
+        return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]], dtype=float)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]], dtype=float)
+
+
+def parse_machine(data: dict, file: str = "<machine>", name: str | None = None) -> MachineTemplate:
+    """Validate a machine template table (as read from TOML); raise :class:`InputError` naming the field."""
+    kind = _need(data, "kind", str, file)
+    if kind not in ("cartesian", "robot"):
+        raise InputError(f"'kind' must be 'cartesian' or 'robot', got {kind!r}", file=file, field="kind")
+    title = str(data.get("title", name or Path(file).stem))
+    raw_axes = _need(data, "axes", list, file)
+    if not raw_axes:
+        raise InputError("'axes' must list at least the mandrel axis", file=file, field="axes")
+    allowed = ROLES_CARTESIAN if kind == "cartesian" else ROLES_ROBOT
+    axes: list[Axis] = []
+    for i, ax in enumerate(raw_axes):
+        pre = f"axes[{i}]."
+        if not isinstance(ax, dict):
+            raise InputError(f"'axes[{i}]' must be a table", file=file, field=f"axes[{i}]")
+        nm = _need(ax, "name", str, file, pre)
+        if not nm or not nm.replace("_", "").isalnum():
+            raise InputError(f"axis name must be letters/digits, got {nm!r}", file=file, field=pre + "name")
+        role = _need(ax, "role", str, file, pre)
+        if role not in allowed:
+            raise InputError(f"role {role!r} is not one of {', '.join(allowed)} for a {kind} machine",
+                             file=file, field=pre + "role")
+        typ = _need(ax, "type", str, file, pre)
+        want = "linear" if role in ("carriage", "cross", "vertical", "track") else "rotary"
+        if typ != want:
+            raise InputError(f"role {role!r} needs type '{want}', got {typ!r}", file=file, field=pre + "type")
+        units = _need(ax, "units", str, file, pre)
+        ok_units = ROTARY_UNITS if typ == "rotary" else LINEAR_UNITS
+        if units not in ok_units:
+            raise InputError(f"units {units!r} not allowed for a {typ} axis (use {', '.join(ok_units)})",
+                             file=file, field=pre + "units")
+        sign = _num(ax, "sign", file, pre, default=1.0)
+        if sign not in (1.0, -1.0):
+            raise InputError(f"'sign' must be 1 or -1, got {sign!r}", file=file, field=pre + "sign")
+        lo = _num(ax, "min", file, pre, default=-1e12)
+        hi = _num(ax, "max", file, pre, default=1e12)
+        if lo >= hi:
+            raise InputError(f"'min' ({lo}) must be below 'max' ({hi})", file=file, field=pre + "min")
+        axes.append(Axis(
+            name=nm, role=role, type=typ, sign=sign, units=units,
+            offset=_num(ax, "offset", file, pre, default=0.0), min=lo, max=hi,
+            max_speed=_num(ax, "max_speed", file, pre, positive=True),
+            max_accel=_num(ax, "max_accel", file, pre, positive=True),
+            max_jump=_num(ax, "max_jump", file, pre, positive=True)))
+    names = [a.name for a in axes]
+    roles = [a.role for a in axes]
+    for lst, what in ((names, "name"), (roles, "role")):
+        dup = sorted({x for x in lst if lst.count(x) > 1})
+        if dup:
+            raise InputError(f"duplicate axis {what} {dup[0]!r}", file=file, field="axes")
+    if "mandrel" not in roles:
+        raise InputError("no axis has role 'mandrel'", file=file, field="axes")
+    phase_mode = data.get("mandrel_phase", "eye")
+    if phase_mode not in ("eye", "contact"):
+        raise InputError(f"'mandrel_phase' must be 'eye' or 'contact', got {phase_mode!r}", file=file,
+                         field="mandrel_phase")
+    phase = math.radians(_num(data, "phase_deg", file, default=0.0))
+    tau = _num(data, "min_block_time", file, default=0.002, positive=True)
+    kw: dict[str, Any] = {}
+    if kind == "cartesian":
+        if "carriage" not in roles:
+            raise InputError("a cartesian winder needs an axis with role 'carriage'", file=file, field="axes")
+        if "vertical" not in roles and (phase_mode != "eye" or phase != 0.0):
+            raise InputError("without a 'vertical' axis the eye stays in the y = 0 plane: use "
+                             "mandrel_phase = 'eye' and phase_deg = 0", file=file, field="mandrel_phase")
+        if "cross" not in roles:
+            kw["eye_radius"] = _num(data, "eye_radius", file, positive=True)
+        if "yaw" in roles and "roll" not in roles:
+            raise InputError("an eye 'yaw' axis needs a 'roll' axis too", file=file, field="axes")
+        fibre_mode = "full" if "yaw" in roles else ("projected" if "roll" in roles else "line")
+        if "yaw" in roles and "vertical" not in roles:
+            raise InputError("an eye 'yaw' axis needs a 'vertical' axis (6-axis layout)", file=file,
+                             field="axes")
+    else:
+        missing = [r for r in ROLES_ROBOT if r not in roles]
+        if missing:
+            raise InputError(f"a robot cell needs axes with roles {', '.join(missing)}", file=file,
+                             field="axes")
+        robot = _need(data, "robot", dict, file)
+        dh_rows = _need(robot, "dh", list, file, "robot.")
+        if len(dh_rows) != 6:
+            raise InputError(f"'robot.dh' must have 6 rows, got {len(dh_rows)}", file=file, field="robot.dh")
+        dh = []
+        for i, row in enumerate(dh_rows):
+            pre = f"robot.dh[{i}]."
+            if not isinstance(row, dict):
+                raise InputError(f"'robot.dh[{i}]' must be a table", file=file, field=f"robot.dh[{i}]")
+            dh.append(DH(a=_num(row, "a", file, pre), alpha=math.radians(_num(row, "alpha_deg", file, pre)),
+                         d=_num(row, "d", file, pre),
+                         theta0=math.radians(_num(row, "theta0_deg", file, pre, default=0.0))))
+        home = _need(robot, "home_deg", list, file, "robot.")
+        if len(home) != 6 or not all(isinstance(h, (int, float)) for h in home):
+            raise InputError(f"'robot.home_deg' must be 6 numbers, got {home!r}", file=file,
+                             field="robot.home_deg")
+        kw.update(base=_mat(_need(robot, "base", dict, file, "robot."), file, "robot.base"),
+                  tool=_mat(_need(robot, "tool", dict, file, "robot."), file, "robot.tool"),
+                  dh=tuple(dh), home=tuple(math.radians(h) for h in home))
+        fibre_mode = "full"
+    return MachineTemplate(name=name or Path(file).stem, title=title, kind=kind, axes=tuple(axes),
+                           fibre_mode=fibre_mode, mandrel_phase=phase_mode, phase=phase,
+                           min_block_time=tau, source=str(file), **kw)
+
+
+def load_machine(name_or_path: str | Path) -> MachineTemplate:
+    """Load a machine template by shipped name (``"lathe2"``) or by path to a ``.toml`` file.
+
+    Raises
+    ------
+    InputError
+        Unknown name, unreadable file, bad TOML or an invalid field (the message names file and field).
+    """
+    p = Path(name_or_path)
+    if p.suffix != ".toml":
+        p = MACHINES_DIR / f"{name_or_path}.toml"
+        if not p.exists():
+            raise InputError(f"unknown machine {str(name_or_path)!r}; known: {', '.join(list_machines())}",
+                             field="machine")
+    try:
+        with open(p, "rb") as fh:
+            data = tomllib.load(fh)
+    except FileNotFoundError:
+        raise InputError("machine template file not found", file=p) from None
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"not valid TOML: {exc}", file=p) from None
+    return parse_machine(data, file=str(p), name=p.stem)
+
+
+# --------------------------------------------------------------------------------------------------
+# Homogeneous transforms (vectorised)
+# --------------------------------------------------------------------------------------------------
+def _rot_batch(axis: str, ang: np.ndarray) -> np.ndarray:
+    """(N,4,4) rotations about a coordinate axis."""
+    n = ang.shape[0]
+    T = np.zeros((n, 4, 4))
+    c, s = np.cos(ang), np.sin(ang)
+    i, j = {"x": (1, 2), "y": (2, 0), "z": (0, 1)}[axis]
+    k = 3 - i - j
+    T[:, k, k] = 1.0
+    T[:, i, i] = c
+    T[:, j, j] = c
+    T[:, i, j] = -s
+    T[:, j, i] = s
+    T[:, 3, 3] = 1.0
+    return T
+
+
+def _trans_batch(axis: str, d: np.ndarray) -> np.ndarray:
+    n = d.shape[0]
+    T = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
+    T[:, "xyz".index(axis), 3] = d
+    return T
+
+
+def _dh_fixed(row: DH) -> np.ndarray:
+    """The fixed part ``Tz(d) Tx(a) Rx(alpha)`` of a DH row."""
+    T = np.eye(4)
+    T[:3, :3] = _rot("x", row.alpha)
+    T[0, 3] = row.a
+    T[2, 3] = row.d
+    return T
+
+
+def eye_chain(machine: MachineTemplate, q_int: np.ndarray) -> np.ndarray:
+    """Eye frame in the machine frame, ``(N,4,4)``: right-hand side of eq. (16).
+
+    ``q_int``: (N, n_axes) internal values (rad, mm).  The mandrel column is ignored.
+    """
+    q_int = np.atleast_2d(np.asarray(q_int, dtype=float))
+    n = q_int.shape[0]
+    T = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
+    if machine.kind == "cartesian":
+        col = {r: machine.axis_index(r) for r in ROLES_CARTESIAN}
+        x = q_int[:, col["cross"]] if col["cross"] is not None else np.full(n, machine.eye_radius)
+        y = q_int[:, col["vertical"]] if col["vertical"] is not None else np.zeros(n)
+        T[:, 0, 3], T[:, 1, 3], T[:, 2, 3] = x, y, q_int[:, col["carriage"]]
+        if col["yaw"] is not None:
+            T = T @ _rot_batch("y", q_int[:, col["yaw"]])
+        if col["roll"] is not None:
+            T = T @ _rot_batch("x", q_int[:, col["roll"]])
+        return T
+    T = _trans_batch("z", q_int[:, machine.axis_index("track")]) @ machine.base
+    for k, row in enumerate(machine.dh):
+        T = T @ _rot_batch("z", q_int[:, machine.axis_index(f"joint{k + 1}")] + row.theta0) @ _dh_fixed(row)
+    return T @ machine.tool
+
+
+def forward_kinematics(machine: MachineTemplate, q: np.ndarray, contact_xyz: np.ndarray | None = None
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Eye position and fibre direction in the mandrel frame from controller axis values.
+
+    Parameters
+    ----------
+    machine: the template.
+    q: (N, n_axes) controller values.
+    contact_xyz: (N,3) contact points in the mandrel frame, mm; needed for ``fibre_mode == "line"``.
+
+    Returns
+    -------
+    eye_xyz: (N,3) mm, mandrel frame.
+    fibre_dir: (N,3) unit vectors, mandrel frame: the eye axis (``"projected"``/``"full"``) or
+        ``normalise(eye - contact)`` (``"line"``; NaN when ``contact_xyz`` is None).
+    """
+    q_int = machine.to_internal(np.atleast_2d(q))
+    T = eye_chain(machine, q_int)
+    theta = q_int[:, machine.axis_index("mandrel")]
+    c, s = np.cos(theta), np.sin(theta)
+    # p_M = Rz(-theta) p_W
+    def to_m(v: np.ndarray) -> np.ndarray:
+        return np.stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1], v[:, 2]], axis=1)
+    eye = to_m(T[:, :3, 3])
+    if machine.fibre_mode == "line":
+        if contact_xyz is None:
+            return eye, np.full_like(eye, np.nan)
+        d = eye - np.asarray(contact_xyz, dtype=float)
+        return eye, d / np.linalg.norm(d, axis=1, keepdims=True)
+    return eye, to_m(T[:, :3, 2])
+
+
+# --------------------------------------------------------------------------------------------------
+# Inverse kinematics
+# --------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class AxisPath:
+    """Machine axis positions along the path.
+
+    Attributes
+    ----------
+    machine: template name.
+    axis_names: controller axis names, column order of ``q``.
+    q: (N, n_axes) controller units.
+    eye_xyz: (N,3) the eye positions the machine realises, mandrel frame, mm (the input eye path, or
+        it slid along the fibre line for a fixed-radius eye).
+    fibre_dir, contact_xyz: (N,3) the inputs (mandrel frame).
+    eye_shift: (N,) how far the eye was slid along the fibre, mm (0 when the machine reaches it).
+    violations: located limit/workspace violations (empty when the path is feasible).
+    """
+
+    machine: str
+    axis_names: tuple[str, ...]
+    q: np.ndarray
+    eye_xyz: np.ndarray
+    fibre_dir: np.ndarray
+    contact_xyz: np.ndarray
+    eye_shift: np.ndarray
+    violations: tuple[Violation, ...] = field(default_factory=tuple)
+
+    @property
+    def ok(self) -> bool:
+        return not self.violations
+
+    def message(self) -> str:
+        """All violations, one per line (empty when none)."""
+        return "\n".join(v.message for v in self.violations)
+
+
+def _as_path(a: np.ndarray, name: str) -> np.ndarray:
+    arr = np.asarray(a, dtype=float)
+    if arr.ndim != 2 or arr.shape[1] != 3 or arr.shape[0] < 2:
+        raise InputError(f"{name} must be an (N,3) array with N >= 2, got shape {arr.shape}", field=name)
+    if not np.isfinite(arr).all():
+        i = int(np.flatnonzero(~np.isfinite(arr).all(axis=1))[0])
+        raise InputError(f"{name} has a non-finite value at point {i}", field=name)
+    return arr
+
+
+def _unwrap_near(a: np.ndarray, ref: float = 0.0) -> np.ndarray:
+    """Unwrap angles and shift by a multiple of 2 pi so the first one is nearest ``ref``."""
+    u = np.unwrap(a)
+    return u - 2 * np.pi * np.round((u[0] - ref) / (2 * np.pi))
+
+
+def inverse_kinematics(machine: MachineTemplate, eye_xyz: np.ndarray, fibre_dir: np.ndarray,
+                       contact_xyz: np.ndarray, state: State | None = None) -> AxisPath:
+    """Axis positions that put the eye on the path with the eye axis along the fibre.
+
+    Closed form for cartesian winders; warm-started, vectorised Newton for robot cells.  Angles are
+    unwrapped and follow one continuous branch.  Position limits, workspace, singular points and
+    reverse mandrel rotation are reported as :class:`Violation` objects (never raised).
+
+    Parameters
+    ----------
+    machine: the template.
+    eye_xyz, fibre_dir, contact_xyz: (N,3) in the mandrel frame (mm; unit vectors from the contact
+        point to the eye).
+    state: progress / cancellation.
+
+    Returns
+    -------
+    AxisPath
+    """
+    eye = _as_path(eye_xyz, "eye_xyz")
+    d = _as_path(fibre_dir, "fibre_dir")
+    c = _as_path(contact_xyz, "contact_xyz")
+    if not (eye.shape == d.shape == c.shape):
+        raise InputError(f"eye_xyz, fibre_dir, contact_xyz differ in shape: {eye.shape}, {d.shape}, "
+                         f"{c.shape}", field="eye_xyz")
+    nrm = np.linalg.norm(d, axis=1)
+    if np.any(np.abs(nrm - 1.0) > 1e-6):
+        i = int(np.argmax(np.abs(nrm - 1.0)))
+        raise InputError(f"fibre_dir must be unit vectors; |fibre_dir| = {nrm[i]:.9g} at point {i}",
+                         field="fibre_dir")
+    d = d / nrm[:, None]
+    n = eye.shape[0]
+    viol: list[Violation] = []
+    shift = np.zeros(n)
+    if state is not None:
+        state.progress(0.0, "inverse kinematics")
+    if machine.kind == "cartesian" and machine.axis_index("cross") is None:
+        eye, shift, v = _slide_to_radius(eye, d, c, float(machine.eye_radius))
+        viol += v
+    # mandrel angle from the phase rule: p_W = Rz(theta) p_M
+    ref = eye if machine.mandrel_phase == "eye" else c
+    theta = _unwrap_near(machine.phase - np.arctan2(ref[:, 1], ref[:, 0]))
+    dth = np.diff(theta)
+    if np.any(dth > 0) and np.any(dth < 0):
+        major = np.sign(theta[-1] - theta[0]) or 1.0
+        viol += violations_from_mask("reverse", machine.axes[machine.axis_index("mandrel")].name,
+                                     np.concatenate(([False], np.sign(dth) == -major)),
+                                     np.concatenate(([0.0], dth)), 0.0, " rad", what="mandrel reverses by")
+    ct, st = np.cos(theta), np.sin(theta)
+    pw = np.stack([ct * eye[:, 0] - st * eye[:, 1], st * eye[:, 0] + ct * eye[:, 1], eye[:, 2]], axis=1)
+    dw = np.stack([ct * d[:, 0] - st * d[:, 1], st * d[:, 0] + ct * d[:, 1], d[:, 2]], axis=1)
+    q_int = np.zeros((n, len(machine.axes)))
+    q_int[:, machine.axis_index("mandrel")] = theta
+    check_cancel(state)
+    if machine.kind == "cartesian":
+        viol += _ik_cartesian(machine, pw, dw, q_int)
+    else:
+        cw = np.stack([ct * c[:, 0] - st * c[:, 1], st * c[:, 0] + ct * c[:, 1], c[:, 2]], axis=1)
+        viol += _ik_robot(machine, pw, dw, cw, q_int, state)
+    q = machine.to_controller(q_int)
+    lo, hi = machine.limits("min"), machine.limits("max")
+    for k, ax in enumerate(machine.axes):
+        u = " " + ax.units
+        viol += violations_from_mask("position", ax.name, q[:, k] > hi[k], q[:, k], hi[k], u,
+                                     what="position")
+        viol += violations_from_mask("position", ax.name, q[:, k] < lo[k], q[:, k], lo[k], u,
+                                     what="position")
+    if state is not None:
+        state.progress(1.0, "inverse kinematics done")
+    arrs = [np.ascontiguousarray(a) for a in (q, eye, d, c, shift)]
+    for a in arrs:
+        a.flags.writeable = False
+    return AxisPath(machine.name, machine.axis_names, *arrs, violations=tuple(viol))
+
+
+def _slide_to_radius(eye: np.ndarray, d: np.ndarray, c: np.ndarray, r0: float
+                     ) -> tuple[np.ndarray, np.ndarray, list[Violation]]:
+    """Slide the eye along the fibre line to distance ``r0`` from the mandrel axis (nearest root)."""
+    a = d[:, 0] ** 2 + d[:, 1] ** 2
+    b = 2 * (eye[:, 0] * d[:, 0] + eye[:, 1] * d[:, 1])
+    cc = eye[:, 0] ** 2 + eye[:, 1] ** 2 - r0 * r0
+    disc = b * b - 4 * a * cc
+    bad = (disc < 0) | (a < 1e-18)
+    sq = np.sqrt(np.where(bad, 0.0, disc))
+    aa = np.where(bad, 1.0, a)
+    # numerically stable roots; choose the one nearest zero
+    qq = -0.5 * (b + np.copysign(sq, b))
+    r1 = np.where(qq != 0, cc / np.where(qq == 0, 1.0, qq), 0.0)
+    r2 = qq / aa
+    s = np.where(np.abs(r1) < np.abs(r2), r1, r2)
+    s = np.where(bad, 0.0, s)
+    l_free = np.einsum("ij,ij->i", eye - c, d)
+    viol = violations_from_mask("workspace", None, bad, np.sqrt(cc + r0 * r0), r0, " mm",
+                                what="the fibre line never reaches the eye radius; eye radius")
+    behind = (~bad) & (l_free + s <= 0)
+    viol += violations_from_mask("workspace", None, behind, l_free + s, 0.0, " mm",
+                                 what="eye would sit behind the contact point; free length")
+    return eye + s[:, None] * d, s, viol
+
+
+def _ik_cartesian(machine: MachineTemplate, pw: np.ndarray, dw: np.ndarray, q_int: np.ndarray
+                  ) -> list[Violation]:
+    viol: list[Violation] = []
+    col = {r: machine.axis_index(r) for r in ROLES_CARTESIAN}
+    q_int[:, col["carriage"]] = pw[:, 2]
+    if col["cross"] is not None:
+        q_int[:, col["cross"]] = pw[:, 0]
+    if col["vertical"] is not None:
+        q_int[:, col["vertical"]] = pw[:, 1]
+    if col["yaw"] is not None:
+        # eye axis Ry(g) Rx(p) e_z = (sin g cos p, -sin p, cos g cos p) = d
+        dy = np.clip(dw[:, 1], -1.0, 1.0)
+        h = np.hypot(dw[:, 0], dw[:, 2])
+        name = machine.axes[col["yaw"]].name
+        viol += violations_from_mask("singular", name, h < 1e-9, h, 1e-9,
+                                     what="fibre nearly along the yaw axis; horizontal component")
+        q_int[:, col["yaw"]] = _unwrap_near(np.arctan2(dw[:, 0], dw[:, 2]))
+        q_int[:, col["roll"]] = -np.arcsin(dy)
+    elif col["roll"] is not None:
+        # eye axis Rx(p) e_z = (0, -sin p, cos p) along the projection of d onto the y-z plane
+        h = np.hypot(dw[:, 1], dw[:, 2])
+        name = machine.axes[col["roll"]].name
+        viol += violations_from_mask("singular", name, h < 1e-9, h, 1e-9,
+                                     what="fibre along the roll axis; projected length")
+        q_int[:, col["roll"]] = _unwrap_near(np.arctan2(-dw[:, 1], dw[:, 2]))
+    return viol
+
+
+# --------------------------------------------------------------------------------------------------
+# Robot: vectorised Newton with multilevel warm start
+# --------------------------------------------------------------------------------------------------
+def _robot_frames(machine: MachineTemplate, track: np.ndarray, j: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Eye frame (N,4,4), joint axes z_i (N,6,3) and origins o_i (N,6,3), machine frame."""
+    n = j.shape[0]
+    T = _trans_batch("z", track) @ machine.base
+    zs = np.empty((n, 6, 3))
+    os_ = np.empty((n, 6, 3))
+    for k, row in enumerate(machine.dh):
+        zs[:, k] = T[:, :3, 2]
+        os_[:, k] = T[:, :3, 3]
+        T = T @ _rot_batch("z", j[:, k] + row.theta0) @ _dh_fixed(row)
+    return T @ machine.tool, zs, os_
+
+
+def _robot_target(dw: np.ndarray, cw: np.ndarray) -> np.ndarray:
+    """Target eye rotation (N,3,3): z = fibre direction, x = band width direction."""
+    nr = cw.copy()
+    nr[:, 2] = 0.0
+    nr /= np.maximum(np.linalg.norm(nr, axis=1, keepdims=True), 1e-300)
+    x = np.cross(dw, nr)
+    x /= np.maximum(np.linalg.norm(x, axis=1, keepdims=True), 1e-300)
+    y = np.cross(dw, x)
+    return np.stack([x, y, dw], axis=2)
+
+
+def _pose_error(T: np.ndarray, p: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """(N,6): position error (mm) and rotation-vector-like orientation error (rad)."""
+    e = np.empty((T.shape[0], 6))
+    e[:, :3] = p - T[:, :3, 3]
+    Rc = T[:, :3, :3]
+    e[:, 3:] = 0.5 * sum(np.cross(Rc[:, :, k], R[:, :, k]) for k in range(3))
+    return e
+
+
+def _newton(machine: MachineTemplate, track: np.ndarray, p: np.ndarray, R: np.ndarray,
+            j0: np.ndarray, iters: int = 40, damping: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Batched Newton/damped least squares on the 6 joints; returns joints and final error norms."""
+    j = j0.copy()
+    active = np.arange(j.shape[0])
+    err = np.full(j.shape[0], np.inf)
+    w = np.array([1.0, 1.0, 1.0, 1000.0, 1000.0, 1000.0])   # 1 rad ~ 1000 mm
+    for _ in range(iters):
+        if active.size == 0:
+            break
+        T, zs, os_ = _robot_frames(machine, track[active], j[active])
+        e = _pose_error(T, p[active], R[active])
+        en = np.maximum(np.abs(e[:, :3]).max(axis=1), 1000.0 * np.abs(e[:, 3:]).max(axis=1))
+        err[active] = en
+        done = en < 1e-10
+        keep = ~done
+        active, e, T, zs, os_ = active[keep], e[keep], T[keep], zs[keep], os_[keep]
+        if active.size == 0:
+            break
+        J = np.empty((active.size, 6, 6))
+        J[:, :3, :] = np.cross(zs, T[:, None, :3, 3] - os_).transpose(0, 2, 1)
+        J[:, 3:, :] = zs.transpose(0, 2, 1)
+        Jw = J * w[None, :, None]
+        ew = e * w[None, :]
+        if damping > 0:
+            A = Jw.transpose(0, 2, 1) @ Jw + damping ** 2 * np.eye(6)
+            dj = np.linalg.solve(A, (Jw.transpose(0, 2, 1) @ ew[:, :, None]))[:, :, 0]
+        else:
+            try:
+                dj = np.linalg.solve(Jw, ew[:, :, None])[:, :, 0]
+            except np.linalg.LinAlgError:
+                A = Jw.transpose(0, 2, 1) @ Jw + 1e-6 * np.eye(6)
+                dj = np.linalg.solve(A, (Jw.transpose(0, 2, 1) @ ew[:, :, None]))[:, :, 0]
+        step = np.abs(dj).max(axis=1, keepdims=True)
+        dj *= np.minimum(1.0, 0.3 / np.maximum(step, 1e-300))   # trust region 0.3 rad per step
+        j[active] += dj
+    if active.size:
+        T, _, _ = _robot_frames(machine, track[active], j[active])
+        e = _pose_error(T, p[active], R[active])
+        err[active] = np.maximum(np.abs(e[:, :3]).max(axis=1), 1000.0 * np.abs(e[:, 3:]).max(axis=1))
+    return j, err
+
+
+def _ik_robot(machine: MachineTemplate, pw: np.ndarray, dw: np.ndarray, cw: np.ndarray, q_int: np.ndarray,
+              state: State | None) -> list[Violation]:
+    n = pw.shape[0]
+    track = pw[:, 2].copy()          # the track follows the eye along the mandrel axis
+    q_int[:, machine.axis_index("track")] = track
+    R = _robot_target(dw, cw)
+    jcols = [machine.axis_index(f"joint{k + 1}") for k in range(6)]
+    home = np.asarray(machine.home, dtype=float)
+    # level 0: sequential continuation on a coarse subset (branch continuity)
+    n0 = min(n, 64)
+    idx = np.unique(np.linspace(0, n - 1, n0).round().astype(int))
+    j_prev = home[None, :]
+    j0, e0 = _newton(machine, track[idx[:1]], pw[idx[:1]], R[idx[:1]], j_prev, iters=200, damping=50.0)
+    j0, e0 = _newton(machine, track[idx[:1]], pw[idx[:1]], R[idx[:1]], j0, iters=50)
+    if e0[0] > 1e-6:
+        raise InfeasibleError(f"robot cell {machine.name}: no joint solution for the first eye pose "
+                              f"(pose error {e0[0]:.3g} mm) starting from home joints {machine.home}",
+                              field="robot.home_deg", file=machine.source)
+    sol = np.empty((idx.size, 6))
+    sol[0] = j0[0]
+    for m in range(1, idx.size):
+        jm, em = _newton(machine, track[idx[m:m + 1]], pw[idx[m:m + 1]], R[idx[m:m + 1]], sol[m - 1:m],
+                         iters=60)
+        sol[m] = jm[0]
+    # refine level by level: interpolate joints as the warm start, then batched Newton
+    while idx.size < n:
+        check_cancel(state)
+        new_idx = np.unique(np.linspace(0, n - 1, min(n, idx.size * 16)).round().astype(int))
+        guess = np.stack([np.interp(new_idx, idx, sol[:, k]) for k in range(6)], axis=1)
+        sol, _ = _newton(machine, track[new_idx], pw[new_idx], R[new_idx], guess)
+        idx = new_idx
+        if state is not None:
+            state.progress(min(0.95, idx.size / n), "robot inverse kinematics")
+    _, err = _newton(machine, track, pw, R, sol, iters=3)
+    for k, c in enumerate(jcols):
+        q_int[:, c] = sol[:, k]
+    viol = violations_from_mask("ik", None, err > 1e-7, err, 1e-7, " mm",
+                                what="no joint solution (pose error)")
+    jump = np.abs(np.diff(sol, axis=0)).max(axis=1)
+    viol += violations_from_mask("ik", None, np.concatenate(([False], jump > 0.5)),
+                                 np.concatenate(([0.0], jump)), 0.5, " rad",
+                                 what="joint branch switch; joint step")
+    return viol
+
+
+# --------------------------------------------------------------------------------------------------
+# Synthetic eye paths for tests and benchmarks
+# --------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class DemoEyePath:
+    """A synthetic payout-stage output: arrays in the mandrel frame (mm)."""
+
+    x: np.ndarray
+    eye_xyz: np.ndarray
+    contact_xyz: np.ndarray
+    fibre_dir: np.ndarray
+    free_length: np.ndarray
+
+
+def demo_eye_path(kind: str = "helix", n: int = 4000, circuits: int = 2, radius: float = 100.0,
+                  length: float = 400.0, beta_deg: float = 30.0, eye_radius: float = 160.0,
+                  free_length: float = 120.0) -> DemoEyePath:
+    """Closed circuits of a winding line on a cylinder and an eye path above it.
+
+    The winding angle beta goes smoothly from ``beta_deg`` through 90 deg to ``180 - beta_deg`` at each
+    end (turnarounds), so the line is a helix with smooth hoop-like turnarounds.
+
+    Parameters
+    ----------
+    kind:
+        ``"helix"``: eye on a parallel path at fixed distance ``eye_radius`` from the axis;
+        ``"dome"``: constant free length ``free_length`` - the eye radius and height vary (dome-like).
+    n: number of points.  circuits: number of circuits.  radius, length: cylinder, mm.
+    """
+    if kind not in ("helix", "dome"):
+        raise InputError(f"demo path kind must be 'helix' or 'dome', got {kind!r}", field="kind")
+    b0 = math.radians(beta_deg)
+    # one circuit in arc length: pass, turn, pass, turn; beta(s) smooth
+    pass_len = length / math.cos(b0)
+    turn_len = 0.6 * math.pi * radius
+    seg = np.array([pass_len, turn_len, pass_len, turn_len])
+    total = circuits * seg.sum()
+    s = np.linspace(0.0, total, n)
+    sc = np.mod(s, seg.sum())
+    edges = np.concatenate(([0.0], np.cumsum(seg)))
+    beta = np.full(n, b0)
+    for k in range(4):
+        m = (sc >= edges[k]) & (sc < edges[k + 1] + 1e-12)
+        u = (sc[m] - edges[k]) / seg[k]
+        if k == 0:
+            beta[m] = b0
+        elif k == 2:
+            beta[m] = math.pi - b0
+        elif k == 1:
+            beta[m] = b0 + (math.pi - 2 * b0) * 0.5 * (1 - np.cos(np.pi * u))
+        else:
+            beta[m] = (math.pi - b0) - (math.pi - 2 * b0) * 0.5 * (1 - np.cos(np.pi * u))
+    # integrate dz = cos(beta) ds, dv = sin(beta)/R ds (trapezoid on the fine grid)
+    ds = np.diff(s)
+    z = np.concatenate(([0.0], np.cumsum(0.5 * (np.cos(beta[1:]) + np.cos(beta[:-1])) * ds)))
+    v = np.concatenate(([0.0], np.cumsum(0.5 * (np.sin(beta[1:]) + np.sin(beta[:-1])) * ds))) / radius
+    z -= 0.5 * (z.max() + z.min())
+    er = np.stack([np.cos(v), np.sin(v), np.zeros(n)], axis=1)
+    ev = np.stack([-np.sin(v), np.cos(v), np.zeros(n)], axis=1)
+    contact = radius * er + z[:, None] * np.array([0.0, 0.0, 1.0])
+    tau = np.cos(beta)[:, None] * np.array([0.0, 0.0, 1.0]) + np.sin(beta)[:, None] * ev
+    if kind == "helix":
+        if eye_radius <= radius:
+            raise InputError(f"eye_radius {eye_radius} must exceed the mandrel radius {radius}",
+                             field="eye_radius")
+        lf = math.sqrt(eye_radius ** 2 - radius ** 2) / np.sin(beta)
+    else:
+        lf = np.full(n, float(free_length))
+    eye = contact + lf[:, None] * tau
+    return DemoEyePath(x=s, eye_xyz=eye, contact_xyz=contact, fibre_dir=tau, free_length=lf)
+
+
+def reproduced_fibre_dir(machine: MachineTemplate, axis_path: AxisPath) -> np.ndarray:
+    """The fibre direction the machine is expected to reproduce (mandrel frame), per ``fibre_mode``.
+
+    ``"line"`` and ``"full"``: the fibre direction itself; ``"projected"``: its projection onto the
+    plane normal to the eye roll axis (the machine's x axis, rotated into the mandrel frame), normalised.
+    """
+    d = np.asarray(axis_path.fibre_dir, dtype=float)
+    if machine.fibre_mode != "projected":
+        return d.copy()
+    theta = machine.to_internal(axis_path.q)[:, machine.axis_index("mandrel")]
+    ax = np.stack([np.cos(theta), -np.sin(theta), np.zeros_like(theta)], axis=1)  # Rz(-theta) e_x
+    p = d - np.einsum("ij,ij->i", d, ax)[:, None] * ax
+    return p / np.linalg.norm(p, axis=1, keepdims=True)
+
+
+def angle_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angle between unit vectors, rad, accurate for tiny angles (atan2 of |a x b| and a.b)."""
+    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.einsum("ij,ij->i", a, b))
+
+
+__all__ = [
+    "AxisPath", "Axis", "DH", "DemoEyePath", "MachineTemplate", "Violation", "angle_between",
+    "demo_eye_path", "eye_chain", "forward_kinematics", "inverse_kinematics", "list_machines",
+    "load_machine", "parse_machine", "reproduced_fibre_dir", "violations_from_mask",
+]
