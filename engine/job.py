@@ -177,6 +177,17 @@ class PayoutSpec(_Model):
     """Eye path for the 'curve' law: (Z, R) points."""
     grid_points: Annotated[int, Field(ge=50, le=100_000)] = 1000
     u_min: NonNegMM = 0.0
+    """Required lower bound of the relative pull speed u = dλ/dx (the min-range law fails below it)."""
+    parameter: Literal["s", "v"] = "s"
+    """Process parameter x: laid length s (u dimensionless) or mandrel twist v (u in mm/rad)."""
+    free_length_mm: PositiveMM | None = None
+    """Free length for the 'equal-tangent' law; default: the smallest constant that keeps the clearance."""
+    offset_mm: PositiveMM | None = None
+    """Eye distance from the mandrel contour for the 'equidistant' law; default: clearance_mm."""
+    workspace_z_mm: tuple[Finite, Finite] | None = None
+    """Reachable eye Z range (mm, mandrel frame); default: unlimited."""
+    workspace_r_mm: tuple[NonNegMM, NonNegMM] | None = None
+    """Reachable eye distance from the axis (mm); default: unlimited."""
 
 
 class AxisOverride(_Model):
