@@ -504,6 +504,7 @@ class Model:
     feed_series: tuple[float, ...] = ()
     notes: tuple[str, ...] = ()
     coefficients: Mapping[str, Any] = field(default_factory=dict)
+    file: str | None = None
 
     def band_rows(self, k: int, enabled_only: bool = True) -> list[Row]:
         """Rows that apply in feed band ``k`` (plus the band's own feed limits)."""
@@ -558,7 +559,7 @@ def build_model(case: TurningCase, data: CuttingData | None = None) -> Model:
                             None, "expert", _paper_b(name)))
         rows += _user_rows(case, disabled)
         return Model(tuple(rows), ((0.0, math.inf),), None, case.diameter_mm, path_len,
-                     notes=("expert mode: LP rows taken from the case file",))
+                     notes=("expert mode: LP rows taken from the case file",), file=f)
     data = data if data is not None else load_data()
     mats = data.materials
     if case.material not in mats:
@@ -586,10 +587,11 @@ def build_model(case: TurningCase, data: CuttingData | None = None) -> Model:
 
     n_min, n_max = machine_value("n_min_rpm", "n_min_rpm"), machine_value("n_max_rpm", "n_max_rpm")
     s_min, s_max = machine_value("s_min_mm_rev", "s_min_mm_rev"), machine_value("s_max_mm_rev", "s_max_mm_rev")
-    for lo, hi, key in ((n_min, n_max, "n_max_rpm"), (s_min, s_max, "s_max_mm_rev")):
+    for lo, hi, klo, khi in ((n_min, n_max, "n_min_rpm", "n_max_rpm"), (s_min, s_max, "s_min_mm_rev", "s_max_mm_rev")):
         if lo >= hi:
-            raise InputError(f"range is inverted or empty: {lo:g} .. {hi:g}", file=f or data.files["machines"],
-                             field=f"machine.{key}")
+            raise InputError(f"range is inverted or empty: {klo} = {lo:g} is not below {khi} = {hi:g} "
+                             f"(machine {case.machine!r} with the case's overrides)",
+                             file=f or data.files["machines"], field=f"machine.{khi}")
     D, t = case.diameter_mm, case.depth_mm
     phi_deg, phi1_deg = math.degrees(case.phi), math.degrees(case.phi1)
     coeffs: dict[str, Any] = {"material_group": group}
@@ -642,16 +644,15 @@ def build_model(case: TurningCase, data: CuttingData | None = None) -> Model:
     # ---- forces: P = 10 Cp t^x S^y V^n Kp
     needed = {"pz": ("power", "holder", "insert", "accuracy"), "px": ("feed_mechanism",), "py": ("accuracy",)}
     forces: dict[str, tuple[float, float, float, float, float]] = {}
-    for comp, users in needed.items():
-        present = isinstance(data.force.get(group), Mapping) and comp in data.force[group]
-        if not present:
-            if any(on(u) for u in users):
-                on_users = [u for u in users if on(u)]
-                raise InputError(
-                    f"missing force coefficients '{group}.{comp}' (P_{comp[1]}), needed by constraint(s) "
-                    f"{', '.join(on_users)}; add them or switch those constraints off",
-                    file=data.files["force"], field=f"{group}.{comp}",
-                )
+    missing = [(c, [u for u in us if on(u)]) for c, us in needed.items()
+               if not (isinstance(data.force.get(group), Mapping) and c in data.force[group])]
+    missing = [(c, us) for c, us in missing if us]
+    if missing:
+        what = "; ".join(f"'{group}.{c}' (P_{c[1]}) needed by {', '.join(us)}" for c, us in missing)
+        raise InputError(f"missing force coefficients {what}; add them or switch those constraints off",
+                         file=data.files["force"], field=f"{group}.{missing[0][0]}")
+    for comp in needed:
+        if not (isinstance(data.force.get(group), Mapping) and comp in data.force[group]):
             continue
         cp = data.get("force", group, comp)
         vals = []
@@ -743,12 +744,14 @@ def build_model(case: TurningCase, data: CuttingData | None = None) -> Model:
     add("n_min", -1.0, 0.0, 1.0 / n_min)
     add("n_max", 1.0, 0.0, n_max)
     rows += _user_rows(case, disabled)
+    order = {n: i for i, n in enumerate(CONSTRAINT_NAMES)}
+    rows.sort(key=lambda r: (order.get(r.name, len(order)), r.band or 0))
     physics = Physics(D, t, tuple(phys_bands), k_v, case.tool_life_min, forces, case.nose_radius_mm,
                       stiff / math.sqrt(1.0 + lam * lam) if lam else stiff, case.roughness_model, rz_coef,
                       phi_deg, phi1_deg)
     return Model(tuple(rows), tuple(bands), physics, D, path_len,
                  tuple(float(v) for v in mach.get("speed_series_rpm", ())),
-                 tuple(float(v) for v in mach.get("feed_series_mm_rev", ())), tuple(notes), coeffs)
+                 tuple(float(v) for v in mach.get("feed_series_mm_rev", ())), tuple(notes), coeffs, f)
 
 
 def _paper_b(name: str) -> str:
@@ -846,7 +849,7 @@ def solve_model(model: Model) -> LPSolution:
     if unbounded:
         raise InfeasibleError(
             "n*S is unbounded: no enabled constraint limits the spindle speed and feed from above "
-            "(enable n_max and s_max, or the power / tool-life rows)", field="constraints"
+            "(enable n_max and s_max, or the power / tool-life rows)", file=model.file, field="constraints"
         )
     if all(p is None for p in per):
         raise _infeasible_error(model)
@@ -910,7 +913,7 @@ def _infeasible_error(model: Model) -> InfeasibleError:
         "no spindle speed and feed satisfy every constraint")
     if sets:
         msg += "; removing " + " or ".join("{" + ", ".join(s) + "}" for s in sets[:6]) + " restores feasibility"
-    err = InfeasibleError(msg, field="constraints")
+    err = InfeasibleError(msg, file=model.file, field="constraints")
     err.conflict = tuple(core)  # type: ignore[attr-defined]
     err.removal_sets = tuple(sets)  # type: ignore[attr-defined]
     return err
@@ -1000,10 +1003,13 @@ def snap_to_series(model: Model, x1_opt: float, x2_opt: float) -> dict[str, Any]
     if not model.speed_series and not model.feed_series:
         return None
     best: tuple[float, float, float] | None = None
+    exact: dict[float, float] = {}  # log -> the series value itself (no exp(log()) round-off)
     if model.speed_series:
         x1_cands = [math.log(n) for n in model.speed_series]
+        exact.update({math.log(n): n for n in model.speed_series})
     else:
         x1_cands = sorted({x1_opt, *_vertex_x1(model)})
+    exact.update({math.log(s): s for s in model.feed_series})
     for k in range(len(model.bands)):
         rows = model.band_rows(k)
         for x1 in x1_cands:
@@ -1035,8 +1041,10 @@ def snap_to_series(model: Model, x1_opt: float, x2_opt: float) -> dict[str, Any]
     if best is None:
         return {"feasible": False, "message": "no pair of the machine's discrete speeds and feeds is feasible"}
     x1, x2, _ = best
-    q = evaluate(model, math.exp(x1), math.exp(x2))
-    return {"feasible": True, "n_rpm": math.exp(x1), "feed_mm_rev": math.exp(x2), "x1": x1, "x2": x2,
+    n = exact.get(x1, math.exp(x1)) if model.speed_series else math.exp(x1)
+    sv = exact.get(x2, math.exp(x2)) if model.feed_series else math.exp(x2)
+    q = evaluate(model, n, sv)
+    return {"feasible": True, "n_rpm": n, "feed_mm_rev": sv, "x1": x1, "x2": x2,
             "speed_m_min": q["speed_m_min"], "machine_time_min": q["machine_time_min"],
             "power_kw": q["power_kw"], "ratio_to_continuous": math.exp(x1 + x2 - x1_opt - x2_opt)}
 
