@@ -1,0 +1,1111 @@
+"""Mandrel importers and exporters: CSV generatrix tables, DXF profiles, STEP solids, STL meshes.
+
+Every importer returns a :class:`engine.mandrel.Mandrel` (a C2 spline through the profile points)
+or raises :class:`engine.errors.InputError` naming the file and, where it makes sense, the line,
+column, DXF entity or geometric place that is wrong.  Nothing else escapes for bad input.
+
+* :func:`load_csv` -- a table ``z, r`` (mm), header optional, ``,`` ``;`` tab or blanks between
+  cells, ``#`` comments.
+* :func:`load_dxf` -- a profile drawn in model space with LINE / ARC / LWPOLYLINE (bulges) /
+  POLYLINE / SPLINE / ELLIPSE, x = axial z, y = radius.
+* :func:`load_step` -- a solid of revolution; the axis is detected and the body is checked by
+  sectioning it with half-planes through the axis.
+* :func:`export_step`, :func:`export_stl` -- the solid obtained by revolving the closed profile
+  (generatrix, end faces, axis) 360° about the Z axis.
+* :func:`load_mandrel_file` -- dispatch by suffix.
+
+CAD kernels are imported lazily, inside the functions (the GUI must start fast).  cadquery/OCP is
+not thread-safe: every OCP call happens inside the STEP/STL functions of this module, so callers can
+serialise them with one lock.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from engine.errors import InputError
+from engine.fileio import atomic_write_with
+from engine.mandrel import (
+    ArcSegment,
+    EllipseSegment,
+    LineSegment,
+    Mandrel,
+    Segment,
+    SplineSegment,
+    validate_points,
+)
+
+FloatArray = NDArray[np.float64]
+
+MAX_INPUT_BYTES = 64 * 1024 * 1024
+"""Importers refuse larger files (a generatrix never needs that much)."""
+
+# Profile points handed to the spline by the DXF/STEP importers: about this many along the zone.
+_PROFILE_POINTS = 1200
+
+
+# ================================================================================================
+# Common helpers
+# ================================================================================================
+def _read_bytes(path: str | Path, what: str) -> bytes:
+    p = Path(path)
+    try:
+        size = p.stat().st_size
+    except FileNotFoundError:
+        raise InputError(f"{what} file not found", file=p) from None
+    except OSError as exc:
+        raise InputError(f"cannot read the {what} file: {exc.strerror or exc}", file=p) from None
+    if p.is_dir():
+        raise InputError(f"expected a {what} file, got a directory", file=p)
+    if size > MAX_INPUT_BYTES:
+        raise InputError(f"{what} file too large: {size} bytes (limit {MAX_INPUT_BYTES})", file=p)
+    try:
+        return p.read_bytes()
+    except OSError as exc:
+        raise InputError(f"cannot read the {what} file: {exc.strerror or exc}", file=p) from None
+
+
+def _mandrel_from_profile(
+    z: FloatArray, r: FloatArray, *, path: Path, source: str, lines: Sequence[int] | None = None,
+    meta: dict[str, Any] | None = None,
+) -> Mandrel:
+    """Validate points, check the spline stays off the axis between them, build the mandrel."""
+    file = str(path)
+    validate_points(z, r, file=file, lines=lines)
+    _check_spline_off_axis(z, r, file=file, lines=lines)
+    try:
+        m = Mandrel.from_points(z, r, name=path.stem, source=source, file=file)
+    except InputError as exc:
+        raise exc.at(file=file) from None
+    if meta:
+        m.meta.update(meta)
+    m.meta.setdefault("file", file)
+    m.meta.setdefault("points", int(len(z)))
+    return m
+
+
+def _check_spline_off_axis(z: FloatArray, r: FloatArray, *, file: str, lines: Sequence[int] | None) -> None:
+    """The cubic spline through positive points can still dip to the axis between them: refuse that."""
+    from scipy.interpolate import CubicSpline
+
+    s = CubicSpline(z, r, bc_type="not-a-knot")
+    k = 16
+    t = np.linspace(0.0, 1.0, k + 1)[1:-1]
+    zz = (z[:-1, None] + np.diff(z)[:, None] * t[None, :]).ravel()
+    rr = s(zz)
+    bad = np.flatnonzero(~(rr > 0))
+    if bad.size:
+        i = int(bad[0]) // (k - 1)
+        where = f" between lines {lines[i]} and {lines[i + 1]}" if lines is not None else ""
+        raise InputError(
+            f"the generatrix intersects the axis inside the winding zone: the smooth curve through the points "
+            f"reaches r = {rr[bad[0]]:.4g} mm at z = {zz[bad[0]]:.6g} mm{where}, between z = {z[i]:g} and "
+            f"{z[i + 1]:g} mm; add points or move the profile away from the axis",
+            file=file, line=None if lines is None else int(lines[i]), field="r")
+
+
+# ================================================================================================
+# CSV
+# ================================================================================================
+_NUM_RE = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?")
+_NONFINITE_RE = re.compile(r"[+-]?(?:nan|inf|infinity)", re.IGNORECASE)
+_Z_NAMES = {"z", "x", "axial", "axis", "position", "pos", "s"}
+_R_NAMES = {"r", "y", "radius", "rad", "radial"}
+_D_NAMES = {"d", "dia", "diameter", "diam"}
+_UNIT_RE = re.compile(r"[\s_]*[\[(]?\s*mm\s*[\])]?$", re.IGNORECASE)
+
+
+def _decode_text(data: bytes, file: str) -> str:
+    if data.startswith((b"\xff\xfe", b"\xfe\xff")):
+        try:
+            return data.decode("utf-16")
+        except UnicodeDecodeError:
+            raise InputError("the file starts with a UTF-16 mark but is not valid UTF-16 text", file=file) from None
+    if b"\x00" in data:
+        off = data.index(b"\x00")
+        line = data.count(b"\n", 0, off) + 1
+        raise InputError(f"binary data (a NUL byte at offset {off}); expected a text table of z, r values",
+                         file=file, line=line)
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        raise InputError(
+            f"not UTF-8 text: byte 0x{data[exc.start]:02x} at offset {exc.start}; save the table as UTF-8 (or plain "
+            "ASCII) text", file=file, line=line) from None
+
+
+def _split_cells(text: str) -> tuple[list[str], str]:
+    for sep, name in ((";", "semicolon"), ("\t", "tab"), (",", "comma")):
+        if sep in text:
+            return [c.strip() for c in text.split(sep)], name
+    return text.split(), "blank"
+
+
+def _column_role(name: str) -> str | None:
+    n = _UNIT_RE.sub("", name.strip().strip("\"'").lower()).strip()
+    if n in _Z_NAMES:
+        return "z"
+    if n in _R_NAMES:
+        return "r"
+    if n in _D_NAMES:
+        return "d"
+    return None
+
+
+def _parse_number(cell: str, separator: str) -> float | None:
+    c = cell.strip().strip("\"'")
+    if _NUM_RE.fullmatch(c):
+        return float(c)
+    # a decimal comma is unambiguous when the cells are separated by something else
+    if separator in ("semicolon", "tab", "blank") and re.fullmatch(r"[+-]?\d+,\d*(?:[eE][+-]?\d+)?", c):
+        return float(c.replace(",", "."))
+    return None
+
+
+def load_csv(path: str | Path) -> Mandrel:
+    """Read a generatrix table (z and r in mm) and return a C2 spline mandrel.
+
+    Format: one point per line; cells separated by ``,``, ``;``, tab or blanks; decimal point (a
+    decimal comma is accepted with ``;``/tab/blank separators); ``#`` starts a comment.  An
+    optional header names the columns (``z``/``z_mm``/``x`` and ``r``/``r_mm``/``radius``, or
+    ``d``/``diameter`` for a diameter column, any case, an optional ``(mm)``/``[mm]``).  Without a
+    header the table has exactly two columns, z then r.
+
+    Raises
+    ------
+    InputError
+        Naming file, line and column: unreadable or binary file, empty table, a text or non-finite
+        cell, a row with a missing or extra cell (e.g. a truncated last line), z not increasing,
+        r <= 0 inside the zone (only the end points may sit on the axis), fewer than 4 points, or a
+        smooth curve through the points that reaches the axis between them.
+    """
+    p = Path(path)
+    file = str(p)
+    text = _decode_text(_read_bytes(p, "CSV"), file)
+    ends_with_newline = text.endswith(("\n", "\r"))
+    raw_lines = text.splitlines()
+    if not any(ln.split("#", 1)[0].strip() for ln in raw_lines):
+        raise InputError("empty file: no z, r rows found (expected lines like '0.0, 50.0')", file=file)
+
+    names: list[str] | None = None
+    iz = ir = -1
+    diameter = False
+    ncol = 0
+    zs: list[float] = []
+    rs: list[float] = []
+    line_nos: list[int] = []
+    last_data_line = max(i for i, ln in enumerate(raw_lines, 1) if ln.split("#", 1)[0].strip())
+    for lineno, raw in enumerate(raw_lines, 1):
+        body = raw.split("#", 1)[0].strip()
+        if not body:
+            continue
+        cells, sep = _split_cells(body)
+        if sep == "comma" and cells and cells[-1] == "" and len(cells) > 1:
+            cells = cells[:-1]  # tolerate one trailing comma
+        values = [_parse_number(c, sep) for c in cells]
+        truncated = lineno == last_data_line and not ends_with_newline
+        if names is None and not zs:
+            # first row: a header if any cell is not a number
+            if any(v is None for v in values) and not any(_NONFINITE_RE.fullmatch(c.strip()) for c in cells):
+                roles = [_column_role(c) for c in cells]
+                if any(v is not None for v in values) or roles.count("z") != 1 or (
+                        roles.count("r") + roles.count("d")) != 1:
+                    raise InputError(
+                        f"cannot read the header {body!r}: it must name one axial column (z, z_mm, x) and one "
+                        "radius column (r, r_mm, radius, or d/diameter)", file=file, line=lineno)
+                names = [c.strip().strip("\"'") for c in cells]
+                iz = roles.index("z")
+                if "r" in roles:
+                    ir = roles.index("r")
+                else:
+                    ir, diameter = roles.index("d"), True
+                ncol = len(cells)
+                continue
+            if len(cells) != 2:
+                if len(cells) < 2:
+                    msg = (f"the row has only 1 cell ({body!r}); expected 2 (z, r)"
+                           + (" - the file seems cut off" if truncated else ""))
+                    raise InputError(msg, file=file, line=lineno, field="r")
+                raise InputError(
+                    f"the row has {len(cells)} cells but the table has no header; give a header naming the z and r "
+                    "columns, or keep two columns (z, r)", file=file, line=lineno)
+            names = ["z", "r"]
+            iz, ir, ncol = 0, 1, 2
+        if len(cells) != ncol:
+            missing = len(cells) < ncol
+            msg = (f"the row has {len(cells)} cell{'s' if len(cells) != 1 else ''}, expected {ncol} "
+                   f"({', '.join(names)})")
+            if missing and truncated:
+                msg += " - the last line is incomplete, the file seems cut off"
+            col = len(cells) + 1 if missing else ncol + 1
+            raise InputError(msg, file=file, line=lineno,
+                             field=f"{names[col - 1]} (column {col})" if missing else f"column {col}")
+        for j in (iz, ir):
+            if values[j] is None:
+                cell = cells[j]
+                col = f"{names[j]} (column {j + 1})"
+                if _NONFINITE_RE.fullmatch(cell.strip().strip("\"'")):
+                    raise InputError(f"{cell!r} is not a finite number", file=file, line=lineno, field=col)
+                hint = ""
+                if truncated:
+                    hint = " - the last line is incomplete, the file seems cut off"
+                elif "," in cell:
+                    hint = " (use a decimal point)"
+                elif cell == "":
+                    hint = " (empty cell)"
+                raise InputError(f"{cell!r} is not a number{hint}", file=file, line=lineno, field=col)
+        zs.append(float(values[iz]))  # type: ignore[arg-type]
+        rv = float(values[ir])  # type: ignore[arg-type]
+        rs.append(0.5 * rv if diameter else rv)
+        line_nos.append(lineno)
+
+    assert names is not None
+    z = np.asarray(zs, dtype=float)
+    r = np.asarray(rs, dtype=float)
+    if len(z) < 4:
+        raise InputError(f"too few points: {len(z)} row{'s' if len(z) != 1 else ''}; a C2 generatrix needs at "
+                         "least 4", file=file, line=line_nos[-1] if line_nos else None)
+    # errors from validation should name the CSV column
+    try:
+        return _mandrel_from_profile(z, r, path=p, source="csv", lines=line_nos)
+    except InputError as exc:
+        f = exc.location.field
+        if f in ("z", "r"):
+            j = iz if f == "z" else ir
+            exc = InputError(exc.message, file=exc.location.file, line=exc.location.line,
+                             field=f"{names[j]} (column {j + 1})")
+        raise exc from None
+
+
+# ================================================================================================
+# DXF
+# ================================================================================================
+_DXF_CURVES = ("LINE", "ARC", "LWPOLYLINE", "POLYLINE", "SPLINE", "ELLIPSE")
+
+
+@dataclass
+class _Piece:
+    """A polyline in the (z, r) plane from one drawing entity (or a part of it)."""
+
+    pts: FloatArray  # (n, 2): z, r
+    label: str  # e.g. "LINE #2F on layer 'PROFILE'"
+
+
+def _entity_label(e: Any) -> str:
+    try:
+        return f"{e.dxftype()} #{e.dxf.handle} on layer '{e.dxf.layer}'"
+    except Exception:  # noqa: BLE001 - only for a message
+        return "an entity"
+
+
+def _describe_entities(entities: Iterable[Any], limit: int = 8) -> str:
+    from collections import Counter
+
+    cnt: Counter[str] = Counter()
+    examples: dict[str, str] = {}
+    for e in entities:
+        try:
+            t = e.dxftype()
+        except Exception:  # noqa: BLE001
+            t = "?"
+        cnt[t] += 1
+        examples.setdefault(t, _entity_label(e))
+    if not cnt:
+        return "model space is empty"
+    parts = [f"{n} {t}" for t, n in cnt.most_common(limit)]
+    ex = "; e.g. " + ", ".join(examples[t] for t, _ in cnt.most_common(3))
+    return "model space holds " + ", ".join(parts) + ex
+
+
+def load_dxf(path: str | Path) -> Mandrel:
+    """Read a generatrix drawn in a DXF file and return a C2 spline mandrel.
+
+    The profile is taken from model space: LINE, ARC, LWPOLYLINE (with bulges), POLYLINE,
+    SPLINE and ELLIPSE entities (also inside block references), x = axial z, y = radius, in the
+    drawing units ($INSUNITS; unitless = mm).  If a layer named ``PROFILE`` or ``GENERATRIX``
+    exists, only its entities are used.  Curves are flattened finely; parts on the axis (y ≈ 0) or
+    below it and segments perpendicular to the axis (end faces) are dropped; what remains must be
+    one chain that is a function of z (no overhang, no step).
+
+    Raises
+    ------
+    InputError
+        Naming the file and what was found (entity types, handles, layers) when there is no usable
+        profile, or where the profile goes backwards, steps or has a gap.
+    """
+    p = Path(path)
+    file = str(p)
+    data = _read_bytes(p, "DXF")
+    if not data.strip():
+        raise InputError("empty file: not a DXF drawing", file=file)
+    doc = _read_dxf_doc(p, data)
+    try:
+        msp = doc.modelspace()
+        entities = list(msp)
+    except Exception as exc:  # noqa: BLE001 - anything the parser chokes on is bad input
+        raise InputError(f"cannot read the model space of the DXF drawing ({type(exc).__name__}: {exc})",
+                         file=file) from None
+    scale = _dxf_scale(doc)
+    try:
+        pieces, ignored, curves = _dxf_pieces(entities, scale)
+    except InputError as exc:
+        raise exc.at(file=file) from None
+    except Exception as exc:  # noqa: BLE001
+        raise InputError(f"cannot interpret the DXF geometry ({type(exc).__name__}: {exc})", file=file) from None
+    if not curves:
+        raise InputError(
+            "no profile found: expected LINE/ARC/LWPOLYLINE/POLYLINE/SPLINE entities in model space (x = axial z, "
+            f"y = radius); {_describe_entities(entities)}", file=file)
+    try:
+        z, r = _profile_from_pieces(pieces, curves)
+    except InputError as exc:
+        raise exc.at(file=file) from None
+    meta = {"dxf_entities": [_entity_label(e) for e in curves][:50]}
+    return _mandrel_from_profile(z, r, path=p, source="dxf", meta=meta)
+
+
+def _read_dxf_doc(p: Path, data: bytes) -> Any:
+    import logging
+
+    import ezdxf
+    from ezdxf import recover
+
+    file = str(p)
+    head = data[:4096]
+    if b"\x00" in head and not head.startswith(b"AutoCAD Binary DXF"):
+        raise InputError("binary data that is not a DXF drawing (export the profile as an ASCII DXF)", file=file)
+    logger = logging.getLogger("ezdxf")
+    old = logger.level
+    logger.setLevel(logging.CRITICAL)  # recovery chatter is not for the user
+    try:
+        try:
+            doc, auditor = recover.readfile(str(p))
+        except ezdxf.DXFStructureError as exc:
+            raise InputError(f"not a readable DXF drawing: {exc}", file=file) from None
+        except (UnicodeError, ValueError, TypeError, IndexError, KeyError, AttributeError, EOFError, OSError,
+                AssertionError, RecursionError) as exc:
+            raise InputError(f"not a readable DXF drawing ({type(exc).__name__}: {exc})", file=file) from None
+    except InputError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - the parser sees arbitrary bytes
+        raise InputError(f"not a readable DXF drawing ({type(exc).__name__}: {exc})", file=file) from None
+    finally:
+        logger.setLevel(old)
+    if auditor.has_errors:
+        msgs = "; ".join(str(e.message) for e in auditor.errors[:3])
+        raise InputError(f"the DXF drawing is damaged: {msgs}", file=file)
+    return doc
+
+
+def _dxf_scale(doc: Any) -> float:
+    """Factor from drawing units to mm ($INSUNITS 0 = unitless is taken as mm)."""
+    try:
+        from ezdxf import units
+
+        u = int(doc.header.get("$INSUNITS", 0))
+        if u in (0, 4):
+            return 1.0
+        return float(units.conversion_factor(u, 4))
+    except Exception:  # noqa: BLE001 - unknown unit code: assume mm
+        return 1.0
+
+
+def _dxf_pieces(entities: list[Any], scale: float) -> tuple[list[_Piece], list[Any], list[Any]]:
+    """Flatten the usable entities into polylines in (z, r); return (pieces, ignored, used entities)."""
+    from ezdxf import path as dxfpath
+
+    flat: list[Any] = []
+    for e in entities:
+        t = e.dxftype()
+        if t == "INSERT":
+            try:
+                flat.extend(v for v in e.virtual_entities() if v.dxftype() in _DXF_CURVES)
+            except Exception:  # noqa: BLE001 - a broken block reference is skipped
+                continue
+        else:
+            flat.append(e)
+    curves = [e for e in flat if e.dxftype() in _DXF_CURVES]
+    ignored = [e for e in flat if e.dxftype() not in _DXF_CURVES]
+    layers = {}
+    for e in curves:
+        layers.setdefault(str(e.dxf.layer).upper(), []).append(e)
+    for name in ("PROFILE", "GENERATRIX", "MANDREL"):
+        if name in layers:
+            curves = layers[name]
+            break
+    # extent, for the flattening tolerance
+    boxes = []
+    paths = []
+    for e in curves:
+        try:
+            pth = dxfpath.make_path(e)
+        except Exception as exc:  # noqa: BLE001
+            raise InputError(f"cannot read {_entity_label(e)} ({type(exc).__name__}: {exc})") from None
+        paths.append((e, pth))
+        try:
+            bb = dxfpath.bbox([pth], fast=True)
+            if bb.has_data:
+                boxes.append((bb.extmin, bb.extmax))
+        except Exception:  # noqa: BLE001
+            continue
+    if not boxes:
+        return [], ignored, curves
+    lo = np.min([[b[0].x, b[0].y] for b in boxes], axis=0)
+    hi = np.max([[b[1].x, b[1].y] for b in boxes], axis=0)
+    extent = float(np.max(hi - lo))
+    if not math.isfinite(extent):
+        raise InputError("the drawing has non-finite coordinates")
+    extent = max(extent, 1e-9)
+    distance = 1e-6 * extent
+    pieces = []
+    for e, pth in paths:
+        try:
+            v = np.array([(q.x, q.y) for q in pth.flattening(distance=distance, segments=16)], dtype=float)
+        except Exception as exc:  # noqa: BLE001
+            raise InputError(f"cannot flatten {_entity_label(e)} ({type(exc).__name__}: {exc})") from None
+        if len(v) < 2 or not np.isfinite(v).all():
+            continue
+        pieces.append(_Piece(v * scale, _entity_label(e)))
+    return pieces, ignored, curves
+
+
+def _profile_from_pieces(pieces: list[_Piece], curves: list[Any]) -> tuple[FloatArray, FloatArray]:
+    """Turn flattened pieces into one z-monotone chain of points (z increasing)."""
+    if not pieces:
+        raise InputError(f"no profile geometry: the curves have no length ({_describe_entities(curves)})")
+    allp = np.concatenate([pc.pts for pc in pieces])
+    extent = max(float(np.ptp(allp[:, 0])), float(np.ptp(allp[:, 1])), 1e-9)
+    tol = 1e-6 * extent  # geometric tolerance (joins, axis, perpendicular faces)
+    # split into edges, keep those off the axis and not perpendicular to it
+    chains: list[tuple[FloatArray, str]] = []
+    dropped_vertical: list[tuple[float, float, float, str]] = []
+    for pc in pieces:
+        q = pc.pts
+        keep_edge = np.ones(len(q) - 1, dtype=bool)
+        dz = np.diff(q[:, 0])
+        seglen = np.hypot(dz, np.diff(q[:, 1]))
+        on_axis = (np.abs(q[:-1, 1]) <= tol) & (np.abs(q[1:, 1]) <= tol)
+        below = (q[:-1, 1] < -tol) | (q[1:, 1] < -tol)
+        vertical = np.abs(dz) <= max(tol, 1e-9 * extent) + 1e-12 * seglen
+        zero = seglen <= 1e-12 * extent
+        keep_edge &= ~(on_axis | below | vertical | zero)
+        for k in np.flatnonzero(vertical & ~on_axis & ~below & ~zero):
+            dropped_vertical.append((float(q[k, 0]), float(min(q[k, 1], q[k + 1, 1])),
+                                     float(max(q[k, 1], q[k + 1, 1])), pc.label))
+        # runs of kept edges become chains
+        idx = np.flatnonzero(keep_edge)
+        if idx.size == 0:
+            continue
+        breaks = np.flatnonzero(np.diff(idx) > 1)
+        for run in np.split(idx, breaks + 1):
+            pts = q[run[0]: run[-1] + 2]
+            d = np.diff(pts[:, 0])
+            if (d > 0).all():
+                chains.append((pts, pc.label))
+            elif (d < 0).all():
+                chains.append((pts[::-1], pc.label))
+            else:
+                k = int(np.flatnonzero(np.sign(d) != np.sign(d[0]))[0])
+                zt = pts[k, 0]
+                raise InputError(
+                    f"the profile is not a function of z: {pc.label} turns back along the axis at z = {zt:.6g} "
+                    f"mm, r = {pts[k, 1]:.6g} mm (an overhang); the generatrix must run monotonically along x")
+    if not chains:
+        found = _describe_entities(curves)
+        if dropped_vertical:
+            raise InputError(f"no profile: every segment is perpendicular to the axis or lies on it ({found})")
+        raise InputError(f"no profile above the axis (y > 0): {found}")
+    chains.sort(key=lambda c: c[0][0, 0])
+    zs = [chains[0][0]]
+    for (prev, plab), (cur, clab) in zip(chains[:-1], chains[1:]):
+        zp, rp = prev[-1]
+        zc, rc = cur[0]
+        if zc < zp - tol:
+            raise InputError(
+                f"the profile is not a function of z: {clab} starts at z = {zc:.6g} mm inside the z range of "
+                f"{plab} (which ends at z = {zp:.6g} mm); two curves cover the same z (overhang or duplicate)")
+        if zc > zp + tol:
+            raise InputError(
+                f"the profile has a gap between z = {zp:.6g} mm ({plab}) and z = {zc:.6g} mm ({clab}); the "
+                "curves must join end to end")
+        if abs(rc - rp) > tol:
+            raise InputError(
+                f"the profile steps from r = {rp:.6g} to {rc:.6g} mm at z = {zc:.6g} mm (a face perpendicular to "
+                f"the axis inside the winding zone, between {plab} and {clab}); the generatrix must be smooth")
+        zs.append(cur[1:])
+    pts = np.concatenate(zs)
+    return _resample_chain(pts[:, 0], pts[:, 1])
+
+
+def _resample_chain(z: FloatArray, r: FloatArray, n: int = _PROFILE_POINTS) -> tuple[FloatArray, FloatArray]:
+    """Make the point spacing usable for a C2 spline.
+
+    Long straight chords (lines, polyline segments) are subdivided so that no z gap exceeds
+    ``length / n`` (points on a straight chord lie on the drawn line).  Very dense runs of points
+    are thinned to an arc-length spacing of ``length / (8 n)``, except where the curve turns by more
+    than 0.01 rad between kept points (tight bends keep their points).  Both ends are kept.
+    """
+    length = float(z[-1] - z[0])
+    h = length / n
+    out_z = [z[:1]]
+    out_r = [r[:1]]
+    for i in range(len(z) - 1):
+        k = max(1, int(math.ceil((z[i + 1] - z[i]) / h - 1e-9)))
+        t = np.arange(1, k + 1) / k
+        out_z.append(z[i] + (z[i + 1] - z[i]) * t)
+        out_r.append(r[i] + (r[i + 1] - r[i]) * t)
+    zz = np.concatenate(out_z)
+    rr = np.concatenate(out_r)
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(zz), np.diff(rr)))])
+    ang = np.arctan2(np.diff(rr), np.diff(zz))  # direction of each chord
+    keep = [0]
+    hmin = h / 8.0
+    last_dir = ang[0]
+    for i in range(1, len(zz) - 1):
+        if (s[i] - s[keep[-1]] >= hmin or abs(ang[i] - last_dir) > 0.01) and s[-1] - s[i] >= 1e-3 * hmin:
+            keep.append(i)
+            last_dir = ang[i]
+    keep.append(len(zz) - 1)
+    return zz[keep], rr[keep]
+
+
+# ================================================================================================
+# STEP / STL export
+# ================================================================================================
+def _bspline_graph_edge(seg: Segment, tol: float) -> Any:
+    """An exact-to-``tol`` cubic B-spline edge x = r(z), z = z in the XZ plane for any segment.
+
+    x(u) = u exactly: the z coordinates of the poles are the Greville abscissae of the knots.
+    """
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
+    from OCP.Geom import Geom_BSplineCurve
+    from OCP.gp import gp_Pnt
+    from OCP.TColgp import TColgp_Array1OfPnt
+    from OCP.TColStd import TColStd_Array1OfInteger, TColStd_Array1OfReal
+    from scipy.interpolate import make_interp_spline
+
+    if isinstance(seg, SplineSegment):
+        nodes = np.asarray(seg.z_pts, dtype=float)
+        exact = True
+    else:
+        nodes = _initial_nodes(seg)
+        exact = False
+    for _ in range(12):
+        bs = make_interp_spline(nodes, seg.eval(nodes)[0], k=3)
+        if exact:
+            break
+        tt = np.linspace(0.0, 1.0, 5)[1:-1]
+        zm = (nodes[:-1, None] + np.diff(nodes)[:, None] * tt[None, :]).ravel()
+        err = np.abs(bs(zm) - seg.eval(zm)[0]).reshape(len(nodes) - 1, -1).max(axis=1)
+        if err.max() <= tol:
+            break
+        bad = np.flatnonzero(err > tol)
+        nodes = np.sort(np.concatenate([nodes, 0.5 * (nodes[bad] + nodes[bad + 1])]))
+    t, c = np.asarray(bs.t, dtype=float), np.asarray(bs.c, dtype=float)
+    deg = 3
+    greville = np.array([t[i + 1: i + deg + 1].mean() for i in range(len(c))])
+    poles = TColgp_Array1OfPnt(1, len(c))
+    for i, (zc, rc) in enumerate(zip(greville, c), 1):
+        poles.SetValue(i, gp_Pnt(float(rc), 0.0, float(zc)))
+    uk, mult = np.unique(t, return_counts=True)
+    knots = TColStd_Array1OfReal(1, len(uk))
+    mults = TColStd_Array1OfInteger(1, len(uk))
+    for i, (u, m) in enumerate(zip(uk, mult), 1):
+        knots.SetValue(i, float(u))
+        mults.SetValue(i, int(m))
+    curve = Geom_BSplineCurve(poles, knots, mults, deg)
+    return BRepBuilderAPI_MakeEdge(curve).Edge()
+
+
+def _initial_nodes(seg: Segment) -> FloatArray:
+    from engine.mandrel import IsotensoidSegment
+
+    if isinstance(seg, IsotensoidSegment):
+        # uniform in the smooth parameter t (clusters nodes where the meridian bends most)
+        t = np.linspace(0.0, math.pi, 97)
+        zeta = np.polynomial.chebyshev.chebval(t * (2.0 / math.pi) - 1.0, seg._series(seg.rho_p)[0])
+        z = seg.zc + seg.direction * seg.R * zeta
+        z = np.sort(z)
+        z[0], z[-1] = seg.z0, seg.z1
+        return np.unique(z)
+    return np.linspace(seg.z0, seg.z1, 33)
+
+
+def _segment_edge(seg: Segment, tol: float) -> Any:
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
+    from OCP.GC import GC_MakeArcOfCircle, GC_MakeArcOfEllipse, GC_MakeSegment
+    from OCP.gp import gp_Ax2, gp_Dir, gp_Elips, gp_Pnt
+
+    def pnt(z: float) -> Any:
+        r = float(seg.eval(np.array([z]))[0][0])
+        return gp_Pnt(max(r, 0.0), 0.0, float(z))
+
+    if isinstance(seg, LineSegment):
+        return BRepBuilderAPI_MakeEdge(GC_MakeSegment(pnt(seg.z0), pnt(seg.z1)).Value()).Edge()
+    if isinstance(seg, ArcSegment):
+        zm = 0.5 * (seg.z0 + seg.z1)
+        arc = GC_MakeArcOfCircle(pnt(seg.z0), pnt(zm), pnt(seg.z1)).Value()
+        return BRepBuilderAPI_MakeEdge(arc).Edge()
+    if isinstance(seg, EllipseSegment):
+        if seg.a >= seg.b:
+            ax = gp_Ax2(gp_Pnt(0, 0, seg.zc), gp_Dir(0, 1, 0), gp_Dir(0, 0, 1))
+            el = gp_Elips(ax, seg.a, seg.b)
+        else:
+            ax = gp_Ax2(gp_Pnt(0, 0, seg.zc), gp_Dir(0, 1, 0), gp_Dir(1, 0, 0))
+            el = gp_Elips(ax, seg.b, seg.a)
+        for pa, pb in ((pnt(seg.z0), pnt(seg.z1)), (pnt(seg.z1), pnt(seg.z0))):
+            arc = GC_MakeArcOfEllipse(el, pa, pb, True).Value()
+            mid = arc.Value(0.5 * (arc.FirstParameter() + arc.LastParameter()))
+            if mid.X() > 0:
+                return BRepBuilderAPI_MakeEdge(arc).Edge()
+        raise RuntimeError("could not orient the ellipse arc")  # pragma: no cover
+    return _bspline_graph_edge(seg, tol)
+
+
+def mandrel_solid(mandrel: Mandrel) -> Any:
+    """The mandrel as an OCP ``TopoDS_Solid``: the closed profile revolved 360° about the Z axis.
+
+    The generatrix uses exact lines, circle and ellipse arcs where the segments are analytic, and
+    cubic B-splines x = r(z) elsewhere (exact for spline segments, within 1e-9 of the radius scale
+    for isotensoid and smooth-step segments).  Coordinates in mm; the solid axis is Z.
+    """
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeFace, BRepBuilderAPI_MakeWire
+    from OCP.BRepCheck import BRepCheck_Analyzer
+    from OCP.BRepPrimAPI import BRepPrimAPI_MakeRevol
+    from OCP.GC import GC_MakeSegment
+    from OCP.gp import gp_Ax1, gp_Dir, gp_Pnt
+    from OCP.TopAbs import TopAbs_SOLID
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    scale = max(mandrel.r_max, mandrel.length)
+    tol = 1e-9 * scale
+    wire = BRepBuilderAPI_MakeWire()
+    for seg in mandrel.segments:
+        wire.Add(_segment_edge(seg, tol))
+    r0, r1 = mandrel.pole_radii
+    z0, z1 = mandrel.z_min, mandrel.z_max
+    close_tol = 1e-9 * scale
+
+    def line(a: tuple[float, float], b: tuple[float, float]) -> None:
+        seg = GC_MakeSegment(gp_Pnt(a[0], 0.0, a[1]), gp_Pnt(b[0], 0.0, b[1])).Value()
+        wire.Add(BRepBuilderAPI_MakeEdge(seg).Edge())
+
+    if r1 > close_tol:
+        line((r1, z1), (0.0, z1))
+    line((0.0, z1), (0.0, z0))
+    if r0 > close_tol:
+        line((0.0, z0), (r0, z0))
+    if not wire.IsDone():
+        raise RuntimeError("could not close the mandrel profile into a wire")
+    face = BRepBuilderAPI_MakeFace(wire.Wire(), True).Face()
+    revol = BRepPrimAPI_MakeRevol(face, gp_Ax1(gp_Pnt(0, 0, 0), gp_Dir(0, 0, 1)), 2.0 * math.pi)
+    revol.Build()
+    shape = revol.Shape()
+    exp = TopExp_Explorer(shape, TopAbs_SOLID)
+    if not exp.More():
+        raise RuntimeError("revolving the mandrel profile did not give a solid")
+    solid = TopoDS.Solid_s(exp.Current())
+    if not BRepCheck_Analyzer(solid).IsValid():
+        raise RuntimeError("the revolved mandrel solid is not valid")
+    return solid
+
+
+def export_step(mandrel: Mandrel, path: str | Path) -> Path:
+    """Write the mandrel solid (axis = Z, mm) as a STEP AP214 file, atomically; return the path."""
+    import cadquery as cq
+    from OCP.IFSelect import IFSelect_ReturnStatus
+
+    shape = cq.Shape.cast(mandrel_solid(mandrel))
+
+    def write(tmp: str) -> None:
+        status = shape.exportStep(tmp)
+        if status != IFSelect_ReturnStatus.IFSelect_RetDone:
+            raise OSError(f"the STEP writer failed ({status})")
+
+    return atomic_write_with(path, write, suffix=".step")
+
+
+def export_stl(mandrel: Mandrel, path: str | Path, tolerance_mm: float = 0.01, angular_tolerance_rad: float = 0.1,
+               ascii: bool = False) -> Path:
+    """Write the mandrel as a closed triangle mesh (STL, mm), atomically; return the path.
+
+    Parameters
+    ----------
+    tolerance_mm:
+        Largest distance between the mesh and the surface (chordal deviation), mm.
+    angular_tolerance_rad:
+        Largest angle between neighbouring facets along a curve, rad.
+    """
+    import cadquery as cq
+
+    if not (math.isfinite(tolerance_mm) and tolerance_mm > 0):
+        raise InputError(f"STL tolerance must be > 0 mm, got {tolerance_mm}", field="tolerance_mm")
+    if not (math.isfinite(angular_tolerance_rad) and angular_tolerance_rad > 0):
+        raise InputError(f"STL angular tolerance must be > 0 rad, got {angular_tolerance_rad}",
+                         field="angular_tolerance_rad")
+    shape = cq.Shape.cast(mandrel_solid(mandrel))
+
+    def write(tmp: str) -> None:
+        ok = shape.exportStl(tmp, tolerance=tolerance_mm, angularTolerance=angular_tolerance_rad, ascii=ascii,
+                             relative=False, parallel=False)
+        if not ok:
+            raise OSError("the STL writer failed")
+
+    return atomic_write_with(path, write, suffix=".stl")
+
+
+# ================================================================================================
+# STEP import
+# ================================================================================================
+# planes through the axis (6 half-planes); 37° is no divisor of 360° / n for small n, so prisms with n-fold
+# symmetry are caught
+_SECTION_ANGLES_DEG = (0.0, 90.0, 37.0)
+
+
+def load_step(path: str | Path) -> Mandrel:
+    """Read a solid of revolution from a STEP file and return a C2 spline mandrel of its outer profile.
+
+    The axis is taken from the faces of revolution (cylinders, cones, tori, surfaces of revolution,
+    sphere centres), else from the principal axes of inertia, else Z through the centroid.  The
+    solid is cut by planes through the axis at 0°, 37° and 90°; the outer profiles r(z) of the six
+    half-sections must agree within 1e-4 of the model size.  Section edges on the axis and
+    perpendicular to it (end faces) are dropped; the outer envelope of the rest is the generatrix.
+    z is measured along the axis from the foot of the global origin, so a solid revolved about Z
+    keeps its z coordinates.
+
+    Raises
+    ------
+    InputError
+        Unreadable file, no solid or several solids, not a solid of revolution (which profiles
+        differ, by how much, where), a step in the profile.
+    """
+    p = Path(path)
+    file = str(p)
+    data = _read_bytes(p, "STEP")
+    if not data.strip():
+        raise InputError("empty file: not a STEP model", file=file)
+    if not data.lstrip()[:64].upper().startswith(b"ISO-10303-21"):
+        raise InputError("not a STEP file: it does not start with 'ISO-10303-21;' (export the mandrel as STEP "
+                         "AP203/AP214)", file=file)
+    try:
+        solid = _read_step_solid(file)
+        axis_o, axis_d, how = _revolution_axis(solid)
+        z, r = _step_profile(solid, axis_o, axis_d, how)
+    except InputError as exc:
+        raise exc.at(file=file) from None
+    return _mandrel_from_profile(z, r, path=p, source="step",
+                                 meta={"axis_origin": axis_o.tolist(), "axis_direction": axis_d.tolist(),
+                                       "axis_from": how})
+
+
+def _read_step_solid(file: str) -> Any:
+    import cadquery as cq
+    from OCP.TopAbs import TopAbs_SOLID
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    try:
+        wp = cq.importers.importStep(file)
+    except Exception as exc:  # noqa: BLE001 - the reader sees arbitrary files
+        raise InputError(f"cannot read the STEP model ({type(exc).__name__}: {exc})") from None
+    solids = []
+    for obj in wp.vals():
+        if not isinstance(obj, cq.Shape):
+            continue
+        exp = TopExp_Explorer(obj.wrapped, TopAbs_SOLID)
+        while exp.More():
+            solids.append(TopoDS.Solid_s(exp.Current()))
+            exp.Next()
+    if not solids:
+        kinds = sorted({type(o).__name__ for o in wp.vals()})
+        raise InputError(f"the STEP model holds no solid (found: {', '.join(kinds) or 'nothing'}); export the "
+                         "mandrel as a solid body")
+    if len(solids) > 1:
+        raise InputError(f"the STEP model holds {len(solids)} solids; export only the mandrel body")
+    return solids[0]
+
+
+def _revolution_axis(solid: Any) -> tuple[FloatArray, FloatArray, str]:
+    """(origin, unit direction, how found) of the presumed axis of revolution."""
+    from OCP.BRepAdaptor import BRepAdaptor_Surface
+    from OCP.BRepGProp import BRepGProp
+    from OCP.GeomAbs import (
+        GeomAbs_Cone,
+        GeomAbs_Cylinder,
+        GeomAbs_Sphere,
+        GeomAbs_SurfaceOfRevolution,
+        GeomAbs_Torus,
+    )
+    from OCP.GProp import GProp_GProps
+    from OCP.TopAbs import TopAbs_FACE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    def vec(p: Any) -> FloatArray:
+        return np.array([p.X(), p.Y(), p.Z()], dtype=float)
+
+    g = GProp_GProps()
+    BRepGProp.VolumeProperties_s(solid, g)
+    centroid = vec(g.CentreOfMass())
+    bb = _bbox(solid)
+    size = float(np.max(bb[1] - bb[0]))
+    tol = 1e-6 * max(size, 1.0)
+    axes: list[tuple[float, FloatArray, FloatArray, str]] = []
+    centres: list[FloatArray] = []
+    exp = TopExp_Explorer(solid, TopAbs_FACE)
+    kinds = {GeomAbs_Cylinder: "cylinder", GeomAbs_Cone: "cone", GeomAbs_Torus: "torus",
+             GeomAbs_SurfaceOfRevolution: "surface of revolution"}
+    while exp.More():
+        face = TopoDS.Face_s(exp.Current())
+        exp.Next()
+        ad = BRepAdaptor_Surface(face)
+        t = ad.GetType()
+        if t == GeomAbs_Sphere:
+            centres.append(vec(ad.Sphere().Location()))
+            continue
+        if t not in kinds:
+            continue
+        if t == GeomAbs_Cylinder:
+            ax = ad.Cylinder().Axis()
+        elif t == GeomAbs_Cone:
+            ax = ad.Cone().Axis()
+        elif t == GeomAbs_Torus:
+            ax = ad.Torus().Axis()
+        else:
+            ax = ad.AxeOfRevolution()
+        fg = GProp_GProps()
+        BRepGProp.SurfaceProperties_s(face, fg)
+        d = ax.Direction()
+        axes.append((fg.Mass(), vec(ax.Location()), np.array([d.X(), d.Y(), d.Z()]), kinds[t]))
+    if axes:
+        axes.sort(key=lambda a: -a[0])
+        _, o, d, kind = axes[0]
+        for _, o2, d2, k2 in axes[1:]:
+            off = _dist_to_line(o2, o, d)
+            if np.linalg.norm(np.cross(d, d2)) > 1e-6 or off > tol:
+                raise InputError(
+                    f"not a solid of revolution: its {k2} face turns about an axis through "
+                    f"{_fmt_pt(o2)} along {_fmt_pt(d2)}, but the main {kind} face about {_fmt_pt(o)} along "
+                    f"{_fmt_pt(d)} ({off:.4g} mm apart)")
+        for c in centres:
+            off = _dist_to_line(c, o, d)
+            if off > tol:
+                raise InputError(f"not a solid of revolution: a spherical face is centred at {_fmt_pt(c)}, "
+                                 f"{off:.4g} mm off the axis of the {kind} faces")
+        how = f"{kind} faces"
+    else:
+        # principal axes of inertia: the axis of a body of revolution has the odd moment
+        mat = g.MatrixOfInertia()
+        inertia = np.array([[mat.Value(i, j) for j in (1, 2, 3)] for i in (1, 2, 3)])
+        w, v = np.linalg.eigh(inertia)
+        scale = max(abs(w).max(), 1e-300)
+        same01 = abs(w[0] - w[1]) <= 1e-6 * scale
+        same12 = abs(w[1] - w[2]) <= 1e-6 * scale
+        o = centres[0] if centres else centroid
+        if same01 and not same12:
+            d, how = v[:, 2], "principal axes of inertia"
+        elif same12 and not same01:
+            d, how = v[:, 0], "principal axes of inertia"
+        else:
+            d, how = np.array([0.0, 0.0, 1.0]), "assumed Z axis"
+    d = np.asarray(d, dtype=float) / np.linalg.norm(d)
+    if d[int(np.argmax(np.abs(d)))] < 0:
+        d = -d
+    o = np.asarray(o, dtype=float)
+    o = o - np.dot(o, d) * d  # foot of the global origin on the axis
+    d[np.abs(d) < 1e-15] = 0.0
+    return o, d, how
+
+
+def _fmt_pt(p: FloatArray) -> str:
+    return "(" + ", ".join(f"{x:.6g}" for x in p) + ")"
+
+
+def _dist_to_line(p: FloatArray, o: FloatArray, d: FloatArray) -> float:
+    return float(np.linalg.norm(np.cross(p - o, d)))
+
+
+def _bbox(shape: Any) -> tuple[FloatArray, FloatArray]:
+    from OCP.Bnd import Bnd_Box
+    from OCP.BRepBndLib import BRepBndLib
+
+    box = Bnd_Box()
+    BRepBndLib.Add_s(shape, box)
+    x0, y0, z0, x1, y1, z1 = box.Get()
+    return np.array([x0, y0, z0]), np.array([x1, y1, z1])
+
+
+def _section_halves(solid: Any, o: FloatArray, d: FloatArray, u: FloatArray, h: float,
+                    tol: float) -> tuple[list[FloatArray], list[FloatArray]]:
+    """Cut with the plane through the axis spanned by d and u; polylines (z, r) of the +u and -u halves."""
+    from OCP.BRepAdaptor import BRepAdaptor_Curve
+    from OCP.BRepAlgoAPI import BRepAlgoAPI_Section
+    from OCP.GCPnts import GCPnts_AbscissaPoint, GCPnts_TangentialDeflection, GCPnts_UniformAbscissa
+    from OCP.gp import gp_Dir, gp_Pln, gp_Pnt
+    from OCP.TopAbs import TopAbs_EDGE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    n = np.cross(d, u)
+    sec = BRepAlgoAPI_Section(solid, gp_Pln(gp_Pnt(*map(float, o)), gp_Dir(*map(float, n))), False)
+    sec.Approximation(True)
+    sec.Build()
+    if not sec.IsDone():
+        raise InputError("cannot cut the solid with a plane through its axis")
+    plus: list[FloatArray] = []
+    minus: list[FloatArray] = []
+    exp = TopExp_Explorer(sec.Shape(), TopAbs_EDGE)
+    while exp.More():
+        edge = TopoDS.Edge_s(exp.Current())
+        exp.Next()
+        c = BRepAdaptor_Curve(edge)
+        f, l_ = c.FirstParameter(), c.LastParameter()
+        length = GCPnts_AbscissaPoint.Length_s(c)
+        if not length > tol:
+            continue
+        params = [f, l_]
+        ua = GCPnts_UniformAbscissa(c, max(8, int(math.ceil(length / h)) + 1), -1.0)
+        if ua.IsDone():
+            params += [ua.Parameter(i) for i in range(1, ua.NbPoints() + 1)]
+        td = GCPnts_TangentialDeflection(c, 0.01, 1e-4 * h)
+        params += [td.Parameter(i) for i in range(1, td.NbPoints() + 1)]
+        prm = np.unique(np.asarray(params, dtype=float))
+        pts = np.array([[q.X(), q.Y(), q.Z()] for q in (c.Value(float(t)) for t in prm)])
+        rel = pts - o
+        zz = rel @ d
+        ss = rel @ u
+        if np.abs(ss).max() <= tol or np.ptp(zz) <= tol:
+            continue  # on the axis, or perpendicular to it (an end face)
+        if ss.max() > tol:
+            m = ss >= -tol
+            plus.append(np.column_stack([zz[m], np.maximum(ss[m], 0.0)]))
+        if ss.min() < -tol:
+            m = ss <= tol
+            minus.append(np.column_stack([zz[m], np.maximum(-ss[m], 0.0)]))
+    return plus, minus
+
+
+def _monotone_runs(pl: FloatArray, ztol: float) -> list[FloatArray]:
+    """Split a polyline into runs of strictly increasing z (reversed where decreasing); drop constant-z runs."""
+    runs: list[FloatArray] = []
+    d = np.diff(pl[:, 0])
+    sgn = np.where(d > 0, 1, np.where(d < 0, -1, 0))
+    start = 0
+    for i in range(1, len(sgn) + 1):
+        if i == len(sgn) or sgn[i] != sgn[start]:
+            run = pl[start: i + 1]
+            if sgn[start] == -1:
+                run = run[::-1]
+            if sgn[start] != 0 and np.ptp(run[:, 0]) > ztol:
+                runs.append(run)
+            start = i
+    return runs
+
+
+def _outer_envelope(polylines: list[FloatArray], tol: float) -> FloatArray:
+    """Points (z, r) of the outer envelope r(z) of the section polylines, z increasing.
+
+    ``tol`` is the geometric tolerance (mm); points closer than ``1e-3 tol`` in z are merged, and
+    a jump in r between such points is a step in the profile.
+    """
+    ztol = 1e-3 * tol
+    runs = [r for pl in polylines for r in _monotone_runs(pl, ztol)]
+    if not runs:
+        raise InputError("the section through the axis has no profile edge off the axis")
+    kept = []
+    for i, run in enumerate(runs):
+        best = np.full(len(run), -np.inf)
+        for j, other in enumerate(runs):
+            if i == j:
+                continue
+            inside = (run[:, 0] > other[0, 0] + tol) & (run[:, 0] < other[-1, 0] - tol)
+            if inside.any():
+                best[inside] = np.maximum(best[inside], np.interp(run[inside, 0], other[:, 0], other[:, 1]))
+        m = run[:, 1] >= best - tol
+        if m.any():
+            kept.append(run[m])
+    pts = np.concatenate(kept)
+    pts = pts[np.lexsort((pts[:, 1], pts[:, 0]))]
+    out = [pts[0]]
+    for q in pts[1:]:
+        if q[0] - out[-1][0] <= ztol:
+            if abs(q[1] - out[-1][1]) > 10 * tol:
+                raise InputError(
+                    f"the profile steps from r = {out[-1][1]:.6g} to {q[1]:.6g} mm at z = {q[0]:.6g} mm (a face "
+                    "perpendicular to the axis inside the winding zone); the generatrix must be smooth")
+            continue
+        out.append(q)
+    return np.array(out)
+
+
+def _step_profile(solid: Any, o: FloatArray, d: FloatArray, how: str) -> tuple[FloatArray, FloatArray]:
+    lo, hi = _bbox(solid)
+    size = float(np.max(hi - lo))
+    tol = 1e-6 * max(size, 1.0)
+    # the axial extent sets the sampling step
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    zext = float(np.ptp((corners - o) @ d))
+    h = max(zext, tol) / _PROFILE_POINTS
+    e1 = np.cross(d, [1.0, 0.0, 0.0] if abs(d[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(d, e1)
+    if abs(d[2]) > 1 - 1e-12:  # axis along Z: 0° is +X, as a user expects
+        e1, e2 = np.array([1.0, 0.0, 0.0]), np.array([0.0, float(np.sign(d[2])), 0.0])
+    profiles: dict[float, FloatArray] = {}
+    for ang in _SECTION_ANGLES_DEG:
+        u = math.cos(math.radians(ang)) * e1 + math.sin(math.radians(ang)) * e2
+        plus, minus = _section_halves(solid, o, d, u, h, tol)
+        for a, pls in ((ang, plus), (ang + 180.0, minus)):
+            if not pls:
+                raise InputError(f"not a solid of revolution about the axis through {_fmt_pt(o)} along "
+                                 f"{_fmt_pt(d)} ({how}): the half-section at {a:g}° is empty")
+            profiles[a] = _outer_envelope(pls, tol)
+    ref = profiles[0.0]
+    rev_tol = max(1e-4 * size, 1e-3)
+    for a in sorted(profiles):
+        if a == 0.0:
+            continue
+        q = profiles[a]
+        for end, zr, zq in (("start", ref[0, 0], q[0, 0]), ("end", ref[-1, 0], q[-1, 0])):
+            if abs(zr - zq) > rev_tol:
+                raise InputError(
+                    f"not a solid of revolution about the axis through {_fmt_pt(o)} along {_fmt_pt(d)} ({how}): "
+                    f"the profile at {a:g}° {end}s at z = {zq:.6g} mm, the one at 0° at z = {zr:.6g} mm")
+        zq = q[:, 0]
+        m = (zq >= ref[0, 0]) & (zq <= ref[-1, 0])
+        diff = np.abs(q[m, 1] - np.interp(zq[m], ref[:, 0], ref[:, 1]))
+        if diff.size and diff.max() > rev_tol:
+            k = int(np.argmax(diff))
+            raise InputError(
+                f"not a solid of revolution: profiles at 0° and {a:g}° differ by {diff[k]:.4g} mm at z = "
+                f"{zq[m][k]:.6g} mm (axis through {_fmt_pt(o)} along {_fmt_pt(d)}, from the {how}; tolerance "
+                f"{rev_tol:.3g} mm)")
+    return _resample_chain(ref[:, 0], ref[:, 1])
+
+
+# ================================================================================================
+# Dispatch
+# ================================================================================================
+_LOADERS = {".csv": load_csv, ".txt": load_csv, ".dat": load_csv, ".dxf": load_dxf, ".step": load_step,
+            ".stp": load_step}
+
+
+def load_mandrel_file(path: str | Path) -> Mandrel:
+    """Load a mandrel from a CSV/TXT table, a DXF profile or a STEP solid, chosen by the file suffix."""
+    p = Path(path)
+    loader = _LOADERS.get(p.suffix.lower())
+    if loader is None:
+        raise InputError(
+            f"unknown mandrel file type '{p.suffix or '(no suffix)'}'; use .csv/.txt (z, r table), .dxf (profile "
+            "drawing) or .step/.stp (solid of revolution)", file=p)
+    return loader(p)
