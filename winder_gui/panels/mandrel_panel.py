@@ -1,0 +1,400 @@
+"""Properties panel of the Mandrel step: template kind and its parameters.
+
+Each kind has its own page of fields (units in the labels); only the current kind's page is shown
+and enabled, and the dome axis ratio only for elliptical domes.  Every keystroke is checked at
+once: a bad value shows a red message right under its field and nothing is emitted; a valid set
+of values is emitted as a new mandrel spec (:attr:`MandrelPanel.spec_edited`).  Errors found later,
+when the mandrel is built, come back through :meth:`MandrelPanel.show_error`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from pydantic import ValidationError
+from PySide6.QtCore import Qt, Signal
+from PySide6.QtWidgets import (
+    QComboBox,
+    QFormLayout,
+    QGroupBox,
+    QHBoxLayout,
+    QLabel,
+    QLineEdit,
+    QPushButton,
+    QStackedWidget,
+    QVBoxLayout,
+    QWidget,
+)
+
+from engine.job import BottleSpec, ConeSpec, FileSpec, PipeSpec, PointsSpec, VesselSpec
+
+KINDS: tuple[tuple[str, str], ...] = (
+    ("vessel", "Vessel — cylinder + two domes"),
+    ("cone", "Cone — frustum"),
+    ("pipe", "Pipe — cylinder"),
+    ("bottle", "Bottle — concave neck"),
+    ("points", "Sketched points (spline)"),
+    ("file", "Imported profile (CSV/DXF/STEP)"),
+)
+SPEC_TYPES: dict[str, type] = {
+    "vessel": VesselSpec,
+    "cone": ConeSpec,
+    "pipe": PipeSpec,
+    "bottle": BottleSpec,
+    "points": PointsSpec,
+    "file": FileSpec,
+}
+DOMES = ("hemisphere", "ellipse", "isotensoid")
+
+# (key, label); "name.0"/"name.1" are the left/right members of a pair field
+FIELDS: dict[str, tuple[tuple[str, str], ...]] = {
+    "vessel": (
+        ("radius_mm", "Radius R [mm]"),
+        ("cylinder_length_mm", "Cylinder length [mm]"),
+        ("dome.0", "Left dome"),
+        ("dome_ratio.0", "Left dome axis ratio a/R [–]"),
+        ("pole_radius_mm.0", "Left pole opening radius [mm]"),
+        ("dome.1", "Right dome"),
+        ("dome_ratio.1", "Right dome axis ratio a/R [–]"),
+        ("pole_radius_mm.1", "Right pole opening radius [mm]"),
+    ),
+    "cone": (
+        ("r0_mm", "Radius at z = 0, r0 [mm]"),
+        ("r1_mm", "Radius at z = L, r1 [mm]"),
+        ("length_mm", "Length L [mm]"),
+    ),
+    "pipe": (("radius_mm", "Radius R [mm]"), ("length_mm", "Length L [mm]")),
+    "bottle": (
+        ("radius_mm", "Body radius R [mm]"),
+        ("body_length_mm", "Body length [mm]"),
+        ("shoulder_length_mm", "Shoulder length [mm]"),
+        ("waist_radius_mm", "Waist radius [mm]"),
+        ("neck_length_mm", "Neck length [mm]"),
+        ("neck_radius_mm", "Neck radius [mm]"),
+        ("bottom_pole_radius_mm", "Bottom pole opening radius [mm]"),
+    ),
+    "points": (),
+    "file": (("path", "Profile file"),),
+}
+
+
+def fmt(v: float) -> str:
+    """A number for a text field: short, but exact enough to round-trip typical inputs."""
+    return format(float(v), ".10g")
+
+
+@dataclass
+class _Row:
+    key: str
+    editor: QLineEdit | QComboBox
+    error: QLabel
+    shown: str = ""
+    value: Any = None
+
+
+class MandrelPanel(QWidget):
+    """Kind selector and parameter fields of the job's mandrel.
+
+    Signals
+    -------
+    spec_edited(spec):
+        A valid new mandrel spec (pydantic model from :mod:`engine.job`) typed by the user.
+    points_requested():
+        The user chose "Sketched points": the window converts the current mandrel.
+    import_requested():
+        The user wants to import a profile file.
+    """
+
+    spec_edited = Signal(object)
+    points_requested = Signal()
+    import_requested = Signal()
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.spec: Any = None
+        self.hint = (100.0, 400.0)
+        """(r_max, length) of the current mandrel in mm: scales the defaults of a newly chosen kind."""
+        self.rows: dict[tuple[str, str], _Row] = {}
+        self._loading = False
+
+        lay = QVBoxLayout(self)
+        lay.setContentsMargins(6, 6, 6, 6)
+        title = QLabel("<b>Mandrel</b>")
+        lay.addWidget(title)
+        kind_form = QFormLayout()
+        self.kind_combo = QComboBox()
+        for key, text in KINDS:
+            self.kind_combo.addItem(text, key)
+        kind_form.addRow("Kind", self.kind_combo)
+        lay.addLayout(kind_form)
+
+        self.pages = QStackedWidget()
+        self.page_index: dict[str, int] = {}
+        for kind, _ in KINDS:
+            box = QGroupBox("Parameters")
+            form = QFormLayout(box)
+            form.setFieldGrowthPolicy(QFormLayout.FieldGrowthPolicy.AllNonFixedFieldsGrow)
+            for key, label in FIELDS[kind]:
+                row = self._make_row(kind, key)
+                cell = QWidget()
+                v = QVBoxLayout(cell)
+                v.setContentsMargins(0, 0, 0, 0)
+                v.setSpacing(1)
+                if kind == "file":
+                    h = QHBoxLayout()
+                    h.addWidget(row.editor, 1)
+                    self.import_button = QPushButton("Import…")
+                    self.import_button.clicked.connect(self.import_requested)
+                    h.addWidget(self.import_button)
+                    v.addLayout(h)
+                else:
+                    v.addWidget(row.editor)
+                v.addWidget(row.error)
+                form.addRow(label, cell)
+            if kind == "points":
+                self.points_info = QLabel("")
+                self.points_info.setWordWrap(True)
+                form.addRow(self.points_info)
+            if kind == "file":
+                note = QLabel("The profile is read from the file each time the job is opened.")
+                note.setWordWrap(True)
+                note.setStyleSheet("color: #666;")
+                form.addRow(note)
+            self.page_index[kind] = self.pages.addWidget(box)
+        lay.addWidget(self.pages)
+        self.status = QLabel("")
+        self.status.setWordWrap(True)
+        self.status.setStyleSheet("color: #c01010;")
+        lay.addWidget(self.status)
+        lay.addStretch(1)
+        self.kind_combo.activated.connect(self._on_kind_activated)
+
+    def _make_row(self, kind: str, key: str) -> _Row:
+        editor: QLineEdit | QComboBox
+        if key.startswith("dome."):
+            editor = QComboBox()
+            editor.addItems(DOMES)
+            editor.activated.connect(lambda _i, k=kind: self._on_edited(k))
+        else:
+            editor = QLineEdit()
+            if key == "path":
+                editor.setReadOnly(True)
+                editor.setPlaceholderText("choose a file with Import…")
+            else:
+                editor.setAlignment(Qt.AlignmentFlag.AlignRight)
+                editor.textEdited.connect(lambda _t, k=kind: self._on_edited(k))
+        editor.setObjectName(f"{kind}.{key}")
+        err = QLabel("")
+        err.setObjectName(f"error.{kind}.{key}")
+        err.setStyleSheet("color: #c01010; font-size: 9pt;")
+        err.setWordWrap(True)
+        err.hide()
+        row = _Row(key, editor, err)
+        self.rows[(kind, key)] = row
+        return row
+
+    # -- public API ------------------------------------------------------------------------------
+    def current_kind(self) -> str:
+        """The kind shown in the selector."""
+        return str(self.kind_combo.currentData())
+
+    def editor(self, key: str, kind: str | None = None) -> QLineEdit | QComboBox:
+        """The field editor of ``key`` (e.g. ``"radius_mm"``, ``"pole_radius_mm.0"``) for ``kind``."""
+        return self.rows[(kind or self.current_kind(), key)].editor
+
+    def error_text(self, key: str, kind: str | None = None) -> str:
+        """The inline message under field ``key`` ("" when none is shown)."""
+        row = self.rows[(kind or self.current_kind(), key)]
+        return row.error.text() if not row.error.isHidden() else ""
+
+    def set_value(self, key: str, value: float | str) -> None:
+        """Type ``value`` into field ``key`` of the current kind as a user would (emits on success)."""
+        ed = self.editor(key)
+        if isinstance(ed, QComboBox):
+            ed.setCurrentText(str(value))
+        else:
+            ed.setText(fmt(value) if isinstance(value, int | float) else str(value))
+        self._on_edited(self.current_kind())
+
+    def set_spec(self, spec: Any) -> None:
+        """Show ``spec`` (a mandrel spec of the job) without emitting anything."""
+        self._loading = True
+        try:
+            self.spec = spec
+            kind = spec.kind
+            self.kind_combo.setCurrentIndex(self.kind_combo.findData(kind))
+            vals = self._values_of(spec)
+            for (k, key), row in self.rows.items():
+                if k != kind:
+                    continue
+                v = vals.get(key)
+                row.value = v
+                if isinstance(row.editor, QComboBox):
+                    row.editor.setCurrentText(str(v))
+                    row.shown = str(v)
+                else:
+                    row.shown = "" if v is None else (fmt(v) if isinstance(v, int | float) else str(v))
+                    row.editor.setText(row.shown)
+            if kind == "points":
+                z = spec.z_mm
+                self.points_info.setText(
+                    f"{len(z)} points, z from {min(z):.1f} to {max(z):.1f} mm.\n"
+                    "Edit them on the r(z) plot: drag to move, double-click to add, right-click or Delete to remove."
+                )
+            self.clear_errors()
+            self._show_page(kind)
+        finally:
+            self._loading = False
+
+    def clear_errors(self) -> None:
+        """Hide every inline message."""
+        for row in self.rows.values():
+            row.error.hide()
+            row.error.setText("")
+        self.status.setText("")
+
+    def show_error(self, field: str | None, message: str) -> None:
+        """Show an error of the built mandrel at its field (``mandrel.<name>``) or under the fields."""
+        key = (field or "").removeprefix("mandrel.").split(".")[0]
+        kind = self.current_kind()
+        keys = [k for (kk, k) in self.rows if kk == kind]
+        cands = [k for k in keys if k.split(".")[0] in (key, f"{key}_mm")]
+        if len(cands) > 1:
+            side = "1" if "right" in message.lower() else "0"
+            cands = [k for k in cands if k.endswith(side)] or cands
+        if cands:
+            row = self.rows[(kind, cands[0])]
+            row.error.setText(message)
+            row.error.show()
+        else:
+            self.status.setText(message)
+
+    # -- internals -------------------------------------------------------------------------------
+    @staticmethod
+    def _values_of(spec: Any) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for name, v in spec.model_dump().items():
+            if name == "kind":
+                continue
+            if isinstance(spec, VesselSpec) and name in ("dome", "dome_ratio", "pole_radius_mm"):
+                pair = tuple(v) if isinstance(v, tuple | list) else (v, v)
+                out[f"{name}.0"], out[f"{name}.1"] = pair
+            else:
+                out[name] = v
+        return out
+
+    def _show_page(self, kind: str) -> None:
+        self.pages.setCurrentIndex(self.page_index[kind])
+        for k, idx in self.page_index.items():
+            self.pages.widget(idx).setEnabled(k == kind)
+        if kind == "vessel":
+            for side in ("0", "1"):
+                dome = self.rows[("vessel", f"dome.{side}")].editor
+                assert isinstance(dome, QComboBox)
+                self.rows[("vessel", f"dome_ratio.{side}")].editor.setEnabled(dome.currentText() == "ellipse")
+
+    def _read(self, kind: str) -> tuple[dict[str, Any], dict[str, str]]:
+        """Field values of ``kind`` and per-field problems."""
+        vals: dict[str, Any] = {}
+        errs: dict[str, str] = {}
+        for (k, key), row in self.rows.items():
+            if k != kind:
+                continue
+            ed = row.editor
+            if isinstance(ed, QComboBox):
+                vals[key] = ed.currentText()
+                continue
+            text = ed.text().strip()
+            if key == "path":
+                vals[key] = text
+                if not text:
+                    errs[key] = "choose a profile file"
+                continue
+            if text == row.shown and row.value is not None:
+                vals[key] = row.value
+                continue
+            try:
+                v = float(text.replace(",", "."))
+            except ValueError:
+                errs[key] = f"not a number: {text!r}" if text else "a value is required"
+                continue
+            zero_ok = key.startswith(("pole_radius_mm", "cylinder_length_mm"))
+            if not math.isfinite(v):
+                errs[key] = f"not a finite number: {text!r}"
+            elif v < 0 or (v == 0 and not zero_ok):
+                errs[key] = f"must be {'≥' if zero_ok else '>'} 0, got {fmt(v)}"
+            vals[key] = v
+        return vals, {k: m for k, m in errs.items() if m}
+
+    def _assemble(self, kind: str, vals: dict[str, Any]) -> dict[str, Any]:
+        data: dict[str, Any] = {"kind": kind}
+        for key, v in vals.items():
+            if key.endswith(".0"):
+                name = key[:-2]
+                right = vals[f"{name}.1"]
+                data[name] = v if v == right else (v, right)
+            elif not key.endswith(".1"):
+                data[key] = v
+        return data
+
+    def _on_edited(self, kind: str) -> None:
+        if self._loading:
+            return
+        self._show_page(kind)
+        self.clear_errors()
+        vals, errs = self._read(kind)
+        if not errs and kind == "vessel":
+            for side, name in (("0", "left"), ("1", "right")):
+                rp, big_r = vals.get(f"pole_radius_mm.{side}"), vals.get("radius_mm")
+                if isinstance(rp, float) and isinstance(big_r, float) and rp >= big_r:
+                    errs[f"pole_radius_mm.{side}"] = (
+                        f"{name} pole opening {fmt(rp)} mm must be smaller than the radius {fmt(big_r)} mm"
+                    )
+        if not errs:
+            try:
+                spec = SPEC_TYPES[kind].model_validate(self._assemble(kind, vals))
+            except ValidationError as exc:
+                e = exc.errors()[0]
+                name = str(e["loc"][0]) if e["loc"] else ""
+                keys = [k for (kk, k) in self.rows if kk == kind and k.split(".")[0] == name]
+                errs[keys[0] if keys else ""] = e["msg"]
+            else:
+                self.spec_edited.emit(spec)
+                return
+        for key, msg in errs.items():
+            if (kind, key) in self.rows:
+                self.rows[(kind, key)].error.setText(msg)
+                self.rows[(kind, key)].error.show()
+            else:
+                self.status.setText(msg)
+
+    def _on_kind_activated(self, _index: int) -> None:
+        kind = self.current_kind()
+        if self.spec is not None and kind == self.spec.kind:
+            return
+        if kind == "points":
+            self.points_requested.emit()
+            return
+        if kind == "file":
+            self.import_requested.emit()
+            return
+        spec = self.default_spec(kind)
+        self.set_spec(spec)
+        self.spec_edited.emit(spec)
+
+    def default_spec(self, kind: str) -> Any:
+        """A template spec of ``kind`` sized like the current mandrel (:attr:`hint`)."""
+        r, length = (max(float(x), 1.0) for x in self.hint)
+        r = round(r, 1)
+        length = round(length, 1)
+        if kind == "vessel":
+            return VesselSpec(radius_mm=r, cylinder_length_mm=round(0.6 * length, 1), pole_radius_mm=round(0.25 * r, 1))
+        if kind == "cone":
+            return ConeSpec(r0_mm=r, r1_mm=round(0.6 * r, 1), length_mm=length)
+        if kind == "pipe":
+            return PipeSpec(radius_mm=r, length_mm=length)
+        if kind == "bottle":
+            return BottleSpec()
+        raise ValueError(f"no template for kind {kind!r}")

@@ -1,0 +1,119 @@
+"""Plot and surface data of a mandrel, computed in a worker thread (no Qt here).
+
+The GUI thread only hands these arrays to pyqtgraph / pyvista; everything numeric is done by
+:func:`mandrel_view_data`, which the main window runs through a :class:`winder_gui.workers.JobRunner`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from engine.mandrel import Mandrel
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class MandrelViewData:
+    """Everything the views draw for one mandrel (mm, 1/mm).
+
+    Attributes
+    ----------
+    z, r, d2r:
+        The generatrix sampled for the plots: axial position (mm), radius (mm), r'' (1/mm).
+    concave:
+        Concave zones (r'' > 0) as (z_from, z_to) pairs in mm.
+    handle_z, handle_r:
+        Editable points shown on the r(z) plot (mm): the sketch points of a ``points`` mandrel, a
+        sparse sample of the curve otherwise.
+    surface_x, surface_y, surface_z:
+        The revolved surface on an (n_z, n_theta) grid (mm); the mandrel axis is the x axis.
+    """
+
+    z: FloatArray
+    r: FloatArray
+    d2r: FloatArray
+    concave: tuple[tuple[float, float], ...]
+    handle_z: FloatArray
+    handle_r: FloatArray
+    surface_x: FloatArray
+    surface_y: FloatArray
+    surface_z: FloatArray
+
+
+def handle_points(
+    mandrel: Mandrel, per_length: int = 24, k_min: int = 4, k_max: int = 10
+) -> tuple[FloatArray, FloatArray]:
+    """A sparse set of points on the generatrix that a spline through them resembles (mm).
+
+    Each segment gets between ``k_min`` and ``k_max`` points (in proportion to its share of the
+    length, ``per_length`` in total); joints between segments are kept once.
+    """
+    zs: list[float] = []
+    total = mandrel.length
+    for seg in mandrel.segments:
+        k = int(np.clip(round(per_length * (seg.z1 - seg.z0) / total), k_min, k_max))
+        pts = np.linspace(seg.z0, seg.z1, k)
+        zs.extend(pts[1:] if zs else pts)
+    z = np.asarray(zs, dtype=float)
+    return z, np.asarray(mandrel.r(z), dtype=float)
+
+
+def mandrel_view_data(
+    mandrel: Mandrel,
+    sketch: tuple[list[float], list[float]] | None = None,
+    n_z: int = 600,
+    n_theta: int = 73,
+) -> MandrelViewData:
+    """Sample ``mandrel`` for the r(z) / r'' plots and the revolved 3D surface.
+
+    Parameters
+    ----------
+    mandrel:
+        The mandrel to show.
+    sketch:
+        The (z, r) points of a sketched mandrel (mm), shown as the editable handles; ``None``
+        derives handles from the curve (:func:`handle_points`).
+    n_z, n_theta:
+        Samples along the axis and around it (the last angle repeats the first, closing the surface).
+    """
+    z, r = mandrel.sample(n_z)
+    _, _, d2r = mandrel.evaluate(z)
+    if sketch is not None:
+        hz, hr = np.asarray(sketch[0], dtype=float), np.asarray(sketch[1], dtype=float)
+    else:
+        hz, hr = handle_points(mandrel)
+    theta = np.linspace(0.0, 2.0 * np.pi, n_theta)
+    sx = np.repeat(z[:, None], n_theta, axis=1)
+    sy = r[:, None] * np.cos(theta)[None, :]
+    sz = r[:, None] * np.sin(theta)[None, :]
+    zones = tuple((zn.z_from, zn.z_to) for zn in mandrel.concave_zones())
+    return MandrelViewData(z, r, d2r, zones, hz, hr, sx, sy, sz)
+
+
+def check_points(z: FloatArray, r: FloatArray) -> tuple[int, str] | None:
+    """The first problem of an edited sketch, as (point index, message), or ``None`` when it is fine.
+
+    z must increase strictly, r must be > 0 (0 is allowed at the two end points: a closed pole),
+    and a C2 spline needs at least 4 points.  Positions in mm; indices 0-based, messages 1-based.
+    """
+    n = len(z)
+    if n < 4:
+        return max(n - 1, 0), f"a sketched generatrix needs at least 4 points (it would have {n})"
+    for i in range(n):
+        if not (np.isfinite(z[i]) and np.isfinite(r[i])):
+            return i, f"point {i + 1} is not a finite number"
+    for i in range(1, n):
+        if not z[i] > z[i - 1]:
+            return i, (
+                f"z must increase along the axis: point {i + 1} at z = {z[i]:.4g} mm "
+                f"is not after z = {z[i - 1]:.4g} mm"
+            )
+    for i in range(n):
+        end = i in (0, n - 1)
+        if r[i] < 0 or (r[i] <= 0 and not end):
+            return i, f"radius must be > 0: point {i + 1} has r = {r[i]:.4g} mm"
+    return None

@@ -1,0 +1,322 @@
+"""The r(z) plot of the generatrix with editable points, and the r''(z) plot with concave zones.
+
+Editing (on the r(z) plot):
+
+- drag a point to move it;
+- double-click on empty plot space to add a point (inserted in order of z);
+- right-click a point, or select it (click) and press Delete, to remove it.
+
+Every edit is checked at once (:func:`winder_gui.views.geometry.check_points`); an invalid
+point is drawn red with the message above the plot and the edit is *not* emitted, so the job
+never receives it.  Valid edits are emitted as :attr:`ProfilePlot.points_edited` (z, r arrays).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6.QtCore import QPointF, Qt, Signal
+from PySide6.QtGui import QKeySequence, QShortcut
+from PySide6.QtWidgets import QLabel, QVBoxLayout, QWidget
+
+from winder_gui.views.geometry import FloatArray, MandrelViewData, check_points
+
+_OK_BRUSH = pg.mkBrush(30, 100, 200, 230)
+_TEMPLATE_BRUSH = pg.mkBrush(255, 255, 255, 230)
+_SEL_BRUSH = pg.mkBrush(255, 170, 0, 255)
+_BAD_BRUSH = pg.mkBrush(220, 30, 30, 255)
+_CONCAVE_BRUSH = pg.mkBrush(230, 60, 60, 45)
+
+
+class PointEditor(pg.ScatterPlotItem):
+    """Draggable, addable, deletable generatrix points (mm) on a pyqtgraph plot.
+
+    Signals
+    -------
+    edited(z, r):
+        A valid edit finished (arrays in mm).
+    problem(str):
+        Message of the edit in progress; ``""`` when the points are valid again.
+    selected(int):
+        Index of the point clicked last (-1: none).
+    """
+
+    edited = Signal(object, object)
+    problem = Signal(str)
+    selected = Signal(int)
+
+    def __init__(self) -> None:
+        super().__init__(size=11, pen=pg.mkPen(20, 60, 140, width=1.5), hoverable=True, hoverSize=14)
+        self._z: FloatArray = np.zeros(0)
+        self._r: FloatArray = np.zeros(0)
+        self._work_z: FloatArray = self._z
+        self._work_r: FloatArray = self._r
+        self._bad: int | None = None
+        self._drag: int | None = None
+        self._drag_offset = QPointF(0.0, 0.0)
+        self.selected_index = -1
+        self.sketch = True
+        """False while the points only sample a template (dragging one converts it to a sketch)."""
+        self.message = ""
+
+    # -- data ------------------------------------------------------------------------------------
+    def set_points(self, z: FloatArray, r: FloatArray, sketch: bool) -> None:
+        """Show committed points (mm); ``sketch`` marks them as the job's own points."""
+        self._z = np.array(z, dtype=float)
+        self._r = np.array(r, dtype=float)
+        self._work_z, self._work_r = self._z.copy(), self._r.copy()
+        self.sketch = sketch
+        self._bad = None
+        self._drag = None
+        if self.selected_index >= len(self._z):
+            self.selected_index = -1
+        self._set_message("")
+        self._redraw()
+
+    def points(self) -> tuple[FloatArray, FloatArray]:
+        """The points as drawn now (mm), including an edit in progress."""
+        return self._work_z.copy(), self._work_r.copy()
+
+    def committed_points(self) -> tuple[FloatArray, FloatArray]:
+        """The last points set from the job (mm)."""
+        return self._z.copy(), self._r.copy()
+
+    def _redraw(self) -> None:
+        base = _OK_BRUSH if self.sketch else _TEMPLATE_BRUSH
+        brushes = [base] * len(self._work_z)
+        if 0 <= self.selected_index < len(brushes):
+            brushes[self.selected_index] = _SEL_BRUSH
+        if self._bad is not None and 0 <= self._bad < len(brushes):
+            brushes[self._bad] = _BAD_BRUSH
+        self.setData(x=self._work_z, y=self._work_r, brush=brushes, data=np.arange(len(self._work_z)))
+
+    def _set_message(self, msg: str) -> None:
+        if msg != self.message:
+            self.message = msg
+            self.problem.emit(msg)
+
+    # -- edits (used by the mouse handlers and by tests) ------------------------------------------
+    def move_point(self, i: int, z: float, r: float, finish: bool = True) -> str | None:
+        """Move point ``i`` to (z, r) mm; returns the problem message, or ``None`` if valid.
+
+        With ``finish`` a valid edit is emitted and an invalid one reverted to the committed points.
+        """
+        wz, wr = self._z.copy(), self._r.copy()
+        wz[i], wr[i] = z, r
+        return self._try(wz, wr, finish, focus=i)
+
+    def add_point(self, z: float, r: float) -> str | None:
+        """Insert a point at (z, r) mm in order of z."""
+        i = int(np.searchsorted(self._z, z))
+        return self._try(np.insert(self._z, i, z), np.insert(self._r, i, r), True, focus=i)
+
+    def delete_point(self, i: int) -> str | None:
+        """Remove point ``i``."""
+        if not 0 <= i < len(self._z):
+            return None
+        self.selected_index = -1
+        return self._try(np.delete(self._z, i), np.delete(self._r, i), True, focus=None)
+
+    def _try(self, wz: FloatArray, wr: FloatArray, finish: bool, focus: int | None) -> str | None:
+        bad = check_points(wz, wr)
+        self._work_z, self._work_r = wz, wr
+        self._bad = bad[0] if bad else None
+        msg = bad[1] if bad else ""
+        if finish:
+            if bad is None:
+                self._z, self._r = wz.copy(), wr.copy()
+                if focus is not None:
+                    self.selected_index = focus
+                self._set_message("")
+                self._redraw()
+                self.edited.emit(wz.copy(), wr.copy())
+                return None
+            # not applied: show the committed points again, keep the message up
+            self._work_z, self._work_r = self._z.copy(), self._r.copy()
+            self._bad = None
+            self._set_message("")
+            self._set_message(f"Not applied: {msg}")
+            self._redraw()
+            return msg
+        self._set_message(msg)
+        self._redraw()
+        return msg or None
+
+    # -- mouse -----------------------------------------------------------------------------------
+    def _point_at(self, pos: QPointF) -> int | None:
+        pts = self.pointsAt(pos)
+        if len(pts) == 0:
+            return None
+        return int(pts[0].index())
+
+    def mouseDragEvent(self, ev) -> None:  # noqa: N802 - pyqtgraph override
+        if ev.button() != Qt.MouseButton.LeftButton:
+            ev.ignore()
+            return
+        if ev.isStart():
+            i = self._point_at(ev.buttonDownPos())
+            if i is None:
+                ev.ignore()
+                return
+            self._drag = i
+            self.selected_index = i
+            self._drag_offset = QPointF(self._z[i], self._r[i]) - ev.buttonDownPos()
+        elif self._drag is None:
+            ev.ignore()
+            return
+        ev.accept()
+        p = ev.pos() + self._drag_offset
+        i = self._drag
+        if ev.isFinish():
+            self._drag = None
+            self.move_point(i, p.x(), p.y(), finish=True)
+        else:
+            self.move_point(i, p.x(), p.y(), finish=False)
+
+    def mouseClickEvent(self, ev) -> None:  # noqa: N802 - pyqtgraph override
+        i = self._point_at(ev.pos())
+        if i is None:
+            ev.ignore()
+            return
+        ev.accept()
+        if ev.button() == Qt.MouseButton.RightButton:
+            self.delete_point(i)
+        elif ev.button() == Qt.MouseButton.LeftButton:
+            self.selected_index = i
+            self._redraw()
+            self.selected.emit(i)
+
+
+class ProfilePlot(QWidget):
+    """r(z) with editable points above r''(z); concave zones (r'' > 0) shaded red in both.
+
+    Signals
+    -------
+    points_edited(z, r):
+        The user made a valid edit of the points (mm arrays).
+    message(str):
+        Validation message of the edit in progress ("" when valid).
+    """
+
+    points_edited = Signal(object, object)
+    message = Signal(str)
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.data: MandrelViewData | None = None
+        lay = QVBoxLayout(self)
+        lay.setContentsMargins(2, 2, 2, 2)
+        lay.setSpacing(2)
+        self.message_label = QLabel("")
+        self.message_label.setStyleSheet("color: #c01010; font-weight: bold;")
+        self.message_label.setWordWrap(True)
+        self.message_label.hide()
+        self.hint_label = QLabel(
+            "Drag a point to move it · double-click to add one · right-click or Delete to remove it"
+        )
+        self.hint_label.setStyleSheet("color: #666;")
+        lay.addWidget(self.hint_label)
+        lay.addWidget(self.message_label)
+
+        self.graphics = pg.GraphicsLayoutWidget()
+        self.graphics.setBackground("w")
+        self.graphics.setFocusPolicy(Qt.FocusPolicy.StrongFocus)
+        lay.addWidget(self.graphics, 1)
+        self.plot_r = self.graphics.addPlot(row=0, col=0)
+        self.plot_d2 = self.graphics.addPlot(row=1, col=0)
+        self.graphics.ci.layout.setRowStretchFactor(0, 3)
+        self.graphics.ci.layout.setRowStretchFactor(1, 2)
+        self.plot_d2.setXLink(self.plot_r)
+        self.plot_r.setLabel("left", "r", units="mm")
+        self.plot_d2.setLabel("left", "r''", units="1/mm")
+        self.plot_d2.setLabel("bottom", "z", units="mm")
+        for p in (self.plot_r, self.plot_d2):
+            p.showGrid(x=True, y=True, alpha=0.25)
+            p.setMenuEnabled(False)
+            p.getAxis("left").setWidth(60)
+            p.getAxis("left").enableAutoSIPrefix(False)
+            p.getAxis("bottom").enableAutoSIPrefix(False)
+        self.plot_r.setTitle("Generatrix r(z)", size="9pt")
+        self.plot_d2.setTitle("r''(z) — concave zones (r'' > 0) shaded", size="9pt")
+        self.curve_r = self.plot_r.plot(pen=pg.mkPen(20, 20, 20, width=2))
+        self.curve_d2 = self.plot_d2.plot(pen=pg.mkPen(120, 40, 160, width=1.5))
+        self.plot_d2.addItem(pg.InfiniteLine(pos=0.0, angle=0, pen=pg.mkPen(150, 150, 150, style=Qt.PenStyle.DashLine)))
+        self.editor = PointEditor()
+        self.editor.setZValue(10)
+        self.plot_r.addItem(self.editor)
+        self._regions: list[pg.LinearRegionItem] = []
+
+        self.editor.edited.connect(self.points_edited)
+        self.editor.problem.connect(self._on_problem)
+        self.plot_r.scene().sigMouseClicked.connect(self._on_scene_click)
+        for key in (QKeySequence.StandardKey.Delete, QKeySequence(Qt.Key.Key_Backspace)):
+            sc = QShortcut(key, self.graphics)
+            sc.setContext(Qt.ShortcutContext.WidgetWithChildrenShortcut)
+            sc.activated.connect(self.delete_selected)
+
+    # -- data ------------------------------------------------------------------------------------
+    def set_data(self, data: MandrelViewData, sketch: bool, reset_view: bool = False) -> None:
+        """Show a mandrel's curves and editable points; ``sketch``: points are the job's own."""
+        self.data = data
+        self.curve_r.setData(data.z, data.r)
+        d2 = np.where(np.isfinite(data.d2r), data.d2r, np.nan)
+        self.curve_d2.setData(data.z, d2, connect="finite")
+        for reg in self._regions:
+            reg.getViewBox().removeItem(reg) if reg.getViewBox() is not None else None
+        self._regions.clear()
+        for z0, z1 in data.concave:
+            for p in (self.plot_r, self.plot_d2):
+                reg = pg.LinearRegionItem((z0, z1), movable=False, brush=_CONCAVE_BRUSH, pen=pg.mkPen(None))
+                reg.setZValue(-10)
+                p.addItem(reg)
+                self._regions.append(reg)
+        self.editor.set_points(data.handle_z, data.handle_r, sketch)
+        zmin, zmax, rmax = float(data.z[0]), float(data.z[-1]), float(np.max(data.r))
+        (x0, x1), (y0, y1) = self.plot_r.getViewBox().viewRange()
+        if reset_view or zmin < x0 or zmax > x1 or rmax > y1 or y0 > 0.0:
+            pad = 0.04 * (zmax - zmin)
+            self.plot_r.setXRange(zmin - pad, zmax + pad, padding=0)
+            self.plot_r.setYRange(0.0, 1.12 * rmax, padding=0)
+        # r'' is unbounded at a closed pole: scale to the bulk of the curve, always showing 0
+        finite = d2[np.isfinite(d2)]
+        lo, hi = (np.percentile(finite, [2.0, 98.0]) if finite.size else (0.0, 0.0))
+        lo, hi = min(float(lo), 0.0), max(float(hi), 0.0)
+        span = (hi - lo) or 1e-3
+        self.plot_d2.setYRange(lo - 0.1 * span, hi + 0.1 * span, padding=0)
+
+    def curve_data(self) -> tuple[FloatArray, FloatArray]:
+        """The plotted r(z) curve (mm)."""
+        x, y = self.curve_r.getData()
+        return np.asarray(x), np.asarray(y)
+
+    def revert_points(self) -> None:
+        """Show the points of the current data again (after a rejected edit)."""
+        if self.data is not None:
+            self.editor.set_points(self.data.handle_z, self.data.handle_r, self.editor.sketch)
+
+    def show_message(self, msg: str) -> None:
+        """Show (or clear, with "") the red message above the plot."""
+        self.message_label.setText(msg)
+        self.message_label.setVisible(bool(msg))
+
+    # -- interaction -----------------------------------------------------------------------------
+    def delete_selected(self) -> None:
+        """Delete the selected point (Delete key)."""
+        if self.editor.selected_index >= 0:
+            self.editor.delete_point(self.editor.selected_index)
+
+    def _on_problem(self, msg: str) -> None:
+        self.show_message(msg)
+        self.message.emit(msg)
+
+    def _on_scene_click(self, ev) -> None:
+        if not ev.double() or ev.button() != Qt.MouseButton.LeftButton:
+            return
+        vb = self.plot_r.getViewBox()
+        if not vb.sceneBoundingRect().contains(ev.scenePos()):
+            return
+        if self.editor._point_at(self.editor.mapFromScene(ev.scenePos())) is not None:
+            return
+        p = vb.mapSceneToView(ev.scenePos())
+        ev.accept()
+        self.editor.add_point(p.x(), p.y())

@@ -1,0 +1,152 @@
+"""3D view of the revolved mandrel.
+
+The pyvista/pyvistaqt backend is heavy (VTK) and is created lazily: only when the view is first
+shown, and one event-loop turn later, so the main window paints before VTK loads.  pyvistaqt's
+``QtInteractor`` aborts the process under ``QT_QPA_PLATFORM=offscreen`` (pyvistaqt#351); there —
+or with ``WINDER_NO_3D=1``, or when VTK cannot start — the view is a placeholder label.  The real
+view is tested under ``xvfb-run`` (pytest marker ``gl``).  Rendering happens on the GUI thread only;
+the surface arrays come ready-made from a worker (:mod:`winder_gui.views.geometry`).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from typing import Any
+
+import numpy as np
+from PySide6.QtCore import Qt, QTimer
+from PySide6.QtGui import QGuiApplication
+from PySide6.QtWidgets import QLabel, QVBoxLayout, QWidget
+
+from winder_gui.views.geometry import MandrelViewData
+
+HEADLESS_PLATFORMS = {"offscreen", "minimal", "vnc"}
+
+
+def gl_available() -> bool:
+    """True when a real OpenGL 3D view can be created on this Qt platform."""
+    if os.environ.get("WINDER_NO_3D", "") not in ("", "0"):
+        return False
+    return QGuiApplication.platformName() not in HEADLESS_PLATFORMS
+
+
+class MandrelView3D(QWidget):
+    """Container for the 3D view; :attr:`backend` is ``"pending"``, ``"vtk"`` or ``"placeholder"``."""
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.setMinimumSize(200, 150)
+        self._layout = QVBoxLayout(self)
+        self._layout.setContentsMargins(0, 0, 0, 0)
+        self.backend = "pending"
+        self.plotter: Any = None
+        self.data: MandrelViewData | None = None
+        self._scheduled = False
+        self._reset_camera = True
+        self._label = QLabel("3D view: loading…")
+        self._label.setAlignment(Qt.AlignmentFlag.AlignCenter)
+        self._label.setStyleSheet("color: #555; background: #eef0f4;")
+        self._layout.addWidget(self._label)
+
+    # -- lifecycle -------------------------------------------------------------------------------
+    def showEvent(self, event) -> None:  # noqa: N802 - Qt override
+        super().showEvent(event)
+        if self.backend == "pending" and not self._scheduled:
+            self._scheduled = True
+            QTimer.singleShot(0, self.ensure_backend)
+
+    def ensure_backend(self) -> str:
+        """Create the backend now if not done yet; returns :attr:`backend`."""
+        if self.backend != "pending":
+            return self.backend
+        if not gl_available():
+            self._use_placeholder(f"3D view unavailable on the '{QGuiApplication.platformName()}' Qt platform")
+            return self.backend
+        try:
+            import pyvista  # noqa: F401 - heavy, lazy on purpose
+            from pyvistaqt import QtInteractor
+
+            plotter = QtInteractor(self, auto_update=False)
+            plotter.set_background("#f4f6fa", top="#c9d3e3")
+            plotter.add_axes(interactive=False, line_width=2, labels_off=False)
+        except Exception as exc:  # noqa: BLE001 - no VTK/GL: degrade to a label, the app stays usable
+            print(f"winder: 3D view disabled: {exc}", file=sys.stderr)
+            self._use_placeholder(f"3D view unavailable: {exc}")
+            return self.backend
+        self.plotter = plotter
+        self._layout.removeWidget(self._label)
+        self._label.hide()
+        self._layout.addWidget(plotter.interactor if hasattr(plotter, "interactor") else plotter)
+        self.backend = "vtk"
+        if self.data is not None:
+            self._render()
+        return self.backend
+
+    def _use_placeholder(self, why: str) -> None:
+        self.backend = "placeholder"
+        self._why = why
+        self._update_label()
+
+    def close_backend(self) -> None:
+        """Release VTK resources (call before the window closes)."""
+        if self.plotter is not None:
+            try:
+                self.plotter.close()
+            finally:
+                self.plotter = None
+                self.backend = "closed"
+
+    # -- data ------------------------------------------------------------------------------------
+    def set_data(self, data: MandrelViewData, reset_camera: bool = False) -> None:
+        """Show the revolved surface of ``data``."""
+        self.data = data
+        self._reset_camera = self._reset_camera or reset_camera
+        if self.backend == "vtk":
+            self._render()
+        elif self.backend == "placeholder":
+            self._update_label()
+
+    def _update_label(self) -> None:
+        text = getattr(self, "_why", "3D view")
+        if self.data is not None:
+            d = self.data
+            text += (
+                f"\n\nmandrel: z {d.z[0]:.1f} … {d.z[-1]:.1f} mm, r max {float(np.max(d.r)):.1f} mm,"
+                f" surface grid {d.surface_x.shape[0]} × {d.surface_x.shape[1]}"
+            )
+        self._label.setText(text)
+
+    def _render(self) -> None:
+        import pyvista as pv
+
+        d = self.data
+        assert d is not None and self.plotter is not None
+        grid = pv.StructuredGrid(d.surface_x, d.surface_y, d.surface_z)
+        concave = np.repeat((d.d2r > 1e-9).astype(float)[:, None], d.surface_x.shape[1], axis=1)
+        grid.point_data["concave"] = concave.ravel(order="F")
+        self.plotter.add_mesh(
+            grid,
+            name="mandrel",
+            scalars="concave",
+            cmap=["#9fb3cf", "#e0504a"],
+            clim=[0.0, 1.0],
+            show_scalar_bar=False,
+            smooth_shading=True,
+            specular=0.3,
+            reset_camera=False,
+        )
+        if self._reset_camera:
+            self.plotter.view_isometric()
+            self.plotter.reset_camera()
+            self._reset_camera = False
+        self.plotter.render()
+
+    def mesh_points(self) -> np.ndarray | None:
+        """Points of the surface shown by the VTK backend (n, 3), or ``None``."""
+        if self.plotter is None:
+            return None
+        actor = self.plotter.actors.get("mandrel")
+        if actor is None:
+            return None
+        return np.asarray(actor.mapper.dataset.points)
