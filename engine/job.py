@@ -197,13 +197,13 @@ class AxisOverride(_Model):
     max: Finite | None = None
     max_speed: PositiveMM | None = None
     max_accel: PositiveMM | None = None
-    max_speed_jump: PositiveMM | None = None
+    max_jump: PositiveMM | None = None
 
 
 class MachineSpec(_Model):
     """Machine template (a file name in resources/machines, or a path) and limit overrides."""
 
-    template: str = "lathe_2axis"
+    template: str = "lathe2"
     axes: dict[str, AxisOverride] = Field(default_factory=dict)
 
 
