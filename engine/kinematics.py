@@ -513,19 +513,83 @@ def forward_kinematics(machine: MachineTemplate, q: np.ndarray, contact_xyz: np.
         ``normalise(eye - contact)`` (``"line"``; NaN when ``contact_xyz`` is None).
     """
     q_int = machine.to_internal(np.atleast_2d(q))
-    T = eye_chain(machine, q_int)
+    pw, zw = eye_pose(machine, q_int)
     theta = q_int[:, machine.axis_index("mandrel")]
     c, s = np.cos(theta), np.sin(theta)
-    # p_M = Rz(-theta) p_W
-    def to_m(v: np.ndarray) -> np.ndarray:
+
+    def to_m(v: np.ndarray) -> np.ndarray:   # p_M = Rz(-theta) p_W
         return np.stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1], v[:, 2]], axis=1)
-    eye = to_m(T[:, :3, 3])
+
+    eye = to_m(pw)
     if machine.fibre_mode == "line":
         if contact_xyz is None:
             return eye, np.full_like(eye, np.nan)
         d = eye - np.asarray(contact_xyz, dtype=float)
         return eye, d / np.linalg.norm(d, axis=1, keepdims=True)
-    return eye, to_m(T[:, :3, 2])
+    return eye, to_m(zw)
+
+
+def eye_pose(machine: MachineTemplate, q_int: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Fast form of :func:`eye_chain`: eye position (N,3) and eye axis (N,3), machine frame.
+
+    Same products as the 4x4 chain, written out column by column (tests compare the two).
+    """
+    q_int = np.atleast_2d(np.asarray(q_int, dtype=float))
+    n = q_int.shape[0]
+    if machine.kind == "cartesian":
+        col = {r: machine.axis_index(r) for r in ROLES_CARTESIAN}
+        p = np.empty((n, 3))
+        p[:, 0] = q_int[:, col["cross"]] if col["cross"] is not None else machine.eye_radius
+        p[:, 1] = q_int[:, col["vertical"]] if col["vertical"] is not None else 0.0
+        p[:, 2] = q_int[:, col["carriage"]]
+        z = np.zeros((n, 3))
+        z[:, 2] = 1.0
+        if col["roll"] is not None:
+            r = q_int[:, col["roll"]]
+            z[:, 1], z[:, 2] = -np.sin(r), np.cos(r)
+        if col["yaw"] is not None:
+            g = q_int[:, col["yaw"]]
+            cg, sg = np.cos(g), np.sin(g)
+            z[:, 0], z[:, 2] = sg * z[:, 2], cg * z[:, 2]
+        return p, z
+    R, p, _, _ = _robot_chain(machine, q_int[:, machine.axis_index("track")],
+                              q_int[:, [machine.axis_index(f"joint{k + 1}") for k in range(6)]])
+    return p, R[:, :, 2]
+
+
+def _robot_chain(machine: MachineTemplate, track: np.ndarray, j: np.ndarray, want_axes: bool = False
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """Eye rotation (N,3,3), eye position (N,3) and optionally joint axes/origins (N,6,3), machine frame.
+
+    DH step ``R <- R Rz(theta) Rx(alpha)``, ``p <- p + R Rz(theta) (a, 0, d)`` written on columns
+    (component-major arrays of shape (3, N) for speed).
+    """
+    n = j.shape[0]
+    Rb, pb = machine.base[:3, :3], machine.base[:3, 3]
+    r0 = np.repeat(Rb[:, 0:1], n, axis=1)
+    r1 = np.repeat(Rb[:, 1:2], n, axis=1)
+    r2 = np.repeat(Rb[:, 2:3], n, axis=1)
+    p = np.repeat(pb[:, None], n, axis=1)
+    p[2] += track
+    zs = np.empty((n, 6, 3)) if want_axes else None
+    os_ = np.empty((n, 6, 3)) if want_axes else None
+    jt = np.ascontiguousarray(j.T)
+    for k, row in enumerate(machine.dh):
+        if want_axes:
+            zs[:, k] = r2.T
+            os_[:, k] = p.T
+        th = jt[k] + row.theta0
+        ct, st = np.cos(th), np.sin(th)
+        ca, sa = math.cos(row.alpha), math.sin(row.alpha)
+        n0 = ct * r0 + st * r1
+        m1 = ct * r1 - st * r0
+        p = p + row.a * n0 + row.d * r2 if row.a or row.d else p
+        r0, r1, r2 = n0, ca * m1 + sa * r2, ca * r2 - sa * m1
+    Rt, pt = machine.tool[:3, :3], machine.tool[:3, 3]
+    cols = [Rt[0, c] * r0 + Rt[1, c] * r1 + Rt[2, c] * r2 for c in range(3)]
+    pe = p + pt[0] * r0 + pt[1] * r1 + pt[2] * r2
+    R = np.stack([c.T for c in cols], axis=2)
+    return R, np.ascontiguousarray(pe.T), zs, os_
 
 
 # --------------------------------------------------------------------------------------------------
@@ -715,15 +779,12 @@ def _ik_cartesian(machine: MachineTemplate, pw: np.ndarray, dw: np.ndarray, q_in
 def _robot_frames(machine: MachineTemplate, track: np.ndarray, j: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Eye frame (N,4,4), joint axes z_i (N,6,3) and origins o_i (N,6,3), machine frame."""
-    n = j.shape[0]
-    T = _trans_batch("z", track) @ machine.base
-    zs = np.empty((n, 6, 3))
-    os_ = np.empty((n, 6, 3))
-    for k, row in enumerate(machine.dh):
-        zs[:, k] = T[:, :3, 2]
-        os_[:, k] = T[:, :3, 3]
-        T = T @ _rot_batch("z", j[:, k] + row.theta0) @ _dh_fixed(row)
-    return T @ machine.tool, zs, os_
+    R, p, zs, os_ = _robot_chain(machine, track, j, want_axes=True)
+    T = np.zeros((j.shape[0], 4, 4))
+    T[:, :3, :3] = R
+    T[:, :3, 3] = p
+    T[:, 3, 3] = 1.0
+    return T, zs, os_
 
 
 def _robot_target(dw: np.ndarray, cw: np.ndarray) -> np.ndarray:
@@ -746,47 +807,93 @@ def _pose_error(T: np.ndarray, p: np.ndarray, R: np.ndarray) -> np.ndarray:
     return e
 
 
+_W = np.array([1.0, 1.0, 1.0, 1000.0, 1000.0, 1000.0])   # error weights: 1 rad ~ 1000 mm
+
+
+def _err_norm(e: np.ndarray) -> np.ndarray:
+    return np.maximum(np.abs(e[:, :3]).max(axis=1), 1000.0 * np.abs(e[:, 3:]).max(axis=1))
+
+
+def _jacobian(T: np.ndarray, zs: np.ndarray, os_: np.ndarray) -> np.ndarray:
+    """Geometric Jacobian (N,6,6) of the eye point and frame (rows weighted by ``_W``)."""
+    J = np.empty((T.shape[0], 6, 6))
+    J[:, :3, :] = np.cross(zs, T[:, None, :3, 3] - os_).transpose(0, 2, 1)
+    J[:, 3:, :] = zs.transpose(0, 2, 1)
+    return J * _W[None, :, None]
+
+
 def _newton(machine: MachineTemplate, track: np.ndarray, p: np.ndarray, R: np.ndarray,
-            j0: np.ndarray, iters: int = 40, damping: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """Batched Newton/damped least squares on the 6 joints; returns joints and final error norms."""
+            j0: np.ndarray, iters: int = 40, damping: float = 0.0, want_jinv: bool = False
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Batched Newton / damped least squares on the 6 joints.
+
+    Returns the joints, the final error norms (mm, rad x 1000) and, when asked, the inverse weighted
+    Jacobians at the solution (for chord iterations on a finer level).
+    """
     j = j0.copy()
     active = np.arange(j.shape[0])
     err = np.full(j.shape[0], np.inf)
-    w = np.array([1.0, 1.0, 1.0, 1000.0, 1000.0, 1000.0])   # 1 rad ~ 1000 mm
     for _ in range(iters):
         if active.size == 0:
             break
         T, zs, os_ = _robot_frames(machine, track[active], j[active])
         e = _pose_error(T, p[active], R[active])
-        en = np.maximum(np.abs(e[:, :3]).max(axis=1), 1000.0 * np.abs(e[:, 3:]).max(axis=1))
+        en = _err_norm(e)
         err[active] = en
-        done = en < 1e-10
-        keep = ~done
+        keep = en >= 1e-10
         active, e, T, zs, os_ = active[keep], e[keep], T[keep], zs[keep], os_[keep]
         if active.size == 0:
             break
-        J = np.empty((active.size, 6, 6))
-        J[:, :3, :] = np.cross(zs, T[:, None, :3, 3] - os_).transpose(0, 2, 1)
-        J[:, 3:, :] = zs.transpose(0, 2, 1)
-        Jw = J * w[None, :, None]
-        ew = e * w[None, :]
-        if damping > 0:
-            A = Jw.transpose(0, 2, 1) @ Jw + damping ** 2 * np.eye(6)
-            dj = np.linalg.solve(A, (Jw.transpose(0, 2, 1) @ ew[:, :, None]))[:, :, 0]
-        else:
-            try:
-                dj = np.linalg.solve(Jw, ew[:, :, None])[:, :, 0]
-            except np.linalg.LinAlgError:
-                A = Jw.transpose(0, 2, 1) @ Jw + 1e-6 * np.eye(6)
-                dj = np.linalg.solve(A, (Jw.transpose(0, 2, 1) @ ew[:, :, None]))[:, :, 0]
+        Jw = _jacobian(T, zs, os_)
+        ew = e * _W[None, :]
+        A = Jw.transpose(0, 2, 1) @ Jw + max(damping, 1e-9) ** 2 * np.eye(6)
+        dj = np.linalg.solve(A, (Jw.transpose(0, 2, 1) @ ew[:, :, None]))[:, :, 0]
         step = np.abs(dj).max(axis=1, keepdims=True)
         dj *= np.minimum(1.0, 0.3 / np.maximum(step, 1e-300))   # trust region 0.3 rad per step
         j[active] += dj
     if active.size:
         T, _, _ = _robot_frames(machine, track[active], j[active])
+        err[active] = _err_norm(_pose_error(T, p[active], R[active]))
+    jinv = None
+    if want_jinv:
+        T, zs, os_ = _robot_frames(machine, track, j)
+        Jw = _jacobian(T, zs, os_)
+        A = Jw.transpose(0, 2, 1) @ Jw + 1e-18 * np.eye(6)
+        jinv = np.linalg.solve(A, Jw.transpose(0, 2, 1))
+    return j, err, jinv
+
+
+def _chord(machine: MachineTemplate, track: np.ndarray, p: np.ndarray, R: np.ndarray, j0: np.ndarray,
+           jinv: np.ndarray, iters: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    """Chord iterations ``j += J^-1 e`` with fixed (interpolated) inverse Jacobians; cheap per step."""
+    j = j0.copy()
+    active = np.arange(j.shape[0])
+    err = np.full(j.shape[0], np.inf)
+    for _ in range(iters + 1):
+        R_, pe, _, _ = _robot_chain(machine, track[active], j[active])
+        T = np.empty((active.size, 4, 4))
+        T[:, :3, :3] = R_
+        T[:, :3, 3] = pe
         e = _pose_error(T, p[active], R[active])
-        err[active] = np.maximum(np.abs(e[:, :3]).max(axis=1), 1000.0 * np.abs(e[:, 3:]).max(axis=1))
+        en = _err_norm(e)
+        err[active] = en
+        keep = en >= 1e-10
+        active, e = active[keep], e[keep]
+        if active.size == 0:
+            break
+        j[active] += np.einsum("nij,nj->ni", jinv[active], e * _W[None, :])
     return j, err
+
+
+def _levels(n: int, n0: int = 64, factor: int = 16) -> list[np.ndarray]:
+    """Nested index sets 0 .. n-1 from ``n0`` points up to all points."""
+    out = []
+    m = min(n, n0)
+    while True:
+        out.append(np.linspace(0, n - 1, m).round().astype(np.int64))
+        if m >= n:
+            return out
+        m = min(n, m * factor)
 
 
 def _ik_robot(machine: MachineTemplate, pw: np.ndarray, dw: np.ndarray, cw: np.ndarray, q_int: np.ndarray,
@@ -797,12 +904,12 @@ def _ik_robot(machine: MachineTemplate, pw: np.ndarray, dw: np.ndarray, cw: np.n
     R = _robot_target(dw, cw)
     jcols = [machine.axis_index(f"joint{k + 1}") for k in range(6)]
     home = np.asarray(machine.home, dtype=float)
-    # level 0: sequential continuation on a coarse subset (branch continuity)
-    n0 = min(n, 64)
-    idx = np.unique(np.linspace(0, n - 1, n0).round().astype(int))
-    j_prev = home[None, :]
-    j0, e0 = _newton(machine, track[idx[:1]], pw[idx[:1]], R[idx[:1]], j_prev, iters=200, damping=50.0)
-    j0, e0 = _newton(machine, track[idx[:1]], pw[idx[:1]], R[idx[:1]], j0, iters=50)
+    levels = _levels(n)
+    # level 0: sequential continuation on a coarse subset (keeps one continuous branch)
+    idx = levels[0]
+    i0 = idx[:1]
+    j0, _, _ = _newton(machine, track[i0], pw[i0], R[i0], home[None, :], iters=200, damping=50.0)
+    j0, e0, _ = _newton(machine, track[i0], pw[i0], R[i0], j0, iters=50)
     if e0[0] > 1e-6:
         raise InfeasibleError(f"robot cell {machine.name}: no joint solution for the first eye pose "
                               f"(pose error {e0[0]:.3g} mm) starting from home joints {machine.home}",
@@ -810,19 +917,34 @@ def _ik_robot(machine: MachineTemplate, pw: np.ndarray, dw: np.ndarray, cw: np.n
     sol = np.empty((idx.size, 6))
     sol[0] = j0[0]
     for m in range(1, idx.size):
-        jm, em = _newton(machine, track[idx[m:m + 1]], pw[idx[m:m + 1]], R[idx[m:m + 1]], sol[m - 1:m],
-                         iters=60)
+        im = idx[m:m + 1]
+        jm, _, _ = _newton(machine, track[im], pw[im], R[im], sol[m - 1:m], iters=60)
         sol[m] = jm[0]
-    # refine level by level: interpolate joints as the warm start, then batched Newton
-    while idx.size < n:
+    # finer levels: interpolated warm start, batched Newton; the last level uses chord iterations
+    # with the inverse Jacobians interpolated from the level before
+    jinv = None
+    err = np.zeros(idx.size)
+    for lev, new_idx in enumerate(levels[1:], start=1):
         check_cancel(state)
-        new_idx = np.unique(np.linspace(0, n - 1, min(n, idx.size * 16)).round().astype(int))
-        guess = np.stack([np.interp(new_idx, idx, sol[:, k]) for k in range(6)], axis=1)
-        sol, _ = _newton(machine, track[new_idx], pw[new_idx], R[new_idx], guess)
+        pos = np.interp(new_idx, idx, np.arange(idx.size))
+        lo = np.minimum(np.floor(pos).astype(np.int64), idx.size - 2)
+        f = (pos - lo)[:, None]
+        guess = sol[lo] * (1 - f) + sol[lo + 1] * f
+        last = lev == len(levels) - 1
+        if last and jinv is not None:
+            ji = jinv[lo] * (1 - f[:, :, None]) + jinv[lo + 1] * f[:, :, None]
+            sol, err = _chord(machine, track[new_idx], pw[new_idx], R[new_idx], guess, ji)
+            bad = err >= 1e-10
+            if bad.any():
+                b = np.flatnonzero(bad)
+                sb, eb, _ = _newton(machine, track[new_idx[b]], pw[new_idx[b]], R[new_idx[b]], sol[b])
+                sol[b], err[b] = sb, eb
+        else:
+            sol, err, jinv = _newton(machine, track[new_idx], pw[new_idx], R[new_idx], guess,
+                                     want_jinv=lev == len(levels) - 2)
         idx = new_idx
         if state is not None:
             state.progress(min(0.95, idx.size / n), "robot inverse kinematics")
-    _, err = _newton(machine, track, pw, R, sol, iters=3)
     for k, c in enumerate(jcols):
         q_int[:, c] = sol[:, k]
     viol = violations_from_mask("ik", None, err > 1e-7, err, 1e-7, " mm",
