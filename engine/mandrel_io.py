@@ -330,11 +330,13 @@ def load_dxf(path: str | Path) -> Mandrel:
     """Read a generatrix drawn in a DXF file and return a C2 spline mandrel.
 
     The profile is taken from model space: LINE, ARC, LWPOLYLINE (with bulges), POLYLINE,
-    SPLINE and ELLIPSE entities (also inside block references), x = axial z, y = radius, in the
-    drawing units ($INSUNITS; unitless = mm).  If a layer named ``PROFILE`` or ``GENERATRIX``
-    exists, only its entities are used.  Curves are flattened finely; parts on the axis (y ≈ 0) or
+    SPLINE and ELLIPSE entities (also inside block references), x = axial z, y = radius, in mm
+    (``$INSUNITS`` inch, foot, cm and dm are converted; unitless, mm and metre are read as mm,
+    because metre is the default many writers put in every drawing).  If a layer named
+    ``PROFILE``, ``GENERATRIX`` or ``MANDREL`` exists, only its entities are used.  Curves are
+    flattened finely (exact points on arcs, ellipses and splines); parts on the axis (y ≈ 0) or
     below it and segments perpendicular to the axis (end faces) are dropped; what remains must be
-    one chain that is a function of z (no overhang, no step).
+    one chain that is a function of z (no overhang, no step, no gap).
 
     Raises
     ------
@@ -406,16 +408,16 @@ def _read_dxf_doc(p: Path, data: bytes) -> Any:
     return doc
 
 
-def _dxf_scale(doc: Any) -> float:
-    """Factor from drawing units to mm ($INSUNITS 0 = unitless is taken as mm)."""
-    try:
-        from ezdxf import units
+# $INSUNITS honoured: inch, foot, cm, dm.  Unitless, mm and metre are read as mm: metre is the default
+# that ezdxf and several other writers put in every new drawing, whatever the user drew in.
+_DXF_UNITS_MM = {1: 25.4, 2: 304.8, 5: 10.0, 14: 100.0}
 
-        u = int(doc.header.get("$INSUNITS", 0))
-        if u in (0, 4):
-            return 1.0
-        return float(units.conversion_factor(u, 4))
-    except Exception:  # noqa: BLE001 - unknown unit code: assume mm
+
+def _dxf_scale(doc: Any) -> float:
+    """Factor from drawing units to mm (see ``_DXF_UNITS_MM``)."""
+    try:
+        return _DXF_UNITS_MM.get(int(doc.header.get("$INSUNITS", 0)), 1.0)
+    except Exception:  # noqa: BLE001 - an unreadable unit code: assume mm
         return 1.0
 
 
@@ -444,19 +446,13 @@ def _dxf_pieces(entities: list[Any], scale: float) -> tuple[list[_Piece], list[A
             break
     # extent, for the flattening tolerance
     boxes = []
-    paths = []
     for e in curves:
         try:
-            pth = dxfpath.make_path(e)
+            bb = dxfpath.bbox([dxfpath.make_path(e)], fast=True)
         except Exception as exc:  # noqa: BLE001
             raise InputError(f"cannot read {_entity_label(e)} ({type(exc).__name__}: {exc})") from None
-        paths.append((e, pth))
-        try:
-            bb = dxfpath.bbox([pth], fast=True)
-            if bb.has_data:
-                boxes.append((bb.extmin, bb.extmax))
-        except Exception:  # noqa: BLE001
-            continue
+        if bb.has_data:
+            boxes.append((bb.extmin, bb.extmax))
     if not boxes:
         return [], ignored, curves
     lo = np.min([[b[0].x, b[0].y] for b in boxes], axis=0)
@@ -465,16 +461,30 @@ def _dxf_pieces(entities: list[Any], scale: float) -> tuple[list[_Piece], list[A
     if not math.isfinite(extent):
         raise InputError("the drawing has non-finite coordinates")
     extent = max(extent, 1e-9)
-    distance = 1e-6 * extent
+    distance = 1e-9 * extent  # chords this close to the curve may later be subdivided linearly
     pieces = []
-    for e, pth in paths:
+    for e in curves:
+        label = _entity_label(e)
         try:
-            v = np.array([(q.x, q.y) for q in pth.flattening(distance=distance, segments=16)], dtype=float)
+            t = e.dxftype()
+            parts = list(e.virtual_entities()) if t in ("LWPOLYLINE", "POLYLINE") else [e]
+            for part in parts:
+                pt = part.dxftype()
+                if pt == "LINE":
+                    verts = [part.dxf.start, part.dxf.end]
+                elif pt == "ARC":  # exact points on the circle (ezdxf paths would use Bezier arcs)
+                    verts = list(part.flattening(sagitta=distance))
+                elif pt in ("SPLINE", "ELLIPSE"):
+                    verts = list(part.flattening(distance, segments=16))
+                else:
+                    continue
+                v = np.array([(q.x, q.y) for q in verts], dtype=float)
+                if len(v) >= 2 and np.isfinite(v).all():
+                    pieces.append(_Piece(v * scale, label))
+        except InputError:
+            raise
         except Exception as exc:  # noqa: BLE001
-            raise InputError(f"cannot flatten {_entity_label(e)} ({type(exc).__name__}: {exc})") from None
-        if len(v) < 2 or not np.isfinite(v).all():
-            continue
-        pieces.append(_Piece(v * scale, _entity_label(e)))
+            raise InputError(f"cannot flatten {label} ({type(exc).__name__}: {exc})") from None
     return pieces, ignored, curves
 
 
@@ -488,6 +498,7 @@ def _profile_from_pieces(pieces: list[_Piece], curves: list[Any]) -> tuple[Float
     # split into edges, keep those off the axis and not perpendicular to it
     chains: list[tuple[FloatArray, str]] = []
     dropped_vertical: list[tuple[float, float, float, str]] = []
+    n_axis = n_below = 0
     for pc in pieces:
         q = pc.pts
         keep_edge = np.ones(len(q) - 1, dtype=bool)
@@ -498,6 +509,8 @@ def _profile_from_pieces(pieces: list[_Piece], curves: list[Any]) -> tuple[Float
         vertical = np.abs(dz) <= max(tol, 1e-9 * extent) + 1e-12 * seglen
         zero = seglen <= 1e-12 * extent
         keep_edge &= ~(on_axis | below | vertical | zero)
+        n_axis += int(np.count_nonzero(on_axis & ~zero))
+        n_below += int(np.count_nonzero(below & ~on_axis & ~zero))
         for k in np.flatnonzero(vertical & ~on_axis & ~below & ~zero):
             dropped_vertical.append((float(q[k, 0]), float(min(q[k, 1], q[k + 1, 1])),
                                      float(max(q[k, 1], q[k + 1, 1])), pc.label))
@@ -521,9 +534,10 @@ def _profile_from_pieces(pieces: list[_Piece], curves: list[Any]) -> tuple[Float
                     f"mm, r = {pts[k, 1]:.6g} mm (an overhang); the generatrix must run monotonically along x")
     if not chains:
         found = _describe_entities(curves)
-        if dropped_vertical:
-            raise InputError(f"no profile: every segment is perpendicular to the axis or lies on it ({found})")
-        raise InputError(f"no profile above the axis (y > 0): {found}")
+        raise InputError(
+            f"no profile above the axis: of the drawn segments {len(dropped_vertical)} are perpendicular to the axis "
+            f"(end faces), {n_axis} lie on the axis (y = 0) and {n_below} below it (y < 0), none is left for the "
+            f"generatrix (x = axial z, y = radius > 0); {found}")
     chains.sort(key=lambda c: c[0][0, 0])
     zs = [chains[0][0]]
     for (prev, plab), (cur, clab) in zip(chains[:-1], chains[1:]):
