@@ -345,7 +345,7 @@ class MandrelPanel(QWidget):
         self._show_page(kind)
         self.clear_errors()
         vals, errs = self._read(kind)
-        if not errs and kind == "vessel":
+        if kind == "vessel":
             for side, name in (("0", "left"), ("1", "right")):
                 rp, big_r = vals.get(f"pole_radius_mm.{side}"), vals.get("radius_mm")
                 if isinstance(rp, float) and isinstance(big_r, float) and rp >= big_r:

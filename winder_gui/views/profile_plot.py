@@ -73,7 +73,7 @@ class PointEditor(pg.ScatterPlotItem):
         self._set_message("")
         self._redraw()
 
-    def points(self) -> tuple[FloatArray, FloatArray]:
+    def current_points(self) -> tuple[FloatArray, FloatArray]:
         """The points as drawn now (mm), including an edit in progress."""
         return self._work_z.copy(), self._work_r.copy()
 
