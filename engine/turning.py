@@ -53,6 +53,7 @@ __all__ = [
     "load_data",
     "minimal_removal_sets",
     "optimise",
+    "optimise_with_plot",
     "plot_data",
     "result_to_json",
     "solve_model",
@@ -1202,17 +1203,24 @@ def _segment(a: float, b: float, rhs: float, box: tuple[float, float, float, flo
     return pts[0], pts[-1]
 
 
-def plot_data(res: TurningResult) -> dict[str, Any]:
+def plot_data(res: TurningResult | Model) -> dict[str, Any]:
     """Everything the (n, S) plot draws, in rpm and mm/rev (log axes make every row a straight line).
 
+    ``res`` is a result, or a bare :class:`Model` (e.g. an infeasible one: lines only, no optimum).
     Returns a dict with ``box`` (n_lo, n_hi, S_lo, S_hi), ``lines`` (name, label, enabled, active,
-    n[2], S[2]), ``regions`` (list of (n[], S[]) polygons), ``objective`` (n[2], S[2]) and ``optimum``.
+    band, n[2], S[2]), ``offscreen`` (rows whose line misses the window), ``regions`` (band, n[], S[]
+    polygons), ``objective`` (n[2], S[2]) or ``None``,
+    ``optimum`` (n, S) or ``None`` and, when snapped, ``snapped`` (n, S).
     """
-    model = res.model
-    box = _box(model, (res.x1, res.x2))
-    box = (min(box[0], res.x1 - 0.3), max(box[1], res.x1 + 0.3), min(box[2], res.x2 - 0.3),
-           max(box[3], res.x2 + 0.3))
-    lines = []
+    if isinstance(res, Model):
+        model, center, active, band = res, None, (), None
+    else:
+        model, center, active, band = res.model, (res.x1, res.x2), res.active, res.band
+    box = _box(model, center)
+    if center is not None:
+        box = (min(box[0], center[0] - 0.3), max(box[1], center[0] + 0.3), min(box[2], center[1] - 0.3),
+               max(box[3], center[1] + 0.3))
+    lines, offscreen = [], []
     for r in model.rows:
         if not math.isfinite(r.rhs):
             continue
@@ -1225,22 +1233,43 @@ def plot_data(res: TurningResult) -> dict[str, Any]:
                 continue
         seg = _segment(r.a, r.b, r.rhs, sub)
         if seg is None:
+            offscreen.append({"name": r.name, "label": r.label or r.name, "enabled": r.enabled, "band": r.band})
             continue
         (p1, q1), (p2, q2) = seg
         lines.append({"name": r.name, "label": r.label or r.name, "enabled": r.enabled, "band": r.band,
-                      "active": r.name in res.active and (r.band is None or r.band == res.band),
+                      "active": r.name in active and (r.band is None or r.band == band),
                       "n": [math.exp(p1), math.exp(p2)], "S": [math.exp(q1), math.exp(q2)]})
     regions = []
     for k in range(len(model.bands)):
         for poly in feasible_polygons(model, k, box):
             regions.append({"band": k, "n": [math.exp(p[0]) for p in poly], "S": [math.exp(p[1]) for p in poly]})
-    f = res.x1 + res.x2
-    obj = _segment(1.0, 1.0, f, box)
     objective = None
-    if obj is not None:
-        objective = {"n": [math.exp(obj[0][0]), math.exp(obj[1][0])], "S": [math.exp(obj[0][1]), math.exp(obj[1][1])]}
-    out = {"box": tuple(math.exp(v) for v in box), "lines": lines, "regions": regions, "objective": objective,
-           "optimum": (res.n_rpm, res.feed_mm_rev)}
-    if res.snapped and res.snapped.get("feasible"):
-        out["snapped"] = (res.snapped["n_rpm"], res.snapped["feed_mm_rev"])
+    out: dict[str, Any] = {"box": tuple(math.exp(v) for v in box), "lines": lines, "offscreen": offscreen,
+                           "regions": regions, "objective": None, "optimum": None}
+    if isinstance(res, TurningResult):
+        obj = _segment(1.0, 1.0, res.x1 + res.x2, box)
+        if obj is not None:
+            objective = {"n": [math.exp(obj[0][0]), math.exp(obj[1][0])],
+                         "S": [math.exp(obj[0][1]), math.exp(obj[1][1])]}
+        out["objective"] = objective
+        out["optimum"] = (res.n_rpm, res.feed_mm_rev)
+        if res.snapped and res.snapped.get("feasible"):
+            out["snapped"] = (res.snapped["n_rpm"], res.snapped["feed_mm_rev"])
     return out
+
+
+def optimise_with_plot(case: TurningCase, data: CuttingData | None = None, *, snap: bool = False,
+                       state: State | None = None) -> dict[str, Any]:
+    """:func:`optimise` plus :func:`plot_data`, for the dialog's worker.
+
+    Returns ``{"result": TurningResult | None, "plot": dict, "error": InfeasibleError | None}``: an
+    infeasible set-up still gets its constraint lines (no region, no optimum) and the error.
+    Other :class:`InputError` propagate.
+    """
+    try:
+        res = optimise(case, data, snap=snap, state=state)
+    except InfeasibleError as exc:
+        model = build_model(case, data)
+        return {"result": None, "plot": plot_data(model), "error": exc}
+    check_cancel(state)
+    return {"result": res, "plot": plot_data(res), "error": None}

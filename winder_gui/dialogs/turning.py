@@ -1,0 +1,795 @@
+"""Tools → Turning optimiser: spindle speed and feed for one-pass turning (engine/turning.py, MATH.md §C).
+
+Inputs on the left (units in every label), the report and the constraint table in the middle, and
+the feasible region in the (n, S) plane on log axes on the right: every constraint a labelled,
+coloured line (in log-log coordinates every row ``n^a S^b <= c`` is straight), the feasible region
+shaded, the objective line ``n S = const`` through the optimum, the optimum marked (and the best pair
+of the machine's discrete series when *Snap* is on) — the paper's Fig. 2, but for any set-up.
+
+Every edit is validated at once (a bad value gets an inline message next to its field, nothing
+runs); valid edits are debounced and computed by :func:`engine.turning.optimise_with_plot` through a
+:class:`winder_gui.workers.JobRunner`, so the GUI thread never computes.  An infeasible set-up shows
+the conflicting constraints instead of a result.
+
+Expert mode edits the LP rows ``a x1 + b x2 <= rhs`` (x1 = ln n, x2 = ln S) directly, as in the
+paper's Mathcad sheet; *Rows → expert* copies the current physical rows there.
+"""
+
+from __future__ import annotations
+
+import html
+import math
+import sys
+from typing import Any
+
+import pyqtgraph as pg
+from PySide6.QtCore import QPointF, Qt, QTimer, Signal
+from PySide6.QtGui import QBrush, QColor, QPen, QPolygonF
+from PySide6.QtWidgets import (
+    QAbstractItemView,
+    QCheckBox,
+    QComboBox,
+    QDialog,
+    QFormLayout,
+    QGraphicsPolygonItem,
+    QGroupBox,
+    QHBoxLayout,
+    QHeaderView,
+    QLabel,
+    QLineEdit,
+    QPushButton,
+    QScrollArea,
+    QSplitter,
+    QTableWidget,
+    QTableWidgetItem,
+    QVBoxLayout,
+    QWidget,
+)
+
+from engine.errors import InputError
+from engine.turning import (
+    CONSTRAINT_NAMES,
+    LABELS,
+    CuttingData,
+    TurningCase,
+    case_from_dict,
+    example_case_path,
+    load_case,
+    load_data,
+    optimise_with_plot,
+)
+from winder_gui.workers import JobRunner
+
+_ERR_STYLE = "color: #b00020;"
+_DEBOUNCE_MS = 150
+
+#: colour per constraint (the paper's Fig. 2 colours where it has them)
+COLOURS: dict[str, str] = {
+    "tool_life": "#8b4513",  # brown, as the paper's 3
+    "power": "#c08040",  # light brown
+    "feed_mechanism": "#7f7f7f",
+    "holder": "#9467bd",
+    "insert": "#e377c2",
+    "roughness": "#7ccd7c",  # light green, as the paper's 4
+    "accuracy": "#17becf",
+    "s_min": "#1f4fff",  # blue, as the paper's 1
+    "s_max": "#1f4fff",
+    "n_min": "#2ca02c",  # green, as the paper's 2
+    "n_max": "#2ca02c",
+}
+_USER_COLOURS = ("#ff7f0e", "#bcbd22", "#8c564b", "#d62728")
+
+_BOOL_REFS: list[bool] = []  # references held on purpose, see _guard_bool_refs
+
+
+def _guard_bool_refs(minimum: int = 200_000) -> None:
+    """Keep ``True``/``False`` alive despite a reference leak in PySide6 6.12 (CPython 3.11).
+
+    Every emission of a Qt signal carrying a ``bool`` to a Python slot drops one reference to the
+    bool (measured: ``sys.getrefcount(True)`` falls by 1 per emission), and pyqtgraph emits such
+    signals for every item it creates or updates — about 20 per new curve, 2 per ``setData``.  After a
+    few dozen redraws the count reaches zero, ``True`` is deallocated and the interpreter aborts
+    ("bool_dealloc").  Until PySide6 is fixed, top the count up here before each redraw.
+    """
+    for b in (True, False):
+        deficit = minimum - sys.getrefcount(b)
+        if deficit > 0:
+            _BOOL_REFS.extend([b] * deficit)
+
+# (section, key, label with unit, tooltip)
+_NUM_FIELDS: tuple[tuple[str, str, str, str], ...] = (
+    ("machine", "n_min_rpm", "n min, rpm", "Lowest spindle speed, constraint (12)."),
+    ("machine", "n_max_rpm", "n max, rpm", "Highest spindle speed, constraint (13)."),
+    ("machine", "s_min_mm_rev", "S min, mm/rev", "Smallest feed, constraint (10)."),
+    ("machine", "s_max_mm_rev", "S max, mm/rev", "Largest feed, constraint (11)."),
+    ("machine", "power_kw", "Drive power N, kW", "Main drive power, constraint (4)."),
+    ("machine", "efficiency", "Efficiency η, –", "Drive efficiency, constraint (4)."),
+    ("machine", "feed_force_max_n", "Max feed force, N", "Strength of the weakest feed-mechanism link, (5)."),
+    ("workpiece", "hb", "Hardness, HB", "Brinell hardness (K_mv, K_mp of cast irons)."),
+    ("workpiece", "sigma_b_mpa", "Tensile strength σ_b, MPa", "K_mv, K_mp of steels."),
+    ("workpiece", "diameter_mm", "Diameter D, mm", "Workpiece diameter before the pass."),
+    ("workpiece", "depth_mm", "Depth of cut t, mm", "One pass removes the whole allowance."),
+    ("workpiece", "length_mm", "Part length L, mm", "Span for the deflection check (9)."),
+    ("workpiece", "machined_length_mm", "Machined length l, mm", "Path length of the pass: t_m = l/(n S)."),
+    ("workpiece", "tolerance_mm", "Diameter tolerance, mm", "E.g. IT11 at 83 mm = 0.22 mm."),
+    ("workpiece", "deflection_share", "Deflection share of tolerance, –",
+     "Admissible part deflection = share × tolerance, (9)."),
+    ("tool", "tool_life_min", "Tool life T, min", "Economic tool life in the Taylor constraint (3)."),
+    ("tool", "phi_deg", "Approach angle φ, deg", "Main cutting-edge angle (K_φv, K_φp, insert (7))."),
+    ("tool", "phi1_deg", "Minor angle φ1, deg", "Minor cutting-edge angle (empirical roughness)."),
+    ("tool", "gamma_deg", "Rake angle γ, deg", "K_γp."),
+    ("tool", "lambda_deg", "Inclination λ, deg", "K_λp."),
+    ("tool", "nose_radius_mm", "Nose radius r, mm", "Roughness (8)."),
+    ("tool", "insert_thickness_mm", "Insert thickness c, mm", "Insert strength (7)."),
+    ("tool", "holder_b_mm", "Holder width B, mm", "Holder strength (6)."),
+    ("tool", "holder_h_mm", "Holder height H, mm", "Holder strength (6)."),
+    ("tool", "holder_overhang_mm", "Holder overhang, mm", "Holder strength (6)."),
+    ("tool", "holder_stress_mpa", "Holder stress [σ], MPa", "Admissible bending stress of the shank (6)."),
+    ("requirements", "rz_um", "Roughness Rz, µm", "Required surface roughness (8)."),
+)
+_EXPERT_KEEP = {"diameter_mm", "machined_length_mm"}  # still used in expert mode (V and t_m)
+_SURFACES = ("no_crust", "rolled", "forging", "casting_crust", "casting_dirty_crust")
+_TABLE_COLS = ("on", "row", "constraint", "a", "b", "rhs = ln c", "limit ×", "slack", "use", "status")
+
+
+def _fmt(v: Any, spec: str = ".4g") -> str:
+    return "—" if v is None else format(v, spec)
+
+
+class TurningDialog(QDialog):
+    """The turning-mode optimiser (Tools → Turning optimiser); usable on its own.
+
+    Signals
+    -------
+    computed(dict):
+        a computation finished and is shown: ``{"result", "plot", "error"}`` as returned by
+        :func:`engine.turning.optimise_with_plot`.
+    """
+
+    computed = Signal(object)
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.setWindowTitle("Turning optimiser — spindle speed and feed for minimum machine time")
+        self.resize(1500, 900)
+        self.data: CuttingData = load_data()
+        self.result: Any = None  # the last TurningResult shown (None when infeasible)
+        self.plot: dict[str, Any] | None = None
+        self.error: str = ""
+        self._loading = False
+        self._runner = JobRunner(self)
+        self._runner.finished.connect(self._on_finished)
+        self._runner.failed.connect(self._on_failed)
+        self._timer = QTimer(self)
+        self._timer.setSingleShot(True)
+        self._timer.setInterval(_DEBOUNCE_MS)
+        self._timer.timeout.connect(self.compute)
+
+        # ---- inputs --------------------------------------------------------------------------
+        self.edits: dict[str, QLineEdit] = {}
+        self.field_errors: dict[str, QLabel] = {}
+        left = QWidget()
+        lv = QVBoxLayout(left)
+        top = QFormLayout()
+        self.example = QComboBox()
+        for p in sorted((example_case_path("paper").parent).glob("*.toml")):
+            self.example.addItem(p.stem, str(p))
+        load_btn = QPushButton("Load")
+        load_btn.clicked.connect(lambda: self.load_case_file(self.example.currentData()))
+        row = QHBoxLayout()
+        row.addWidget(self.example, 1)
+        row.addWidget(load_btn)
+        top.addRow("Example case", row)
+        self.mode = QComboBox()
+        self.mode.addItem("Physical model (handbook data)", "physical")
+        self.mode.addItem("Expert (edit LP rows b1…b11)", "expert")
+        self.mode.currentIndexChanged.connect(self._mode_changed)
+        top.addRow("Mode", self.mode)
+        lv.addLayout(top)
+
+        self.machine = self._combo(self.data.machines, "Lathe (resources/cutting/machines.toml)")
+        self.machine.currentIndexChanged.connect(self._machine_changed)
+        self.material = self._combo(self.data.materials, "Workpiece material (materials.toml)")
+        self.material.currentIndexChanged.connect(self._material_changed)
+        self.tool = self._combo(self.data.tools, "Tool material (tools.toml)")
+        self.fixture = QComboBox()
+        for k, lab in (("centres", "between centres"), ("chuck", "in a chuck"),
+                       ("chuck_tailstock", "chuck + tailstock")):
+            self.fixture.addItem(lab, k)
+        self.surface = QComboBox()
+        for k in _SURFACES:
+            self.surface.addItem(k.replace("_", " "), k)
+        self.roughness_model = QComboBox()
+        self.roughness_model.addItem("geometric Rz = S²/8r", "geometric")
+        self.roughness_model.addItem("empirical (paper's (8); uncertain data)", "empirical")
+        self.speed_bands = QComboBox()
+        self.speed_bands.addItem("per feed band (handbook)", "auto")
+        self.speed_bands.addItem("first band for all S (as the paper)", "first")
+        self.snap = QCheckBox("Snap to the machine's speed/feed series")
+        self.groups: dict[str, QGroupBox] = {}
+        forms: dict[str, QFormLayout] = {}
+        for sec, title in (("machine", "Machine"), ("workpiece", "Workpiece"), ("tool", "Tool"),
+                           ("requirements", "Requirements and options")):
+            g = QGroupBox(title)
+            forms[sec] = QFormLayout(g)
+            self.groups[sec] = g
+            lv.addWidget(g)
+        forms["machine"].addRow("Lathe", self.machine)
+        forms["workpiece"].addRow("Material", self.material)
+        forms["workpiece"].addRow("Fixture", self.fixture)
+        forms["workpiece"].addRow("Surface", self.surface)
+        forms["tool"].addRow("Tool material", self.tool)
+        for sec, key, label, tip in _NUM_FIELDS:
+            ed = QLineEdit()
+            ed.setObjectName(key)
+            ed.setToolTip(tip)
+            ed.textChanged.connect(self._changed)
+            err = QLabel()
+            err.setStyleSheet(_ERR_STYLE)
+            err.setWordWrap(True)
+            err.hide()
+            box = QVBoxLayout()
+            box.setSpacing(0)
+            box.addWidget(ed)
+            box.addWidget(err)
+            lab = QLabel(label)
+            lab.setToolTip(tip)
+            forms[sec].addRow(lab, box)
+            self.edits[key] = ed
+            self.field_errors[key] = err
+        forms["requirements"].addRow("Roughness model", self.roughness_model)
+        forms["requirements"].addRow("Taylor coefficients", self.speed_bands)
+        forms["requirements"].addRow(self.snap)
+        for w in (self.fixture, self.surface, self.tool, self.roughness_model, self.speed_bands):
+            w.currentIndexChanged.connect(self._changed)
+        self.snap.toggled.connect(self._changed)
+        lv.addStretch(1)
+        scroll = QScrollArea()
+        scroll.setWidget(left)
+        scroll.setWidgetResizable(True)
+        scroll.setMinimumWidth(380)
+
+        # ---- report and constraint table --------------------------------------------------------
+        mid = QWidget()
+        mv = QVBoxLayout(mid)
+        self.summary = QLabel()
+        self.summary.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+        self.summary.setWordWrap(True)
+        self.summary.setObjectName("summary")
+        self.message = QLabel()
+        self.message.setStyleSheet(_ERR_STYLE)
+        self.message.setWordWrap(True)
+        self.message.setObjectName("message")
+        mv.addWidget(self.summary)
+        mv.addWidget(self.message)
+        self.table = QTableWidget(0, len(_TABLE_COLS))
+        self.table.setHorizontalHeaderLabels(list(_TABLE_COLS))
+        self.table.verticalHeader().setVisible(False)
+        self.table.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
+        self.table.setSelectionBehavior(QAbstractItemView.SelectionBehavior.SelectRows)
+        self.table.itemChanged.connect(self._table_changed)
+        mv.addWidget(self.table, 1)
+        btns = QHBoxLayout()
+        add = QPushButton("Add row n^a·S^b ≤ c")
+        add.clicked.connect(self.add_user_row)
+        rem = QPushButton("Remove user row")
+        rem.clicked.connect(self.remove_user_row)
+        to_exp = QPushButton("Rows → expert")
+        to_exp.setToolTip("Copy the current LP rows (of the feed band in use) into expert mode.")
+        to_exp.clicked.connect(self.rows_to_expert)
+        for b in (add, rem, to_exp):
+            btns.addWidget(b)
+        mv.addLayout(btns)
+
+        # ---- plot --------------------------------------------------------------------------------
+        self.plot_view = pg.GraphicsLayoutWidget()
+        self.plot_view.setBackground("w")
+        self.plot_widget = self.plot_view.addPlot(row=0, col=0)  # a PlotItem
+        self.plot_widget.setLogMode(True, True)
+        self.plot_widget.showGrid(x=True, y=True, alpha=0.25)
+        self.plot_widget.setLabel("bottom", "spindle speed n, rpm")
+        self.plot_widget.setLabel("left", "feed S, mm/rev")
+        self.plot_widget.setTitle("Feasible region in the (n, S) plane (log axes)")
+        self.legend = pg.LegendItem(labelTextColor="k", colCount=2)  # below the plot, never over it
+        self.plot_view.addItem(self.legend, row=1, col=0)
+        self.plot_view.ci.layout.setRowStretchFactor(0, 4)
+        self._pools: dict[str, list[Any]] = {}
+        self._legend_key: list[tuple[int, str]] = []
+        self.curves: dict[str, list[pg.PlotDataItem]] = {}
+        self.region_items: list[QGraphicsPolygonItem] = []
+        self.label_items: list[pg.TextItem] = []
+        self.objective_item = pg.PlotDataItem(pen=pg.mkPen("#d62728", width=2, style=Qt.PenStyle.DashLine),
+                                              name="objective n·S = max")
+        self.optimum_item = pg.PlotDataItem(pen=None, symbol="star", symbolSize=18,
+                                            symbolBrush=pg.mkBrush("#d62728"), symbolPen=pg.mkPen("k"))
+        self.snapped_item = pg.PlotDataItem(pen=None, symbol="x", symbolSize=14, symbolBrush=pg.mkBrush("k"),
+                                            symbolPen=pg.mkPen("k"))
+        for it in (self.objective_item, self.optimum_item, self.snapped_item):
+            self.plot_widget.addItem(it)
+
+        split = QSplitter()
+        split.addWidget(scroll)
+        split.addWidget(mid)
+        split.addWidget(self.plot_view)
+        split.setSizes([380, 470, 650])
+        outer = QVBoxLayout(self)
+        outer.addWidget(split)
+
+        # rows of the constraint table: name -> dict(a, b, rhs, on, factor, user)
+        self._rows: list[dict[str, Any]] = []
+        self._case: TurningCase | None = None
+        self.load_case_file(str(example_case_path("paper")))
+
+    # ------------------------------------------------------------------------------ construction
+    def _combo(self, table: Any, tip: str) -> QComboBox:
+        c = QComboBox()
+        c.setToolTip(tip)
+        for k, v in table.items():
+            c.addItem(f"{k} — {v.get('name', '')}", k)
+        return c
+
+    @staticmethod
+    def _set_combo(combo: QComboBox, key: str) -> None:
+        i = combo.findData(key)
+        if i >= 0:
+            combo.setCurrentIndex(i)
+
+    # ------------------------------------------------------------------------------ case <-> fields
+    def load_case_file(self, path: str) -> None:
+        """Fill every input from a case file (TOML), then compute."""
+        try:
+            case = load_case(path)
+        except InputError as exc:
+            self.message.setText(str(exc))
+            return
+        self.set_case(case)
+
+    def set_case(self, case: TurningCase) -> None:
+        """Show ``case`` in the inputs (machine/material values filled from the database)."""
+        self._loading = True
+        try:
+            self._set_combo(self.mode, case.mode)
+            self._set_combo(self.machine, case.machine)
+            self._fill_machine(case.machine)
+            self._set_combo(self.material, case.material)
+            self._fill_material(case.material)
+            self._set_combo(self.tool, case.tool)
+            self._set_combo(self.fixture, case.fixture)
+            self._set_combo(self.surface, case.surface)
+            self._set_combo(self.roughness_model, case.roughness_model)
+            self._set_combo(self.speed_bands, case.speed_bands)
+            vals = {
+                "n_min_rpm": case.n_min_rpm, "n_max_rpm": case.n_max_rpm, "s_min_mm_rev": case.s_min_mm_rev,
+                "s_max_mm_rev": case.s_max_mm_rev, "power_kw": case.power_kw, "efficiency": case.efficiency,
+                "feed_force_max_n": case.feed_force_max_n, "hb": case.hb, "sigma_b_mpa": case.sigma_b_mpa,
+                "diameter_mm": case.diameter_mm, "depth_mm": case.depth_mm, "length_mm": case.length_mm,
+                "machined_length_mm": case.machined_length_mm, "tolerance_mm": case.tolerance_mm,
+                "deflection_share": case.deflection_share, "tool_life_min": case.tool_life_min,
+                "phi_deg": math.degrees(case.phi), "phi1_deg": math.degrees(case.phi1),
+                "gamma_deg": math.degrees(case.gamma), "lambda_deg": math.degrees(case.lam),
+                "nose_radius_mm": case.nose_radius_mm, "insert_thickness_mm": case.insert_thickness_mm,
+                "holder_b_mm": case.holder_b_mm, "holder_h_mm": case.holder_h_mm,
+                "holder_overhang_mm": case.holder_overhang_mm, "holder_stress_mpa": case.holder_stress_mpa,
+                "rz_um": case.rz_um,
+            }
+            for k, v in vals.items():
+                if v is not None:
+                    self.edits[k].setText(f"{v:.6g}")
+            self._rows = []
+            if case.mode == "expert":
+                for name, a, b, rhs, en in case.expert_rows:
+                    self._rows.append({"name": name, "a": a, "b": b, "rhs": rhs, "on": en and name not in
+                                       case.disabled, "factor": dict(case.limit_factor).get(name, 1.0),
+                                       "user": name not in CONSTRAINT_NAMES})
+            else:
+                for name in CONSTRAINT_NAMES:
+                    self._rows.append({"name": name, "a": None, "b": None, "rhs": None,
+                                       "on": name not in case.disabled,
+                                       "factor": dict(case.limit_factor).get(name, 1.0), "user": False})
+            for u in case.user_rows:
+                self._rows.append({"name": u.name, "a": u.a, "b": u.b, "rhs": math.log(u.c),
+                                   "on": u.name not in case.disabled, "factor": 1.0, "user": True})
+            self._refill_table()
+            self._apply_mode_enabling()
+        finally:
+            self._loading = False
+        self._changed()
+
+    def _fill_machine(self, key: str) -> None:
+        m = self.data.machines.get(key, {})
+        for k in ("n_min_rpm", "n_max_rpm", "s_min_mm_rev", "s_max_mm_rev", "power_kw", "efficiency",
+                  "feed_force_max_n"):
+            if k in m:
+                self.edits[k].setText(f"{float(m[k]):.6g}")
+
+    def _fill_material(self, key: str) -> None:
+        m = self.data.materials.get(key, {})
+        for k in ("hb", "sigma_b_mpa"):
+            if k in m:
+                self.edits[k].setText(f"{float(m[k]):.6g}")
+
+    def _machine_changed(self) -> None:
+        if not self._loading:
+            self._loading = True
+            try:
+                self._fill_machine(self.machine.currentData())
+            finally:
+                self._loading = False
+            self._changed()
+
+    def _material_changed(self) -> None:
+        if not self._loading:
+            self._loading = True
+            try:
+                self._fill_material(self.material.currentData())
+            finally:
+                self._loading = False
+            self._changed()
+
+    def _mode_changed(self) -> None:
+        if self._loading:
+            return
+        self._apply_mode_enabling()
+        if self.current_mode() == "expert" and any(r["a"] is None for r in self._rows if not r["user"]):
+            self.rows_to_expert()
+            return
+        if self.current_mode() == "physical":
+            users = [r for r in self._rows if r["user"]]
+            old = {r["name"]: r for r in self._rows}
+            self._rows = [{"name": n, "a": None, "b": None, "rhs": None, "on": old.get(n, {}).get("on", True),
+                           "factor": 1.0, "user": False} for n in CONSTRAINT_NAMES] + users
+            self._refill_table()
+        self._changed()
+
+    def current_mode(self) -> str:
+        """``"physical"`` or ``"expert"``."""
+        return str(self.mode.currentData())
+
+    def _apply_mode_enabling(self) -> None:
+        expert = self.current_mode() == "expert"
+        for w in (self.machine, self.material, self.tool, self.fixture, self.surface, self.roughness_model,
+                  self.speed_bands):
+            w.setEnabled(not expert)
+        for key, ed in self.edits.items():
+            ed.setEnabled(not expert or key in _EXPERT_KEEP)
+
+    def case_document(self) -> dict[str, Any]:
+        """The inputs as a case document (the TOML layout); raises :class:`InputError` naming the field."""
+        doc: dict[str, Any] = {"mode": self.current_mode(), "machine": {"id": self.machine.currentData()},
+                               "workpiece": {"material": self.material.currentData(),
+                                             "fixture": self.fixture.currentData(),
+                                             "surface": self.surface.currentData()},
+                               "tool": {"material": self.tool.currentData()},
+                               "requirements": {},
+                               "options": {"roughness_model": self.roughness_model.currentData(),
+                                           "speed_bands": self.speed_bands.currentData()}}
+        expert = self.current_mode() == "expert"
+        for sec, key, label, _tip in _NUM_FIELDS:
+            if expert and key not in _EXPERT_KEEP:
+                continue
+            text = self.edits[key].text().strip()
+            if not text:
+                raise InputError(f"{label}: a value is required", field=f"{sec}.{key}")
+            try:
+                v = float(text.replace(",", "."))
+            except ValueError:
+                raise InputError(f"{label}: {text!r} is not a number", field=f"{sec}.{key}") from None
+            doc[sec][key] = v
+        cons: dict[str, Any] = {"disable": [r["name"] for r in self._rows if not r["on"]],
+                                "limit_factor": {r["name"]: r["factor"] for r in self._rows
+                                                 if not r["user"] and r["factor"] != 1.0},
+                                "user": []}
+        if expert:
+            doc["rows"] = [{"name": r["name"], "a": r["a"], "b": r["b"], "rhs": r["rhs"], "enabled": r["on"]}
+                           for r in self._rows if not r["user"]]
+            cons["user"] = [{"name": r["name"], "a": r["a"], "b": r["b"], "c": math.exp(r["rhs"])}
+                            for r in self._rows if r["user"]]
+        else:
+            cons["user"] = [{"name": r["name"], "a": r["a"], "b": r["b"], "c": math.exp(r["rhs"])}
+                            for r in self._rows if r["user"]]
+        doc["constraints"] = cons
+        return doc
+
+    # ------------------------------------------------------------------------------ the table
+    def _refill_table(self) -> None:
+        self.table.blockSignals(True)
+        try:
+            self.table.setRowCount(len(self._rows))
+            expert = self.current_mode() == "expert"
+            for i, r in enumerate(self._rows):
+                on = QTableWidgetItem()
+                on.setFlags(Qt.ItemFlag.ItemIsUserCheckable | Qt.ItemFlag.ItemIsEnabled)
+                on.setCheckState(Qt.CheckState.Checked if r["on"] else Qt.CheckState.Unchecked)
+                self.table.setItem(i, 0, on)
+                paper = f"b{CONSTRAINT_NAMES.index(r['name']) + 1}" if r["name"] in CONSTRAINT_NAMES else "user"
+                cells = [paper, LABELS.get(r["name"], r["name"]), _fmt(r["a"]), _fmt(r["b"]),
+                         _fmt(r["rhs"], ".5g"), _fmt(r["factor"]), "", "", ""]
+                for j, text in enumerate(cells, start=1):
+                    it = QTableWidgetItem(text)
+                    editable = (j in (3, 4, 5) and (expert or r["user"])) or (j == 6 and not expert and not r["user"])
+                    flags = Qt.ItemFlag.ItemIsEnabled | Qt.ItemFlag.ItemIsSelectable
+                    if editable:
+                        flags |= Qt.ItemFlag.ItemIsEditable
+                    it.setFlags(flags)
+                    if j == 2:
+                        it.setForeground(QBrush(QColor(self._colour(r["name"]))))
+                    self.table.setItem(i, j, it)
+        finally:
+            self.table.blockSignals(False)
+
+    def _table_changed(self, item: QTableWidgetItem) -> None:
+        i, j = item.row(), item.column()
+        if i >= len(self._rows):
+            return
+        r = self._rows[i]
+        if j == 0:
+            r["on"] = item.checkState() == Qt.CheckState.Checked
+        elif j in (3, 4, 5, 6):
+            key = {3: "a", 4: "b", 5: "rhs", 6: "factor"}[j]
+            try:
+                v = float(item.text().replace(",", "."))
+                if not math.isfinite(v) or (key == "factor" and v <= 0):
+                    raise ValueError
+            except ValueError:
+                self._show_input_error(InputError(
+                    f"row {r['name']!r}: {key} must be a {'positive ' if key == 'factor' else ''}number, "
+                    f"got {item.text()!r}", field=f"constraints.{r['name']}.{key}"))
+                return
+            r[key] = v
+        else:
+            return  # read-only columns
+        self._changed()
+
+    def add_user_row(self) -> None:
+        """Append a user constraint ``n^a S^b <= c`` (default ``n S <= 2000``, i.e. 2 m/min feed rate)."""
+        k = 1 + sum(r["user"] for r in self._rows)
+        names = {r["name"] for r in self._rows}
+        while f"user{k}" in names:
+            k += 1
+        self._rows.append({"name": f"user{k}", "a": 1.0, "b": 1.0, "rhs": math.log(2000.0), "on": True,
+                           "factor": 1.0, "user": True})
+        self._refill_table()
+        self._changed()
+
+    def remove_user_row(self) -> None:
+        """Remove the selected user row (or the last one)."""
+        sel = [i.row() for i in self.table.selectedIndexes() if self._rows[i.row()]["user"]]
+        idx = sel[0] if sel else max((i for i, r in enumerate(self._rows) if r["user"]), default=None)
+        if idx is not None:
+            del self._rows[idx]
+            self._refill_table()
+            self._changed()
+
+    def rows_to_expert(self) -> None:
+        """Switch to expert mode with the rows of the current result (the feed band in use)."""
+        if self.result is None:
+            self.message.setText("No result to copy the rows from; fix the set-up first.")
+            return
+        users = [r for r in self._rows if r["user"]]
+        rows = [{"name": r.name, "a": r.a, "b": r.b, "rhs": r.rhs, "on": r.enabled, "factor": 1.0, "user": False}
+                for r in self.result.rows if r.kind != "user"]
+        self._loading = True
+        try:
+            self._set_combo(self.mode, "expert")
+        finally:
+            self._loading = False
+        self._rows = rows + users
+        self._refill_table()
+        self._apply_mode_enabling()
+        self._changed()
+
+    # ------------------------------------------------------------------------------ computing
+    def _changed(self) -> None:
+        if self._loading:
+            return
+        for lab in self.field_errors.values():
+            lab.hide()
+        try:
+            self._case = case_from_dict(self.case_document())
+        except InputError as exc:
+            self._timer.stop()
+            self._show_input_error(exc)
+            return
+        self.message.setText("")
+        self._timer.start()
+
+    def _show_input_error(self, exc: InputError) -> None:
+        self.error = str(exc)
+        self.message.setText(f"Input: {exc}")
+        fld = exc.location.field or ""
+        key = fld.split(".")[-1]
+        if key in self.field_errors:
+            self.field_errors[key].setText(exc.message)
+            self.field_errors[key].show()
+
+    def compute(self) -> None:
+        """Submit the current (validated) case to the worker now."""
+        self._timer.stop()
+        if self._case is None:
+            return
+        self._runner.submit(optimise_with_plot, self._case, self.data, snap=self.snap.isChecked())
+
+    def flush(self) -> None:
+        """Run a pending debounced computation immediately (for tests and scripts)."""
+        if self._timer.isActive():
+            self.compute()
+
+    def _on_failed(self, exc: object, tb: str) -> None:
+        if isinstance(exc, InputError):
+            self._show_input_error(exc)
+        else:  # a bug: show it, never crash the dialog
+            self.message.setText(f"Internal error: {exc!r}")
+        self.result = None
+        self.computed.emit({"result": None, "plot": None, "error": exc})
+
+    def _on_finished(self, out: dict[str, Any]) -> None:
+        self.result = out["result"]
+        self.plot = out["plot"]
+        err = out["error"]
+        self.error = str(err) if err is not None else ""
+        self.message.setText(f"Infeasible: {err.message}" if err is not None else "")
+        self._show_result()
+        self._draw(self.plot)
+        self.computed.emit(out)
+
+    def _show_result(self) -> None:
+        res = self.result
+        self.table.blockSignals(True)
+        try:
+            for i in range(len(self._rows)):
+                for j in (7, 8, 9):
+                    it = self.table.item(i, j)
+                    if it is not None:
+                        it.setText("")
+        finally:
+            self.table.blockSignals(False)
+        if res is None:
+            self.summary.setText("<b>No feasible cutting mode.</b>")
+            return
+        q = res.quantities
+        lines = [f"<b>n = {res.n_rpm:.2f} rpm, S = {res.feed_mm_rev:.4g} mm/rev</b> "
+                 f"(x1 = ln n = {res.x1:.4f}, x2 = ln S = {res.x2:.4f})",
+                 f"V = {_fmt(q['speed_m_min'])} m/min, feed {_fmt(q['feed_mm_min'])} mm/min, "
+                 f"machine time {_fmt(q['machine_time_min'])} min"]
+        if q.get("force_pz_n") is not None:
+            lines.append(f"P_z = {_fmt(q['force_pz_n'], '.5g')} N, P_y = {_fmt(q['force_py_n'], '.5g')} N, "
+                         f"P_x = {_fmt(q['force_px_n'], '.5g')} N, cutting power {_fmt(q['power_kw'], '.3g')} kW")
+            lines.append(f"tool life T = {_fmt(q['tool_life_min'])} min, Rz = {_fmt(q['rz_um'], '.3g')} µm, "
+                         f"part deflection {_fmt(q['deflection_mm'], '.3g')} mm")
+        lines.append("active: " + ", ".join(res.active))
+        if res.snapped is not None:
+            sn = res.snapped
+            if sn.get("feasible"):
+                lines.append(f"on the machine's series: n = {sn['n_rpm']:g} rpm, S = {sn['feed_mm_rev']:g} mm/rev, "
+                             f"t_m = {_fmt(sn['machine_time_min'])} min")
+            else:
+                lines.append(sn["message"])
+        elif self.snap.isChecked():
+            lines.append("the machine has no discrete speed/feed series (continuous)")
+        self.summary.setText("<br>".join(lines))
+        by_name = {r.name: r for r in res.rows}
+        self.table.blockSignals(True)
+        try:
+            for i, r in enumerate(self._rows):
+                row = by_name.get(r["name"])
+                if row is not None and self.current_mode() == "physical" and not r["user"]:
+                    self.table.item(i, 3).setText(_fmt(row.a))
+                    self.table.item(i, 4).setText(_fmt(row.b))
+                    self.table.item(i, 5).setText(_fmt(row.rhs, ".5g"))
+                if r["name"] in res.slack:
+                    self.table.item(i, 7).setText(f"{res.slack[r['name']]:.4f}")
+                    self.table.item(i, 8).setText(f"{100 * res.utilisation[r['name']]:.1f} %")
+                    self.table.item(i, 9).setText("ACTIVE" if r["name"] in res.active else "")
+                elif not r["on"]:
+                    self.table.item(i, 9).setText("off")
+        finally:
+            self.table.blockSignals(False)
+
+    # ------------------------------------------------------------------------------ drawing
+    def _colour(self, name: str) -> str:
+        if name in COLOURS:
+            return COLOURS[name]
+        users = [r["name"] for r in self._rows if r["user"]]
+        return _USER_COLOURS[users.index(name) % len(_USER_COLOURS)] if name in users else "#000000"
+
+    def _item(self, pool: str, i: int, make: Any) -> Any:
+        """The ``i``-th reusable plot item of ``pool`` (created on first use; items are never re-created)."""
+        items = self._pools.setdefault(pool, [])
+        while len(items) <= i:
+            it = make()
+            self.plot_widget.addItem(it)
+            items.append(it)
+        items[i].setVisible(True)
+        return items[i]
+
+    def _draw(self, pd: dict[str, Any] | None) -> None:
+        """Show ``plot_data`` output.  Plot items are pooled and updated in place (see :func:`_guard_bool_refs`)."""
+        _guard_bool_refs()
+        used: dict[str, int] = {}
+        self.curves, self.region_items, self.label_items = {}, [], []
+        legend: list[tuple[Any, str]] = []
+        if pd is not None:
+            for reg in pd["regions"]:
+                poly = QPolygonF([QPointF(math.log10(n), math.log10(s)) for n, s in zip(reg["n"], reg["S"])])
+                item = self._item("region", used.setdefault("region", 0), self._make_region)
+                used["region"] += 1
+                item.setPolygon(poly)
+                self.region_items.append(item)
+            for ln in pd["lines"] + [dict(o, n=None, S=None, active=False) for o in pd.get("offscreen", [])]:
+                colour = self._colour(ln["name"])
+                if ln["n"] is None:
+                    style = Qt.PenStyle.DashDotLine
+                else:
+                    style = Qt.PenStyle.SolidLine if ln["enabled"] else Qt.PenStyle.DotLine
+                width = 3 if ln["active"] else 1.5
+                item = self._item("line", used.setdefault("line", 0), pg.PlotDataItem)
+                used["line"] += 1
+                item.setData(ln["n"] or [], ln["S"] or [])
+                item.setPen(pg.mkPen(colour, width=width, style=style))
+                self.curves.setdefault(ln["name"], []).append(item)
+                label = ln["label"] if ln["enabled"] else f"{ln['label']} (off)"
+                if ln["band"] is not None:
+                    label += f", band {ln['band'] + 1}"
+                if ln["n"] is None:
+                    label += " — outside the view"
+                if len(self.curves[ln["name"]]) == 1 or ln["band"] is not None:
+                    legend.append((item, html.escape(label)))
+                if ln["n"] is None:
+                    continue
+                tag = ln["name"] if ln["band"] is None else f"{ln['name']}[{ln['band'] + 1}]"
+                text = self._item("text", used.setdefault("text", 0), lambda: pg.TextItem(anchor=(0.5, 1.0)))
+                used["text"] += 1
+                text.setText(tag, color=colour)
+                text.setPos(0.5 * (math.log10(ln["n"][0]) + math.log10(ln["n"][1])),
+                            0.5 * (math.log10(ln["S"][0]) + math.log10(ln["S"][1])))
+                self.label_items.append(text)
+        for pool, items in self._pools.items():
+            for it in items[used.get(pool, 0):]:
+                it.setVisible(False)
+        if pd is not None and pd["objective"] is not None:
+            self.objective_item.setData(pd["objective"]["n"], pd["objective"]["S"])
+            legend.append((self.objective_item, "objective n·S = max"))
+        else:
+            self.objective_item.setData([], [])
+        if pd is not None and pd["optimum"] is not None:
+            self.optimum_item.setData([pd["optimum"][0]], [pd["optimum"][1]])
+            legend.append((self.optimum_item, "optimum"))
+        else:
+            self.optimum_item.setData([], [])
+        if pd is not None and pd.get("snapped") is not None:
+            self.snapped_item.setData([pd["snapped"][0]], [pd["snapped"][1]])
+            legend.append((self.snapped_item, "best discrete pair"))
+        else:
+            self.snapped_item.setData([], [])
+        key = [(id(it), name) for it, name in legend]
+        if key != self._legend_key:  # rebuild the legend only when its entries change
+            self.legend.clear()
+            for it, name in legend:
+                self.legend.addItem(it, name)
+            self._legend_key = key
+        if pd is not None:
+            n0, n1, s0, s1 = pd["box"]
+            self.plot_widget.setRange(xRange=(math.log10(n0), math.log10(n1)),
+                                      yRange=(math.log10(s0), math.log10(s1)), padding=0)
+
+    @staticmethod
+    def _make_region() -> QGraphicsPolygonItem:
+        item = QGraphicsPolygonItem()
+        item.setBrush(QBrush(QColor(120, 170, 255, 70)))
+        item.setPen(QPen(Qt.PenStyle.NoPen))
+        item.setZValue(-10)
+        return item
+
+    # ------------------------------------------------------------------------------ Qt
+    def closeEvent(self, event: Any) -> None:  # noqa: N802 - Qt override
+        """Stop the worker before the dialog goes away."""
+        self._timer.stop()
+        self._runner.cancel()
+        self._runner.wait(5000)
+        super().closeEvent(event)
+
+    def done(self, r: int) -> None:  # noqa: D102 - Qt override
+        self._timer.stop()
+        self._runner.cancel()
+        self._runner.wait(5000)
+        super().done(r)
