@@ -161,6 +161,9 @@ class WindingSpec(_Model):
     pattern_q: Annotated[int, Field(ge=1)] | None = None
     layers: Annotated[int, Field(ge=1)] = 1
     lead: Literal["leading", "lagging"] = "leading"
+    close_by: Literal["dwell", "angle"] = "dwell"
+    """How the pattern is closed (Δv = 2π·q/p): extra dwell at the turnarounds, or (geodesic lines)
+    a small change of the winding angle."""
 
 
 class PayoutSpec(_Model):

@@ -1,0 +1,902 @@
+"""Winding line on a mandrel of revolution: Clairaut function, twist, circuits, pattern (MATH.md §A2).
+
+Main entry points: :func:`winding_line` (mandrel + band + μ + :class:`engine.job.WindingSpec`) and
+:func:`winding_line_for_job`.  The result, :class:`WindingLine`, holds per-point arrays over the
+whole pattern (all circuits, in laying order) and the metadata the later stages need.
+
+How C(z) is chosen (``WindingSpec.mode``)
+-----------------------------------------
+Conditions come from the two ends and from required winding angles:
+
+* an end whose radius grows inwards (a dome pole, the small end of a cone) gets by default
+  ``C = r_pole + b/2`` and the line turns around tangentially on the parallel where r = C
+  (boundary condition (4)); ``pole_c_mm`` overrides the value.  If a user C is below the end
+  radius of an *open* end (pipe, bottle neck) the line leaves that end with C(z_end) = C and turns
+  on pins (with the dwell).  An open end without a user value is *free*.
+* every ``angles`` entry (z, β) is a point condition C(z) = r(z)·sin β.
+
+``geodesic``: λ = 0, C = const from the first angle (or the larger pole C); turnarounds wherever
+r = C.  ``constant-lambda``: exactly two point conditions, the unknown constant λ found by
+shooting (Newton on dC/dλ).  ``piecewise-lambda``: one constant λ per interval between
+consecutive conditions.  ``minimax``: problem (5)-(6) by the direct search of
+:mod:`engine.winding_clairaut`.  ``auto``: minimax where the wound zone has a concave part,
+else geodesic / constant / piecewise by the number of conditions.  Free end pieces are geodesic.
+
+Sign of λ: λ = k_g / k_n with k_n = −κ·n (n the outward normal, κ = dτ/ds) and
+k_g = κ·(τ × n); with this sign C' = λ·[...] of (3) holds along z on the outgoing pass, and the
+return pass (the mirror image run backwards) has the same λ at the same z.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from engine import winding_clairaut as wc
+from engine.errors import InfeasibleError, InputError
+from engine.state import check_cancel
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+_MIN_STEPS = 1999  # RK4/Simpson steps per pass at least (the output keeps points_per_pass)
+
+
+# ------------------------------------------------------------------------------------------------
+# Result
+# ------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class WindingLine:
+    """A winding line over the whole pattern (all circuits concatenated in laying order).
+
+    Per-point arrays (length N): ``z`` (mm), ``r`` (mm), ``dr`` (r'), ``v`` (twist, rad, unwrapped,
+    non-decreasing), ``beta`` (winding angle to the meridian, rad, in [0, π/2]), ``direction`` (+1
+    while z grows, −1 on the return pass; dwell points keep the sign of the pass they end),
+    ``C`` (Clairaut function, mm), ``lam`` (λ = k_g/k_n), ``s`` (laid band length, mm), ``xyz`` (N,3),
+    ``tau`` (N,3, unit tangent in the direction of travel), ``normal`` (N,3, outward surface normal),
+    ``circuit`` and ``pass_id`` (int), ``dwell`` (bool: point on a dwell arc at a turnaround).
+
+    Circuit k occupies ``circuit_slice(k)``: it starts where circuit k−1 ended (the shared point
+    belongs to circuit k), and the slice includes the closing point.
+    """
+
+    z: FloatArray
+    r: FloatArray
+    dr: FloatArray
+    v: FloatArray
+    beta: FloatArray
+    direction: IntArray
+    C: FloatArray
+    lam: FloatArray
+    s: FloatArray
+    xyz: FloatArray
+    tau: FloatArray
+    normal: FloatArray
+    circuit: IntArray
+    pass_id: IntArray
+    dwell: NDArray[np.bool_]
+    # metadata
+    mode: str
+    lambda_: float | list[dict[str, float]]
+    max_abs_lambda: float
+    z_at_max_lambda: float
+    mu: float
+    slips: list[tuple[float, float]]
+    bridging: list[tuple[float, float]]
+    circuits: int
+    pattern_p: int
+    pattern_q: int
+    lead: str
+    twist_per_circuit_rad: float
+    dwell_rad: tuple[float, float]
+    coverage: dict[str, float]
+    circuit_order: list[int]
+    z_turn: tuple[float, float]
+    end_kinds: tuple[str, str]
+    points_per_circuit: int
+    band_width_mm: float
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        """True when the band neither slips (|λ| <= μ) nor bridges (6)."""
+        return not self.slips and not self.bridging
+
+    @property
+    def lambda_value(self) -> float | list[dict[str, float]]:
+        """λ: a number for a constant-λ line, else the list of pieces {z_from, z_to, lambda}."""
+        return self.lambda_
+
+    def circuit_slice(self, k: int) -> slice:
+        """Index range of circuit ``k`` (0-based) including its closing point."""
+        if not 0 <= k < self.circuits:
+            raise IndexError(f"circuit {k} out of range 0..{self.circuits - 1}")
+        m = self.points_per_circuit
+        return slice(k * m, (k + 1) * m + 1)
+
+    @property
+    def one_circuit(self) -> WindingLine:
+        """The first circuit alone (a WindingLine with ``circuits = 1``)."""
+        return self.take_circuit(0)
+
+    def take_circuit(self, k: int) -> WindingLine:
+        """Circuit ``k`` alone as a WindingLine."""
+        sl = self.circuit_slice(k)
+        arrays = {
+            name: getattr(self, name)[sl]
+            for name in ("z", "r", "dr", "v", "beta", "direction", "C", "lam", "s", "xyz", "tau", "normal",
+                         "circuit", "pass_id", "dwell")
+        }
+        return replace(self, circuits=1, circuit_order=[0], **arrays)
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-able summary (``winder trajectory --json``)."""
+        return {
+            "mode": self.mode,
+            "lambda": self.lambda_,
+            "max_abs_lambda": self.max_abs_lambda,
+            "z_at_max_lambda": self.z_at_max_lambda,
+            "mu": self.mu,
+            "ok": self.ok,
+            "slips": [list(x) for x in self.slips],
+            "bridging": [list(x) for x in self.bridging],
+            "circuits": self.circuits,
+            "pattern_p": self.pattern_p,
+            "pattern_q": self.pattern_q,
+            "lead": self.lead,
+            "twist_per_circuit_rad": self.twist_per_circuit_rad,
+            "dwell_deg": [math.degrees(d) for d in self.dwell_rad],
+            "coverage": self.coverage,
+            "circuit_order": self.circuit_order,
+            "z_turn": list(self.z_turn),
+            "end_kinds": list(self.end_kinds),
+            "points": int(len(self.z)),
+            "points_per_circuit": self.points_per_circuit,
+            "band_length_mm": float(self.s[-1]),
+            "beta_deg_range": [math.degrees(float(self.beta.min())), math.degrees(float(self.beta.max()))],
+            "notes": self.notes,
+        }
+
+
+# ------------------------------------------------------------------------------------------------
+# One pass
+# ------------------------------------------------------------------------------------------------
+@dataclass
+class PassLine:
+    """The outgoing pass z_a -> z_b at the output nodes."""
+
+    z: FloatArray
+    r: FloatArray
+    dr: FloatArray
+    C: FloatArray
+    lam: FloatArray
+    v: FloatArray
+    s: FloatArray
+    beta: FloatArray
+    left: str
+    right: str
+    mode: str
+    pieces: list[dict[str, float]]
+    bridging: list[tuple[float, float]]
+    notes: list[str]
+    lam_all: FloatArray  # λ at every grid node (for max |λ| and slips)
+    z_all: FloatArray
+
+
+@dataclass
+class _Cond:
+    z: float
+    C: float
+    what: str  # "turn", "open", "angle"
+    field: str
+
+
+def _err(msg: str, fld: str | None, ctx: dict[str, Any], cls: type[InputError] = InputError) -> InputError:
+    return cls(msg, file=ctx.get("file"), field=fld if ctx.get("job") else None)
+
+
+def _end_is_dome(mandrel: Any, side: int) -> bool:
+    """True when r grows going inwards from the end (a pole the line can turn around)."""
+    L = mandrel.length
+    if side == 0:
+        z0, z1 = mandrel.z_min, mandrel.z_min + 1e-4 * L
+    else:
+        z0, z1 = mandrel.z_max, mandrel.z_max - 1e-4 * L
+    r0, r1 = mandrel.r(np.array([z0, z1]))
+    return bool(r1 > r0 + 1e-9 * max(1.0, r0))
+
+
+def _crossing(mandrel: Any, C: float, z_start: float, z_stop: float) -> float | None:
+    """First z from ``z_start`` towards ``z_stop`` where r(z) − C changes sign (mm), or None."""
+    z = np.linspace(z_start, z_stop, 2001)
+    j = [x for x in wc.joints(mandrel) if min(z_start, z_stop) < x < max(z_start, z_stop)]
+    if j:
+        z = np.sort(np.concatenate([z, j]))
+        if z_stop < z_start:
+            z = z[::-1]
+    f = mandrel.r(z) - C
+    s0 = f[0]
+    if s0 == 0.0:
+        return float(z[0])
+    idx = np.flatnonzero(np.sign(f) != np.sign(s0))
+    if not idx.size:
+        return None
+    i = int(idx[0])
+    a, b = float(z[i - 1]), float(z[i])
+    zz = np.linspace(a, b, 2001)
+    ff = mandrel.r(zz) - C
+    k = int(np.flatnonzero(np.sign(ff) != np.sign(s0))[0])
+    if ff[k] == 0.0:
+        return float(zz[k])
+    # quadratic interpolation through three neighbouring samples (spacing ~1e-5 of a scan step)
+    j0 = min(max(k - 1, 0), len(zz) - 3)
+    x3, f3 = zz[j0 : j0 + 3], ff[j0 : j0 + 3]
+    x = float(zz[k - 1] + (zz[k] - zz[k - 1]) * (-ff[k - 1]) / (ff[k] - ff[k - 1]))
+    for _ in range(3):  # Newton on the interpolating parabola
+        p = np.polyfit(x3 - x3[1], f3, 2)
+        val = np.polyval(p, x - x3[1])
+        der = np.polyval(np.polyder(p), x - x3[1])
+        if der == 0:
+            break
+        x -= float(val / der)
+    return float(min(max(x, min(a, b)), max(a, b)))
+
+
+def _end_condition(
+    mandrel: Any, side: int, C_end: float | None, fld: str, ctx: dict[str, Any], user: bool = True
+) -> tuple[str, float, float | None]:
+    """(kind, z, C) of one end: ('turn', z_t, C), ('open', z_end, C) or ('open', z_end, None)."""
+    z_end = mandrel.z_min if side == 0 else mandrel.z_max
+    z_other = mandrel.z_max if side == 0 else mandrel.z_min
+    r_end = float(mandrel.r(np.array([z_end]))[0])
+    name = "left" if side == 0 else "right"
+    if C_end is None:
+        return wc.OPEN, z_end, None
+    if C_end > r_end:
+        zt = _crossing(mandrel, C_end, z_end, z_other)
+        if zt is None and not user and not _end_is_dome(mandrel, side):
+            return wc.OPEN, z_end, None  # an open end (pipe, cone base): the line runs off it, C free
+        if zt is None:
+            raise _err(
+                f"{name} pole: Clairaut constant C = {C_end:.6g} mm is not below the mandrel radius anywhere "
+                f"(largest radius {mandrel.r_max:.6g} mm); the pole opening + band/2 must be smaller than the "
+                "local radius for the line to turn around",
+                fld, ctx)
+        return wc.TURN, zt, C_end
+    if _end_is_dome(mandrel, side) or r_end <= 0:
+        raise _err(
+            f"{name} pole: Clairaut constant C = {C_end:.6g} mm is below the pole opening radius {r_end:.6g} mm; "
+            "the line would run into the opening", fld, ctx)
+    return wc.OPEN, z_end, C_end
+
+
+def solve_pass(
+    mandrel: Any,
+    band_width_mm: float,
+    spec: Any,
+    ctx: dict[str, Any],
+    state: Any = None,
+    c_override: float | None = None,
+) -> PassLine:
+    """C(z), λ, twist and band length of the outgoing pass (see the module docstring)."""
+    b = float(band_width_mm)
+    n_out = int(spec.points_per_pass)
+    refine = max(1, math.ceil(_MIN_STEPS / (n_out - 1)))
+    r_poles = mandrel.pole_radii
+    notes: list[str] = []
+    if spec.pole_c_mm is not None:
+        pole_c: list[float | None] = [float(spec.pole_c_mm[0]), float(spec.pole_c_mm[1])]
+        pole_fld = "winding.pole_c_mm"
+        for c in pole_c:
+            if c is not None and c <= 0:
+                raise _err(f"pole Clairaut constant must be > 0, got {c} mm", pole_fld, ctx)
+    else:
+        pole_c = [r_poles[i] + 0.5 * b for i in (0, 1)]
+        pole_fld = "band.width_mm"
+    # angle conditions
+    angles: list[_Cond] = []
+    for i, a in enumerate(spec.angles):
+        z = float(a.z_mm)
+        if not mandrel.z_min <= z <= mandrel.z_max:
+            raise _err(
+                f"winding angle {a.angle_deg:g}° is required at z = {z:g} mm, outside the mandrel "
+                f"[{mandrel.z_min:.6g}, {mandrel.z_max:.6g}] mm", f"winding.angles[{i}].z_mm", ctx)
+        r = float(mandrel.r(np.array([z]))[0])
+        angles.append(_Cond(z, r * math.sin(math.radians(a.angle_deg)), "angle", f"winding.angles[{i}].angle_deg"))
+    angles.sort(key=lambda c: c.z)
+
+    mode = spec.mode
+    if c_override is not None or mode == "geodesic":
+        return _geodesic_pass(mandrel, pole_c, angles, n_out, refine, ctx, notes, pole_fld, c_override)
+
+    user_poles = spec.pole_c_mm is not None
+    ends = [_end_condition(mandrel, i, pole_c[i], pole_fld, ctx, user_poles) for i in (0, 1)]
+    conds: list[_Cond] = []
+    if ends[0][2] is not None:
+        conds.append(_Cond(ends[0][1], ends[0][2], ends[0][0], pole_fld))
+    za, zb = ends[0][1], ends[1][1]
+    for a in angles:
+        if not za < a.z < zb:
+            raise _err(
+                f"winding angle required at z = {a.z:g} mm cannot be reached: the line turns around at "
+                f"z = {za:.6g} and {zb:.6g} mm", a.field.replace("angle_deg", "z_mm"), ctx)
+        r = float(mandrel.r(np.array([a.z]))[0])
+        if a.C >= r:
+            raise _err(f"winding angle at z = {a.z:g} mm cannot be reached (C = {a.C:.6g} >= r = {r:.6g} mm)",
+                       a.field, ctx)
+        conds.append(a)
+    if ends[1][2] is not None:
+        conds.append(_Cond(ends[1][1], ends[1][2], ends[1][0], pole_fld))
+    if not conds:
+        raise _err(
+            "the line is not determined: both ends are open (no pole to turn around); give a winding angle "
+            "([[winding.angles]]) or pole_c_mm", "winding.angles", ctx)
+    for c1, c2 in zip(conds[:-1], conds[1:]):
+        if c2.z - c1.z < 1e-6:
+            raise _err(f"two conditions at the same parallel z = {c1.z:g} mm", c2.field, ctx)
+    # free ends: geodesic continuation from the outermost condition
+    left_kind, right_kind = ends[0][0], ends[1][0]
+    if ends[0][2] is None:
+        zt = _crossing(mandrel, conds[0].C, conds[0].z, mandrel.z_min)
+        if zt is not None:
+            za, left_kind = zt, wc.TURN
+    if ends[1][2] is None:
+        zt = _crossing(mandrel, conds[-1].C, conds[-1].z, mandrel.z_max)
+        if zt is not None:
+            zb, right_kind = zt, wc.TURN
+    concave = [zn for zn in mandrel.concave_zones() if zn.z_to > za and zn.z_from < zb]
+    if mode == "auto":
+        if concave:
+            mode = "minimax"
+        elif len(conds) == 1:
+            mode = "geodesic"
+        elif len(conds) == 2:
+            mode = "constant-lambda"
+        else:
+            mode = "piecewise-lambda"
+    if mode == "constant-lambda" and len(conds) > 2:
+        raise _err(
+            f"a constant-λ line meets exactly two conditions, this job has {len(conds)} "
+            "(pole turnarounds and required angles); use mode = 'piecewise-lambda' or 'minimax'",
+            "winding.mode", ctx)
+    check_cancel(state)
+    grid = wc.build_grid(mandrel, za, zb, left_kind, right_kind, n_out, refine, [c.z for c in conds])
+    idx = [grid.node_index(c.z) for c in conds]
+    C = np.empty(grid.n)
+    lam = np.zeros(grid.n - 1)
+    rn, drn, d2rn = wc.node_geometry(grid)
+    cvals = [float(rn[i]) if c.what == wc.TURN else c.C for c, i in zip(conds, idx)]
+    # the natural solution: one constant λ per interval between conditions, geodesic free ends
+    pieces: list[dict[str, float]] = []
+    try:
+        for j in range(len(conds) - 1):
+            i0, i1 = idx[j], idx[j + 1]
+            guess = pieces[-1]["lambda"] if pieces else 0.0
+            lj, cs = wc.shoot(grid, i0, i1, cvals[j], cvals[j + 1], guess)
+            C[i0 : i1 + 1] = cs
+            lam[i0:i1] = lj
+            pieces.append({"z_from": float(grid.z[i0]), "z_to": float(grid.z[i1]), "lambda": lj})
+            check_cancel(state)
+    except ValueError as exc:
+        raise _err(f"no line of constant deviation meets the conditions at z = {conds[j].z:.6g} and "
+                   f"{conds[j + 1].z:.6g} mm: {exc}", conds[j + 1].field, ctx, InfeasibleError) from None
+    C[: idx[0] + 1] = cvals[0]
+    C[idx[-1] :] = cvals[-1]
+    if idx[0] > 0:
+        pieces.insert(0, {"z_from": float(grid.z[0]), "z_to": float(grid.z[idx[0]]), "lambda": 0.0})
+    if idx[-1] < grid.n - 1:
+        pieces.append({"z_from": float(grid.z[idx[-1]]), "z_to": float(grid.z[-1]), "lambda": 0.0})
+    if mode == "geodesic" and len(conds) > 1:
+        spread = max(cvals) - min(cvals)
+        if spread > 1e-9 * max(cvals):
+            raise _err(
+                f"a geodesic has one Clairaut constant but the conditions need C from {min(cvals):.6g} to "
+                f"{max(cvals):.6g} mm; use mode = 'auto' or 'constant-lambda'", "winding.mode", ctx)
+    lo = wc.lower_bound(grid)
+    if mode == "minimax":
+        F = _bracket(grid, C)
+        ok = bool((F >= -1e-12).all()) and bool((C[1:-1] < rn[1:-1]).all())
+        if ok:
+            try:
+                wc.twist(grid, C, lam)
+            except ValueError:
+                ok = False
+        if not ok:
+            hi = rn.copy()
+            hi[1:-1] *= 1.0 - 1e-9
+            points = {i: v for i, v in zip(idx, cvals)}
+            if left_kind == wc.TURN:
+                points[0] = float(rn[0])
+            if right_kind == wc.TURN:
+                points[grid.n - 1] = float(rn[-1])
+            lam0 = max([abs(p["lambda"]) for p in pieces] + [0.0])
+            try:
+                lam_star, tb = wc.minimax_search(grid, lo, hi, points, lam0, state=state)
+            except ValueError as exc:
+                raise _err(f"minimax winding line: {exc}", "winding.mode", ctx, InfeasibleError) from None
+            C, lam = wc.tube_path(grid, tb, lam_star)
+            pieces = _pieces_from_steps(grid, lam)
+            notes.append(f"minimax direct search: max |λ| = {lam_star:.6g} (bisection on the reachable tube)")
+    try:
+        v, s, _ = wc.twist(grid, C, lam)
+    except ValueError as exc:
+        raise _err(f"the winding line is not realisable: {exc}", "winding.mode", ctx, InfeasibleError) from None
+    F = _bracket(grid, C)
+    bridging = _ranges(grid.z, F < -1e-9 * np.maximum(1.0, rn))
+    return _finish(grid, C, lam, v, s, mode, pieces, bridging, notes)
+
+
+def _geodesic_pass(
+    mandrel: Any,
+    pole_c: list[float | None],
+    angles: list[_Cond],
+    n_out: int,
+    refine: int,
+    ctx: dict[str, Any],
+    notes: list[str],
+    pole_fld: str,
+    c_override: float | None,
+) -> PassLine:
+    if c_override is not None:
+        C0, z_ref, fld = c_override, (angles[0].z if angles else None), "winding.angles"
+    elif angles:
+        C0, z_ref, fld = angles[0].C, angles[0].z, angles[0].field
+    else:
+        given = [c for c in pole_c if c is not None]
+        if not given:
+            raise _err("a geodesic needs a pole to turn around or a winding angle ([[winding.angles]])",
+                       "winding.angles", ctx)
+        C0, z_ref, fld = max(given), None, pole_fld
+    if z_ref is None:
+        zs, rs = mandrel.sample(4000)
+        z_ref = float(zs[int(np.argmax(rs))])
+    r_ref = float(mandrel.r(np.array([z_ref]))[0])
+    if not C0 < r_ref:
+        raise _err(f"Clairaut constant C = {C0:.6g} mm is not below the radius {r_ref:.6g} mm anywhere on the line",
+                   fld, ctx)
+    kinds = []
+    zz = []
+    for z_end in (mandrel.z_min, mandrel.z_max):
+        zt = _crossing(mandrel, C0, z_ref, z_end)
+        if zt is None:
+            kinds.append(wc.OPEN)
+            zz.append(z_end)
+        else:
+            kinds.append(wc.TURN)
+            zz.append(zt)
+    za, zb = zz
+    for a in angles[1:]:
+        if not za <= a.z <= zb:
+            raise _err(f"winding angle required at z = {a.z:g} mm cannot be reached: the geodesic turns around at "
+                       f"z = {za:.6g} and {zb:.6g} mm", a.field, ctx)
+        if abs(a.C - C0) > 1e-9 * C0:
+            raise _err(
+                f"winding angle at z = {a.z:g} mm cannot be reached by the geodesic through the first required "
+                f"angle (it needs C = {a.C:.6g} mm, the geodesic has C = {C0:.6g} mm); use mode = 'auto'",
+                a.field, ctx)
+    for i, c in enumerate(pole_c):
+        if c is not None and kinds[i] == wc.TURN and abs(c - C0) > 1e-9 * C0:
+            notes.append(f"{'left' if i == 0 else 'right'} end: the geodesic turns around at r = {C0:.6g} mm, "
+                         f"not at the pole value {c:.6g} mm")
+    grid = wc.build_grid(mandrel, za, zb, kinds[0], kinds[1], n_out, refine, [a.z for a in angles])
+    C = np.full(grid.n, C0)
+    lam = np.zeros(grid.n - 1)
+    try:
+        v, s, _ = wc.twist(grid, C, lam)
+    except ValueError as exc:
+        raise _err(f"the geodesic is not realisable: {exc}", fld, ctx, InfeasibleError) from None
+    rn, _, _ = wc.node_geometry(grid)
+    F = _bracket(grid, C)
+    bridging = _ranges(grid.z, F < -1e-9 * np.maximum(1.0, rn))
+    pieces = [{"z_from": za, "z_to": zb, "lambda": 0.0}]
+    return _finish(grid, C, lam, v, s, "geodesic", pieces, bridging, notes)
+
+
+def _bracket(grid: wc.PassGrid, C: FloatArray) -> FloatArray:
+    """The bracket of (3) per node, (aC² + b)·r² (>= 0 means no bridging), min over both sides."""
+    out = np.full(grid.n, np.inf)
+    for side, sl, cs in (("L", slice(0, -1), C[:-1]), ("R", slice(1, None), C[1:])):
+        r, dr, d2r = grid.geo[side]
+        a, b = wc.riccati_ab(r, dr, d2r)
+        out[sl] = np.minimum(out[sl], (a * cs * cs + b) * r * r)
+    return out
+
+
+def _ranges(z: FloatArray, mask: NDArray[np.bool_]) -> list[tuple[float, float]]:
+    if not mask.any():
+        return []
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(int), [0]])))
+    return [(float(z[a]), float(z[b - 1])) for a, b in zip(edges[0::2], edges[1::2])]
+
+
+def _pieces_from_steps(grid: wc.PassGrid, lam: FloatArray) -> list[dict[str, float]]:
+    pieces: list[dict[str, float]] = []
+    start = 0
+    for k in range(1, len(lam) + 1):
+        if k == len(lam) or abs(lam[k] - lam[start]) > 1e-6 * max(1e-3, abs(lam[start])):
+            seg = lam[start:k]
+            pieces.append({"z_from": float(grid.z[start]), "z_to": float(grid.z[k]), "lambda": float(np.mean(seg))})
+            start = k
+    # merge tiny pieces (single clamped steps) into a compact list for reports
+    return pieces
+
+
+def _finish(
+    grid: wc.PassGrid,
+    C: FloatArray,
+    lam: FloatArray,
+    v: FloatArray,
+    s: FloatArray,
+    mode: str,
+    pieces: list[dict[str, float]],
+    bridging: list[tuple[float, float]],
+    notes: list[str],
+) -> PassLine:
+    rn, drn, _ = wc.node_geometry(grid)
+    lam_node = np.append(lam, lam[-1]) if len(lam) else np.zeros(grid.n)
+    m = grid.out
+    D = np.maximum(rn - C, 0.0)
+    beta = np.arctan2(C, np.sqrt(D * (rn + C)))
+    if grid.left == wc.TURN:
+        beta[0] = 0.5 * math.pi
+    if grid.right == wc.TURN:
+        beta[-1] = 0.5 * math.pi
+    return PassLine(
+        z=grid.z[m], r=rn[m], dr=drn[m], C=C[m], lam=lam_node[m], v=v[m], s=s[m], beta=beta[m],
+        left=grid.left, right=grid.right, mode=mode, pieces=pieces, bridging=bridging, notes=notes,
+        lam_all=lam_node, z_all=grid.z.copy(),
+    )
+
+
+# ------------------------------------------------------------------------------------------------
+# Pattern
+# ------------------------------------------------------------------------------------------------
+@dataclass
+class Pattern:
+    """Pattern closure: p circuits per layer, Δv = 2π(m + q/p)."""
+
+    p: int
+    q: int
+    m: int
+    lead: str
+    total: int
+    twist: float
+    dwell: tuple[float, float]
+    coverage: dict[str, float]
+    order: list[int]
+
+
+def _lead_of(p: int, q: int) -> str:
+    if p <= 2:
+        return "leading"
+    k_plus = pow(q, -1, p)
+    return "leading" if k_plus <= p - k_plus else "lagging"
+
+
+def choose_pattern(
+    raw_twist: float, p: int, lead: str, q_user: int | None, ctx: dict[str, Any], allow_below: bool = False
+) -> tuple[int, int, float]:
+    """(q, m, target twist) closest above ``raw_twist`` (or either side with ``allow_below``)."""
+    two_pi = 2.0 * math.pi
+    if q_user is not None:
+        if p > 1 and (math.gcd(p, q_user) != 1 or q_user % p == 0):
+            raise _err(f"pattern_q = {q_user} is not coprime with pattern_p = {p}", "winding.pattern_q", ctx)
+        cands = [q_user % p if p > 1 else 0]
+    elif p == 1:
+        cands = [0]
+    else:
+        cands = [q for q in range(1, p) if math.gcd(p, q) == 1 and _lead_of(p, q) == lead] or [1]
+    best: tuple[float, int, int, float] | None = None
+    for q in cands:
+        frac = q / p
+        m = math.ceil(raw_twist / two_pi - frac - 1e-12)
+        opts = [m] + ([m - 1] if allow_below else [])
+        for mm in opts:
+            target = two_pi * (mm + frac)
+            if target <= 0:
+                continue
+            cost = abs(target - raw_twist)
+            if best is None or cost < best[0]:
+                best = (cost, q, mm, target)
+    assert best is not None
+    return best[1], best[2], best[3]
+
+
+def _coverage(pl: PassLine, b: float, p: int) -> dict[str, float]:
+    w = np.sqrt(np.maximum(pl.r**2 - pl.C**2, 0.0))  # r·cos β
+    i = int(np.argmax(w))
+    band_c = b * pl.r[i] / w[i]  # band width along the parallel, b / cos β
+    pitch = 2.0 * math.pi * pl.r[i] / p
+    return {
+        "fraction": float(band_c / pitch),
+        "at_z_mm": float(pl.z[i]),
+        "at_r_mm": float(pl.r[i]),
+        "beta_deg": float(math.degrees(pl.beta[i])),
+        "band_along_parallel_mm": float(band_c),
+        "pitch_mm": float(pitch),
+        "overlap_mm": float(max(band_c - pitch, 0.0)),
+        "gap_mm": float(max(pitch - band_c, 0.0)),
+        "circuits_for_full_coverage": int(math.ceil(2.0 * math.pi * w[i] / b - 1e-9)),
+    }
+
+
+# ------------------------------------------------------------------------------------------------
+# Main entry
+# ------------------------------------------------------------------------------------------------
+def winding_line(
+    mandrel: Any,
+    band_width_mm: float,
+    mu: float,
+    spec: Any = None,
+    state: Any = None,
+    *,
+    _ctx: dict[str, Any] | None = None,
+) -> WindingLine:
+    """The winding line of the whole pattern on ``mandrel``.
+
+    Parameters
+    ----------
+    mandrel:
+        :class:`engine.mandrel.Mandrel`.
+    band_width_mm:
+        Band width b (mm).
+    mu:
+        Band-on-mandrel friction coefficient μ; points with |λ| > μ are reported in ``slips``.
+    spec:
+        :class:`engine.job.WindingSpec` (default: all defaults).
+    state:
+        Progress / cancellation (:mod:`engine.state`).
+
+    Raises
+    ------
+    InputError
+        Bad or contradictory input (names the value, and the job field when called from a job).
+    InfeasibleError
+        No line meets the conditions (says which and where).
+    """
+    from engine.job import WindingSpec
+
+    ctx = _ctx or {}
+    spec = spec if spec is not None else WindingSpec()
+    b = float(band_width_mm)
+    mu = float(mu)
+    if not (math.isfinite(b) and b > 0):
+        raise _err(f"band width must be a positive number of mm, got {band_width_mm!r}", "band.width_mm", ctx)
+    if not (math.isfinite(mu) and mu >= 0):
+        raise _err(f"friction coefficient μ must be >= 0, got {mu!r}", "band.friction", ctx)
+    circ = 2.0 * math.pi * mandrel.r_max
+    if b >= circ:
+        raise _err(f"band width {b:g} mm is wider than the largest circumference of the mandrel ({circ:.6g} mm)",
+                   "band.width_mm", ctx)
+    if state is not None:
+        state.progress(0.0, "winding line: Clairaut function")
+    pl = solve_pass(mandrel, b, spec, ctx, state)
+    check_cancel(state)
+    lam_abs = np.abs(pl.lam_all)
+    i_max = int(np.argmax(lam_abs))
+    max_lam = float(lam_abs[i_max])
+    if mu == 0.0 and max_lam > 1e-12:
+        raise _err(
+            f"friction coefficient μ = 0 but the line needs |λ| up to {max_lam:.4g} (at z = {pl.z_all[i_max]:.6g} mm): "
+            "a non-geodesic line cannot be held without friction; set band.friction or use a geodesic",
+            "band.friction", ctx)
+    slips = _ranges(pl.z_all, lam_abs > mu + 1e-12)
+    notes = list(pl.notes)
+    if slips:
+        notes.append(f"the band slips: |λ| up to {max_lam:.4g} > μ = {mu:g}")
+    if pl.bridging:
+        notes.append("the band bridges (does not lie on the surface, constraint (6)) in " +
+                     ", ".join(f"z {a:.6g}..{c:.6g} mm" for a, c in pl.bridging))
+    if state is not None:
+        state.progress(0.5, "winding line: pattern")
+
+    # --- pattern -------------------------------------------------------------------------------
+    dwell = (math.radians(spec.dwell_deg[0]), math.radians(spec.dwell_deg[1]))
+    cov0 = _coverage(pl, b, 1)
+    n_min = max(1, cov0["circuits_for_full_coverage"])
+    if spec.circuits is not None and spec.pattern_p is not None and spec.circuits % spec.pattern_p:
+        raise _err(f"circuits = {spec.circuits} is not a multiple of pattern_p = {spec.pattern_p}",
+                   "winding.circuits", ctx)
+    p = int(spec.pattern_p or spec.circuits or n_min)
+    per_layer = int(spec.circuits or p)
+    total = per_layer * int(spec.layers)
+    close_by = getattr(spec, "close_by", "dwell")
+    raw = 2.0 * pl.v[-1] + dwell[0] + dwell[1]
+    if close_by == "angle":
+        pl, dwell, q, m, target = _close_by_angle(mandrel, b, spec, ctx, pl, dwell, p, notes)
+    else:
+        q, m, target = choose_pattern(raw, p, spec.lead, spec.pattern_q, ctx)
+        extra = target - raw
+        dwell = (dwell[0] + 0.5 * extra, dwell[1] + 0.5 * extra)
+        if extra > 1e-12:
+            notes.append(f"pattern closed by adding {math.degrees(extra):.4f}° of dwell (half at each end)")
+    cov = _coverage(pl, b, p)
+    if cov["fraction"] < 1.0 - 1e-9:
+        notes.append(f"{p} circuits leave gaps of {cov['gap_mm']:.3g} mm; full coverage needs "
+                     f"{cov['circuits_for_full_coverage']}")
+    order = [(k * q) % p if p > 1 else 0 for k in range(p)]
+    lead = _lead_of(p, q) if p > 1 else "leading"
+    if state is not None:
+        state.progress(0.7, "winding line: circuits")
+    check_cancel(state)
+    line = _assemble(pl, dwell, total, target)
+    lam_desc: float | list[dict[str, float]]
+    if len({pc["lambda"] for pc in pl.pieces}) == 1:
+        lam_desc = float(pl.pieces[0]["lambda"])
+    else:
+        lam_desc = [{k: float(x) for k, x in pc.items()} for pc in pl.pieces]
+    if state is not None:
+        state.progress(1.0, "winding line: done")
+    return WindingLine(
+        **line,
+        mode=pl.mode,
+        lambda_=lam_desc,
+        max_abs_lambda=max_lam,
+        z_at_max_lambda=float(pl.z_all[i_max]),
+        mu=mu,
+        slips=slips,
+        bridging=pl.bridging,
+        circuits=total,
+        pattern_p=p,
+        pattern_q=q,
+        lead=lead,
+        twist_per_circuit_rad=float(target),
+        dwell_rad=dwell,
+        coverage=cov,
+        circuit_order=order,
+        z_turn=(float(pl.z[0]), float(pl.z[-1])),
+        end_kinds=(pl.left, pl.right),
+        band_width_mm=b,
+        notes=notes,
+    )
+
+
+def _close_by_angle(
+    mandrel: Any, b: float, spec: Any, ctx: dict[str, Any], pl: PassLine, dwell: tuple[float, float], p: int,
+    notes: list[str],
+) -> tuple[PassLine, tuple[float, float], int, int, float]:
+    """Close the pattern by changing the Clairaut constant of a geodesic (the winding angle)."""
+    from scipy.optimize import brentq
+
+    if pl.mode != "geodesic":
+        raise _err("close_by = 'angle' needs a geodesic line (mode = 'geodesic'); use close_by = 'dwell'",
+                   "winding.close_by", ctx)
+    raw = 2.0 * pl.v[-1] + dwell[0] + dwell[1]
+    q, m, target = choose_pattern(raw, p, spec.lead, spec.pattern_q, ctx, allow_below=True)
+    c0 = float(pl.C[len(pl.C) // 2])
+
+    def f(c: float) -> float:
+        return 2.0 * solve_pass(mandrel, b, spec, ctx, None, c_override=c).v[-1] + dwell[0] + dwell[1] - target
+
+    lo_c, hi_c = 0.8 * c0, c0
+    r_top = float(np.min(pl.r[1:-1])) if pl.left == wc.OPEN and pl.right == wc.OPEN else float(mandrel.r_max)
+    hi_c = min(1.2 * c0, c0 + 0.999 * (r_top - c0))
+    try:
+        fa, fb = f(lo_c), f(hi_c)
+        if fa * fb > 0:
+            raise ValueError
+        c_new = float(brentq(f, lo_c, hi_c, xtol=1e-13 * c0, rtol=1e-15))
+    except (ValueError, InputError):
+        raise _err(f"the pattern (p = {p}, q = {q}) cannot be closed by a small change of the winding angle; "
+                   "use close_by = 'dwell'", "winding.close_by", ctx, InfeasibleError) from None
+    new = solve_pass(mandrel, b, spec, ctx, None, c_override=c_new)
+    i = len(new.z) // 2
+    notes.append(f"pattern closed by the winding angle: C {c0:.6g} -> {c_new:.6g} mm "
+                 f"(β at z = {new.z[i]:.6g} mm: {math.degrees(new.beta[i]):.4f}°)")
+    return new, dwell, q, m, target
+
+
+def _dwell_values(d: float) -> FloatArray:
+    if d <= 0.0:
+        return np.zeros(0)
+    k = max(2, math.ceil(d / math.radians(2.0)))
+    return np.linspace(0.0, d, k + 1)[1:]
+
+
+def _assemble(pl: PassLine, dwell: tuple[float, float], total: int, twist_circ: float) -> dict[str, Any]:
+    """Arrays of all circuits: circuit 0 built from the pass, the others rotated by k·Δv."""
+    V = float(pl.v[-1])
+    S = float(pl.s[-1])
+    dl, dr = dwell
+    ra, rb = float(pl.r[0]), float(pl.r[-1])
+    dR = _dwell_values(dr)
+    dL = _dwell_values(dl)
+    ret = slice(None, None, -1)
+    z_ret = pl.z[ret][1:]
+    parts_z = [pl.z, np.full(len(dR), pl.z[-1]), z_ret, np.full(len(dL), pl.z[0])]
+    parts_r = [pl.r, np.full(len(dR), rb), pl.r[ret][1:], np.full(len(dL), ra)]
+    parts_dr = [pl.dr, np.full(len(dR), pl.dr[-1]), pl.dr[ret][1:], np.full(len(dL), pl.dr[0])]
+    v_ret = V + dr + (V - pl.v[ret][1:])
+    parts_v = [pl.v, V + dR, v_ret, 2.0 * V + dr + dL]
+    s_ret = S + rb * dr + (S - pl.s[ret][1:])
+    S2 = 2.0 * S + rb * dr
+    parts_s = [pl.s, S + rb * dR, s_ret, S2 + ra * dL]
+    parts_b = [pl.beta, np.full(len(dR), 0.5 * math.pi), pl.beta[ret][1:], np.full(len(dL), 0.5 * math.pi)]
+    parts_c = [pl.C, np.full(len(dR), rb), pl.C[ret][1:], np.full(len(dL), ra)]
+    parts_l = [pl.lam, np.zeros(len(dR)), pl.lam[ret][1:], np.zeros(len(dL))]
+    parts_dir = [np.ones(len(pl.z), dtype=np.int64), np.ones(len(dR), dtype=np.int64),
+                 -np.ones(len(z_ret), dtype=np.int64), -np.ones(len(dL), dtype=np.int64)]
+    parts_pass = [np.zeros(len(pl.z), dtype=np.int64), np.zeros(len(dR), dtype=np.int64),
+                  np.ones(len(z_ret), dtype=np.int64), np.ones(len(dL), dtype=np.int64)]
+    parts_dw = [np.zeros(len(pl.z), dtype=bool), np.ones(len(dR), dtype=bool), np.zeros(len(z_ret), dtype=bool),
+                np.ones(len(dL), dtype=bool)]
+    c0 = {
+        "z": np.concatenate(parts_z), "r": np.concatenate(parts_r), "dr": np.concatenate(parts_dr),
+        "v": np.concatenate(parts_v), "s": np.concatenate(parts_s), "beta": np.concatenate(parts_b),
+        "C": np.concatenate(parts_c), "lam": np.concatenate(parts_l), "direction": np.concatenate(parts_dir),
+        "pass_id": np.concatenate(parts_pass), "dwell": np.concatenate(parts_dw),
+    }
+    # the closing point: the last one (v = Δv); make it exact
+    c0["v"][-1] = 2.0 * V + dr + dl
+    m = len(c0["z"]) - 1  # points per circuit without the closing point
+    # local frame of circuit 0, then circuit k is circuit 0 turned by k·Δv about the axis
+    v0 = c0["v"]
+    cv, sv = np.cos(v0), np.sin(v0)
+    r0, d0 = c0["r"], c0["dr"]
+    g = 1.0 / np.sqrt(1.0 + d0 * d0)
+    cb = np.cos(c0["beta"]) * g * c0["direction"]
+    sb = np.sin(c0["beta"])
+    local = {
+        "xyz": (r0 * cv, r0 * sv, c0["z"]),
+        "tau": (cb * d0 * cv - sb * sv, cb * d0 * sv + sb * cv, cb),
+        "normal": (g * cv, g * sv, -g * d0),
+    }
+    n = total * m + 1
+    k = np.arange(total)
+    ang = k * twist_circ
+    ck, sk = np.cos(ang)[:, None], np.sin(ang)[:, None]
+    out: dict[str, Any] = {}
+
+    def tile(a: NDArray[Any]) -> NDArray[Any]:
+        res = np.empty(n, dtype=a.dtype)
+        res[:-1].reshape(total, m)[:] = a[:m]
+        res[-1] = a[m]
+        return res
+
+    def shifted(a: NDArray[Any], step: Any) -> NDArray[Any]:
+        res = np.empty(n, dtype=a.dtype)
+        res[:-1].reshape(total, m)[:] = a[:m][None, :] + (k * step)[:, None]
+        res[-1] = a[m] + (total - 1) * step
+        return res
+
+    for name in ("z", "r", "dr", "beta", "C", "lam", "direction", "dwell"):
+        out[name] = tile(c0[name])
+    out["v"] = shifted(v0, twist_circ)
+    out["s"] = shifted(c0["s"], float(c0["s"][-1]))
+    out["pass_id"] = shifted(c0["pass_id"], 2)
+    out["circuit"] = np.empty(n, dtype=np.int64)
+    out["circuit"][:-1].reshape(total, m)[:] = k[:, None]
+    out["circuit"][-1] = total - 1
+    for name, (x0, y0, z0) in local.items():
+        arr = np.empty((n, 3))
+        body = arr[:-1].reshape(total, m, 3)
+        body[:, :, 0] = x0[:m] * ck - y0[:m] * sk
+        body[:, :, 1] = x0[:m] * sk + y0[:m] * ck
+        body[:, :, 2] = z0[:m]
+        cl, sl = float(ck[-1, 0]), float(sk[-1, 0])
+        arr[-1] = (x0[m] * cl - y0[m] * sl, x0[m] * sl + y0[m] * cl, z0[m])
+        out[name] = arr
+    out["points_per_circuit"] = m
+    return out
+
+
+def winding_line_for_job(job: Any, job_path: str | Path | None = None, state: Any = None) -> WindingLine:
+    """:func:`winding_line` for a :class:`engine.job.Job`; errors name the job file, line and field."""
+    from engine.job import _find_line, build_mandrel
+
+    mandrel = build_mandrel(job, job_path)
+    try:
+        return winding_line(mandrel, job.band.width_mm, job.band.friction, job.winding, state,
+                            _ctx={"file": job_path, "job": True})
+    except InputError as exc:
+        line = None
+        fld = exc.location.field
+        if fld and job_path is not None and Path(job_path).is_file():
+            loc = tuple(p for p in fld.replace("]", "").replace("[", ".").split(".") if p and not p.isdigit())
+            line = _find_line(Path(job_path).read_text(encoding="utf-8", errors="replace"), loc)
+        raise type(exc)(exc.message, file=job_path, line=line, field=fld) from None
