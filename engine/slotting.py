@@ -288,15 +288,11 @@ def theta_roots(phi: float, ratio: float, k: float) -> np.ndarray:
 
     grid = np.linspace(-0.5 * math.pi, 0.5 * math.pi, _SCAN_POINTS)
     vals = np.sin(grid) - k * np.sin(phi + ratio * grid)
-    roots: list[float] = []
-    for a, b, fa, fb in zip(grid[:-1], grid[1:], vals[:-1], vals[1:]):
-        if fa == 0.0:
-            roots.append(float(a))
-        elif fa * fb < 0.0:
-            roots.append(float(brentq(f, float(a), float(b), xtol=1e-14, rtol=4 * np.finfo(float).eps)))
-    if vals[-1] == 0.0:
-        roots.append(float(grid[-1]))
-    return np.asarray(roots, dtype=float)
+    roots: list[float] = [float(g) for g in grid[vals == 0.0]]
+    rtol = 4 * np.finfo(float).eps
+    for n in np.nonzero(vals[:-1] * vals[1:] < 0.0)[0]:
+        roots.append(float(brentq(f, float(grid[n]), float(grid[n + 1]), xtol=1e-14, rtol=rtol)))
+    return np.sort(np.asarray(roots, dtype=float))
 
 
 def contraction_factor(theta: float, phi: float, ratio: float, k: float) -> float:

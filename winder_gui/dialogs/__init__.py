@@ -1,0 +1,1 @@
+"""Modal and modeless tool dialogs (turning optimiser, slot-forming calculator, ...)."""
