@@ -48,6 +48,12 @@ FloatArray = NDArray[np.float64]
 MAX_INPUT_BYTES = 64 * 1024 * 1024
 """Importers refuse larger files (a generatrix never needs that much)."""
 
+MAX_COORD_MM = 1e7
+"""Largest |z| or |r| accepted (10 km): anything larger is a unit mistake, and would overflow the spline."""
+
+MIN_LENGTH_MM = 1e-3
+"""Shortest winding zone accepted (1 µm)."""
+
 # Profile points handed to the spline by the DXF/STEP importers: about this many along the zone.
 _PROFILE_POINTS = 1200
 
@@ -79,7 +85,25 @@ def _mandrel_from_profile(
 ) -> Mandrel:
     """Validate points, check the spline stays off the axis between them, build the mandrel."""
     file = str(path)
+    for name, arr in (("z", z), ("r", r)):
+        with np.errstate(invalid="ignore"):
+            big = np.flatnonzero(np.isfinite(arr) & (np.abs(arr) > MAX_COORD_MM))
+        if big.size:
+            i = int(big[0])
+            raise InputError(f"{name} = {arr[i]:g} mm is out of range (|{name}| <= {MAX_COORD_MM:g} mm); check the "
+                             "units", file=file, line=None if lines is None else int(lines[i]), field=name)
     validate_points(z, r, file=file, lines=lines)
+    dz = np.diff(z)
+    i = int(np.argmin(dz))
+    if dz[i] < 1e-9 * (z[-1] - z[0]) or z[-1] - z[0] < MIN_LENGTH_MM:
+        if z[-1] - z[0] < MIN_LENGTH_MM:
+            msg = f"the profile is only {z[-1] - z[0]:.3g} mm long (at least {MIN_LENGTH_MM:g} mm); check the units"
+            raise InputError(msg, file=file, field="z")
+        raise InputError(f"points {i + 1} and {i + 2} are too close: z = {z[i]:.17g} and {z[i + 1]:.17g} mm",
+                         file=file, line=None if lines is None else int(lines[i + 1]), field="z")
+    if r.max() < MIN_LENGTH_MM:
+        raise InputError(f"the largest radius is {r.max():.3g} mm (at least {MIN_LENGTH_MM:g} mm); check the units",
+                         file=file, field="r")
     _check_spline_off_axis(z, r, file=file, lines=lines)
     try:
         m = Mandrel.from_points(z, r, name=path.stem, source=source, file=file)
@@ -121,6 +145,7 @@ _Z_NAMES = {"z", "x", "axial", "axis", "position", "pos", "s"}
 _R_NAMES = {"r", "y", "radius", "rad", "radial"}
 _D_NAMES = {"d", "dia", "diameter", "diam"}
 _UNIT_RE = re.compile(r"[\s_]*[\[(]?\s*mm\s*[\])]?$", re.IGNORECASE)
+_UNITS_ROW_RE = re.compile(r"[\[(]?\s*mm\s*[\])]?|", re.IGNORECASE)
 
 
 def _decode_text(data: bytes, file: str) -> str:
@@ -213,6 +238,9 @@ def load_csv(path: str | Path) -> Mandrel:
             cells = cells[:-1]  # tolerate one trailing comma
         values = [_parse_number(c, sep) for c in cells]
         truncated = lineno == last_data_line and not ends_with_newline
+        if (names is not None and not zs and "mm" in body.lower()
+                and all(_UNITS_ROW_RE.fullmatch(c.strip().strip("\"'")) for c in cells)):
+            continue  # a row of units under the header, e.g. "mm, mm"
         if names is None and not zs:
             # first row: a header if any cell is not a number
             if any(v is None for v in values) and not any(_NONFINITE_RE.fullmatch(c.strip()) for c in cells):
@@ -458,8 +486,9 @@ def _dxf_pieces(entities: list[Any], scale: float) -> tuple[list[_Piece], list[A
     lo = np.min([[b[0].x, b[0].y] for b in boxes], axis=0)
     hi = np.max([[b[1].x, b[1].y] for b in boxes], axis=0)
     extent = float(np.max(hi - lo))
-    if not math.isfinite(extent):
-        raise InputError("the drawing has non-finite coordinates")
+    if not math.isfinite(extent) or extent * scale > MAX_COORD_MM:
+        raise InputError(f"the drawing is {extent * scale:.3g} mm across, more than {MAX_COORD_MM:g} mm; check the "
+                         "units and stray entities far from the profile")
     extent = max(extent, 1e-9)
     distance = 1e-9 * extent  # chords this close to the curve may later be subdivided linearly
     pieces = []

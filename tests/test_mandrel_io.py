@@ -70,6 +70,8 @@ def _err(fn, path: Path) -> InputError:  # noqa: ANN001
         ("exp.csv", "z,r\n" + "\n".join(_rows(",", "{:.10e}")) + "\n"),
         ("comma_decimal.csv", "z;r\n" + "\n".join(_rows(";", "{:.1f}")).replace(".", ",") + "\n"),
         ("trailing_comma.csv", "z,r,\n" + "\n".join(f"{r}," for r in _rows()) + "\n"),
+        ("units_row.csv",
+         '"z","r"\n"[mm]","[mm]"\n' + "\n".join(f'"{a:g}","{b:g}"' for a, b in zip(Z_REF, R_REF))),
     ],
 )
 def test_csv_formats(tmp_path: Path, name: str, text: str) -> None:
@@ -109,6 +111,8 @@ GOOD = _rows()
         (_table(GOOD[:3] + ["35,35,9"] + GOOD[4:]), 5, "column 3", "expected 2"),
         (_table(GOOD[:3] + ["35,,35"] + GOOD[4:]), 5, "column 3", "expected 2"),
         (_table(GOOD[:3]), 4, None, "too few points"),
+        (_table(GOOD[:3] + ["35,1e9"] + GOOD[4:]), 5, "r_mm (column 2)", "out of range"),
+        (_table(GOOD[:3] + ["20.0000000000001,35"] + GOOD[4:]), 5, "z_mm (column 1)", "too close"),
         (_table(["0,10", "1,10", "2,10", "3,10", "3.1,0.5", "4,10", "5,10"]), 6, "r_mm (column 2)",
          "intersects the axis"),
         ("z_mm,r_mm\n" + "\n".join(GOOD) + "\n90,2", 9, "z_mm (column 1)", "z must increase"),
@@ -219,8 +223,9 @@ def test_csv_fuzz_random_rows(tmp_path: Path, rows: list[list[str]], sep: str, h
     assert _listing(tmp_path) == before
 
 
-@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(z=st.lists(st.floats(-1e4, 1e4), min_size=0, max_size=10), r=st.lists(st.floats(-10, 1e4), max_size=10))
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(z=st.one_of(st.lists(st.floats(-1e4, 1e4), max_size=10), st.lists(st.floats(), max_size=8)),
+       r=st.one_of(st.lists(st.floats(-10, 1e4), max_size=10), st.lists(st.floats(), max_size=8)))
 def test_csv_fuzz_numeric_tables(tmp_path: Path, z: list[float], r: list[float]) -> None:
     text = "z,r\n" + "\n".join(f"{a!r},{b!r}" for a, b in zip(z, r)) + "\n"
     p = _write(tmp_path, "num.csv", text)
@@ -229,7 +234,8 @@ def test_csv_fuzz_numeric_tables(tmp_path: Path, z: list[float], r: list[float])
     except InputError:
         return
     # accepted: the points are reproduced and the curve stays off the axis
-    zz, rr = np.array(z[: len(r)]), np.array(r[: len(z)])
+    n = min(len(z), len(r))
+    zz, rr = np.array(z[:n]), np.array(r[:n])
     np.testing.assert_allclose(m.r(zz), rr, rtol=1e-9, atol=1e-9)
     assert (m.r(np.linspace(m.z_min, m.z_max, 400))[1:-1] > 0).all()
 
