@@ -31,8 +31,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from PySide6.QtCore import QEventLoop, Qt, QTimer, Signal
-from PySide6.QtGui import QAction, QCloseEvent, QKeySequence
+from PySide6.QtCore import QEventLoop, QPoint, QRect, Qt, QTimer, Signal
+from PySide6.QtGui import QAction, QCloseEvent, QImage, QKeySequence, QPainter
 from PySide6.QtWidgets import (
     QApplication,
     QFileDialog,
@@ -633,6 +633,18 @@ class MainWindow(QMainWindow):
     def _on_step(self, key: str) -> None:
         if key in self.step_pages:
             self.properties.setCurrentIndex(self.step_pages[key])
+
+    def screenshot(self) -> QImage:
+        """The window as an image, with the GL-drawn 3D view composed in (for docs and tests)."""
+        img = self.grab().toImage()
+        view = self.view3d.render_image()
+        if view is not None:
+            top_left = self.view3d.mapTo(self, QPoint(0, 0))
+            size = self.view3d.size()
+            painter = QPainter(img)
+            painter.drawImage(QRect(top_left, size), view)
+            painter.end()
+        return img
 
     # -- closing ---------------------------------------------------------------------------------
     def closeEvent(self, event: QCloseEvent) -> None:  # noqa: N802 - Qt override

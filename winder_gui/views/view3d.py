@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 from PySide6.QtCore import Qt, QTimer
-from PySide6.QtGui import QGuiApplication
+from PySide6.QtGui import QGuiApplication, QImage
 from PySide6.QtWidgets import QLabel, QVBoxLayout, QWidget
 
 from winder_gui.views.geometry import MandrelViewData
@@ -67,7 +67,7 @@ class MandrelView3D(QWidget):
             import pyvista  # noqa: F401 - heavy, lazy on purpose
             from pyvistaqt import QtInteractor
 
-            plotter = QtInteractor(self, auto_update=False)
+            plotter = QtInteractor(self, auto_update=False, off_screen=False)  # PYVISTA_OFF_SCREEN must not apply here
             plotter.set_background("#f4f6fa", top="#c9d3e3")
             plotter.add_axes(interactive=False, line_width=2, labels_off=False)
         except Exception as exc:  # noqa: BLE001 - no VTK/GL: degrade to a label, the app stays usable
@@ -137,10 +137,23 @@ class MandrelView3D(QWidget):
             reset_camera=False,
         )
         if self._reset_camera:
-            self.plotter.view_isometric()
+            # the axis runs left to right as in the r(z) plot, seen slightly from above and the front
+            self.plotter.view_xz(negative=False)
+            self.plotter.camera.elevation = 22.0
+            self.plotter.camera.azimuth = -28.0
             self.plotter.reset_camera()
+            self.plotter.camera.zoom(1.35)
             self._reset_camera = False
         self.plotter.render()
+
+    def render_image(self) -> QImage | None:
+        """The 3D view rendered to an image (VTK draws with GL, which ``QWidget.grab`` may miss)."""
+        if self.plotter is None:
+            return None
+        self.plotter.render()
+        arr = np.ascontiguousarray(self.plotter.screenshot(return_img=True, transparent_background=False)[:, :, :3])
+        h, w = arr.shape[:2]
+        return QImage(arr.data, w, h, 3 * w, QImage.Format.Format_RGB888).copy()
 
     def mesh_points(self) -> np.ndarray | None:
         """Points of the surface shown by the VTK backend (n, 3), or ``None``."""
