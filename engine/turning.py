@@ -535,7 +535,8 @@ def _mat_factor(rule: Mapping[str, Any], mat: Mapping[str, float], *, data: Cutt
     e = float(exponent if exponent is not None else data.get(src, *path, "exponent"))
     scale = float(rule.get("scale", 1.0))
     if prop not in mat:
-        raise InputError(f"material has no '{prop}' needed by '{'.'.join(path)}'", file=data.files["materials"])
+        raise InputError(f"the workpiece material has no '{prop}', needed by '{'.'.join(path)}' in {src}.toml",
+                         file=data.files["materials"], field=str(prop))
     return scale * (float(mat[prop]) / ref) ** e
 
 

@@ -112,3 +112,13 @@ def test_switching_a_row_off(dialog: TurningDialog, qtbot) -> None:
     _wait(qtbot, dialog, lambda: dialog.table.item(idx, 0).setCheckState(Qt.CheckState.Unchecked))
     assert "roughness" in dialog.result.disabled
     assert dialog.result.feed_mm_rev > 0.8
+
+
+def test_missing_tool_factor_is_shown_not_raised(dialog: TurningDialog, qtbot) -> None:
+    out = _wait(qtbot, dialog, lambda: dialog._set_combo(dialog.tool, "T15K6"))  # no K_uv for T15K6 on grey iron
+    assert out["result"] is None
+    assert "speed.toml" in dialog.message.text() and "T15K6" in dialog.message.text()
+    xs = dialog.optimum_item.getOriginalDataset()[0]
+    assert xs is None or len(xs) == 0
+    out = _wait(qtbot, dialog, lambda: dialog._set_combo(dialog.tool, "VK8"))
+    assert out["result"] is not None and dialog.message.text() == ""

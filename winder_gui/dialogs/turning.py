@@ -620,6 +620,9 @@ class TurningDialog(QDialog):
         else:  # a bug: show it, never crash the dialog
             self.message.setText(f"Internal error: {exc!r}")
         self.result = None
+        self.plot = None
+        self.summary.setText("<b>No result</b> — see the message below.")
+        self._draw(None)
         self.computed.emit({"result": None, "plot": None, "error": exc})
 
     def _on_finished(self, out: dict[str, Any]) -> None:
@@ -793,3 +796,17 @@ class TurningDialog(QDialog):
         self._runner.cancel()
         self._runner.wait(5000)
         super().done(r)
+
+
+def main() -> int:
+    """Run the dialog on its own: ``python -m winder_gui.dialogs.turning``."""
+    from PySide6.QtWidgets import QApplication
+
+    app = QApplication.instance() or QApplication(sys.argv)
+    dlg = TurningDialog()
+    dlg.show()
+    return int(app.exec())
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
