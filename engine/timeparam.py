@@ -1,0 +1,1198 @@
+"""Time parametrization of a path by dynamic programming and a narrowing tube (seed 003, MATH.md §B).
+
+Given a path ``X_c(s)`` (``c = 1..p``) sampled at nodes ``s_0 < ... < s_{N-1}`` together with
+``dX_c/ds`` and ``d²X_c/ds²``, find the law ``s(t)`` -- equivalently ``ṡ(s)`` at the nodes -- that
+traverses the path as fast as the limits allow:
+
+* axis speeds ``|dX_c/ds|·ṡ <= V_c`` and accelerations ``|d²X_c/ds²·ṡ² + dX_c/ds·s̈| <= A_c``,
+* the technological path speed ``ṡ <= ṡ_T`` and acceleration ``|s̈| <= s̈_T``,
+* technological points (an ``s`` value or an interval, each with a label) with ``ṡ <= ṡ_TT``.
+
+Public API
+----------
+``TechPoint``, ``TimeLimits``
+    The limits (Tables 2-5 of the paper); ``limits_from_toml`` / ``limits_from_mapping`` read them.
+``parametrize(path_s, X, dX, ddX, limits, method="tube", state=None) -> TimeLaw``
+    ``method`` is ``"tube"`` (the paper's hybrid algorithm), ``"dp"`` (one classical DP with
+    ``limits.levels`` speed levels) or ``"toppra"`` (the time-optimal reference, TOPP-RA).
+``TimeLaw``
+    Frozen result: ``s``, ``sdot`` (mm/s at the nodes), ``t`` (s at the nodes), ``total_time_s``,
+    ``iterations`` (list of :class:`IterationLog`, the paper's Fig. 2), ``max_accel_ratio`` (worst
+    ``|axis acceleration| / A_c`` on a fine sub-grid inside every interval), ``max_speed_ratio``,
+    ``energy`` (curvature energy of ``ṡ(t)``), ``compute_s``, ``method``.
+``block_feeds(law, s_block_ends, decimals=None) -> (durations_s, inverse_time_feed_per_min)``
+    Per-NC-block durations and G93 inverse-time feed numbers (1/min).
+``curvature_energy(t, sdot)``
+    ``E = ∫ k² dt`` of the plane curve ``(t, ṡ(t))``.
+
+The state protocol: ``parametrize`` reports ``state.progress``, polls cancellation between tube
+iterations (and inside long DP passes), and publishes every finished tube iteration as an
+:class:`IterationLog` via ``state.partial`` (tube bounds, ``ṡ`` and the W/O touch masks for plots).
+
+Model between nodes
+-------------------
+The path between two nodes is the quintic Hermite interpolant of ``X, dX, ddX`` (its "own
+interpolation").  On a DP transition from ``ṡ_k`` (node ``i-1``) to ``ṡ_j`` (node ``i``) the path
+acceleration ``u = s̈`` is constant, so ``ṡ²`` is linear in ``s`` and ``Δt = Δs / ((ṡ_k + ṡ_j)/2)``
+is exact, as in the paper.  The axis acceleration inside the interval,
+``a_c(τ) = X_c''(τ)·ṡ²(τ) + X_c'(τ)·u``, is a quartic in ``τ`` whose Bernstein coefficients are linear
+in ``(ṡ_k², u)``; requiring every Bernstein coefficient to lie in ``[-A_c, A_c]`` guarantees the limit
+on the whole interval, not only at the arrival node (the paper's check, kept as
+``accel_check="arrival"`` for comparison).  Axis speeds are bounded the same way (Bernstein bound of
+``|X_c'|`` on both intervals adjacent to a node; ``ṡ`` is monotone inside an interval).
+
+Speed of the DP
+---------------
+All constraints of one interval are half-planes in ``(ṡ_k², u)``; after normalising them to
+``n·z <= 1`` only the vertices of the convex hull of the normals matter (a few of ~72), found once,
+vectorised over intervals.  For a level ``ṡ_j`` the feasible ``ṡ_k`` then form one window
+``[k_lo, k_hi]`` in closed form; only those candidates are costed (flat, vectorised), and the
+sequential pass does one gather + ``minimum.reduceat`` per interval.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import tomllib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from engine.errors import InfeasibleError, InputError
+from engine.state import State, check_cancel
+
+__all__ = [
+    "IterationLog",
+    "TechPoint",
+    "TimeLaw",
+    "TimeLimits",
+    "block_feeds",
+    "curvature_energy",
+    "evaluate_limits",
+    "limits_from_mapping",
+    "limits_from_toml",
+    "load_path_npz",
+    "parametrize",
+]
+
+METHODS = ("tube", "dp", "toppra")
+_N_SUB = 16  # sub-points per interval for the reported limit ratios
+_MAX_LEVELS = 4096  # the DP packs the level index into 12 bits
+
+
+# --------------------------------------------------------------------------------------------------
+# Inputs and outputs
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class TechPoint:
+    """A technological point: ``ṡ <= sdot_max`` (mm/s) at ``s`` or over ``[s_from, s_to]`` (mm)."""
+
+    sdot_max: float
+    s: float | None = None
+    s_from: float | None = None
+    s_to: float | None = None
+    label: str = ""
+
+    def describe(self) -> str:
+        """``"'feed' at s = 854.27 mm"`` or ``"'x' over s = 10.00..20.00 mm"``."""
+        name = f"'{self.label}'" if self.label else "technological point"
+        if self.s is not None:
+            return f"{name} at s = {self.s:.2f} mm"
+        return f"{name} over s = {self.s_from:.2f}..{self.s_to:.2f} mm"
+
+
+@dataclass(frozen=True)
+class TimeLimits:
+    """Limits and algorithm parameters (the paper's Tables 2-5).
+
+    Attributes
+    ----------
+    v_max, a_max:
+        Axis speed (unit/s) and acceleration (unit/s²) limits, one per coordinate (rad or mm).
+    sdot_max, sddot_max:
+        Technological path speed ṡ_T,max (mm/s) and acceleration s̈_T,max (mm/s²); ``inf`` = none.
+    levels:
+        M, the number of speed levels per node.
+    penalty:
+        K, the acceleration penalty coefficient (s per (mm/s²)²).
+    tube_share, stop_percent:
+        Δ_sh (tube half-width as a share of max ṡ of the nominal run) and Δ_p (%).
+    sdot_start, sdot_end:
+        Path speed at the first and the last node (mm/s).
+    points:
+        Technological points.
+    max_iterations:
+        Safety cap on tube iterations.
+    accel_check:
+        ``"interval"`` (limits hold inside every interval) or ``"arrival"`` (the paper's check at the
+        arrival node only).
+    """
+
+    v_max: tuple[float, ...]
+    a_max: tuple[float, ...]
+    sdot_max: float = math.inf
+    sddot_max: float = math.inf
+    levels: int = 100
+    penalty: float = 0.5e-11
+    tube_share: float = 0.1
+    stop_percent: float = 0.5
+    sdot_start: float = 0.0
+    sdot_end: float = 0.0
+    points: tuple[TechPoint, ...] = ()
+    max_iterations: int = 60
+    accel_check: str = "interval"
+
+
+@dataclass(frozen=True)
+class IterationLog:
+    """One DP run of the tube algorithm (a line of the paper's Fig. 2 plus the arrays of Fig. 3).
+
+    ``half_width`` is the tube half-width sh used in this iteration (``None`` for the nominal run);
+    ``decrease_percent`` is P = (1 - t_sp(r)/t_sp(r-1))·100 (``None`` for r = 1); ``w_touches`` and
+    ``o_touches`` count touching fragments (runs of nodes) off and on a physical/technological limit.
+    """
+
+    r: int
+    total_time_s: float
+    specific_time: float
+    half_width: float | None
+    w_touches: int
+    o_touches: int
+    decrease_percent: float | None
+    halved: bool
+    stop: bool
+    s: np.ndarray = field(repr=False)
+    sdot: np.ndarray = field(repr=False)
+    lower: np.ndarray = field(repr=False)
+    upper: np.ndarray = field(repr=False)
+    w_mask: np.ndarray = field(repr=False)
+    o_mask: np.ndarray = field(repr=False)
+
+    def as_dict(self) -> dict[str, Any]:
+        """The JSON-able summary (no arrays)."""
+        return {
+            "r": self.r,
+            "total_time_s": self.total_time_s,
+            "specific_time": self.specific_time,
+            "half_width": self.half_width,
+            "w_touches": self.w_touches,
+            "o_touches": self.o_touches,
+            "decrease_percent": self.decrease_percent,
+            "halved": self.halved,
+            "stop": self.stop,
+        }
+
+    def text(self) -> str:
+        """The paper's Fig. 2 wording, in English."""
+        lines = [f"Iteration {self.r}. Specific time {self.specific_time:.7f} s/mm "
+                 f"(total {self.total_time_s:.4f} s)"]
+        if self.half_width is not None:
+            lines.append(f"  Tube half-width: {self.half_width:g} mm/s; W touches {self.w_touches}, "
+                         f"O touches {self.o_touches}")
+            if self.w_touches == 0:
+                lines.append("  > no touches")
+        if self.decrease_percent is not None:
+            lines.append(f"  >> decrease of specific time: {self.decrease_percent:.5f} %")
+        if self.stop:
+            lines.append("  --- >>> done <<< ---")
+        return "\n".join(lines)
+
+
+@dataclass(frozen=True)
+class TimeLaw:
+    """A time law ``ṡ(s)`` on the path nodes, with its quality figures."""
+
+    method: str
+    s: np.ndarray
+    sdot: np.ndarray
+    t: np.ndarray
+    total_time_s: float
+    iterations: list[IterationLog]
+    max_accel_ratio: float
+    max_speed_ratio: float
+    max_sddot_ratio: float
+    energy: float
+    compute_s: float
+    levels: int
+    energy_mm: float = float("nan")
+
+    @property
+    def sddot(self) -> np.ndarray:
+        """Constant path acceleration (mm/s²) on each of the N-1 intervals."""
+        return (self.sdot[1:] ** 2 - self.sdot[:-1] ** 2) / (2.0 * np.diff(self.s))
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-able dictionary (the CLI's ``--json`` output)."""
+        return {
+            "method": self.method,
+            "levels": self.levels,
+            "total_time_s": self.total_time_s,
+            "compute_s": self.compute_s,
+            "max_accel_ratio": self.max_accel_ratio,
+            "max_speed_ratio": self.max_speed_ratio,
+            "max_sddot_ratio": self.max_sddot_ratio,
+            "energy": self.energy,
+            "energy_mm": self.energy_mm,
+            "iterations": [it.as_dict() for it in self.iterations],
+            "s": self.s,
+            "sdot": self.sdot,
+            "t": self.t,
+        }
+
+
+# --------------------------------------------------------------------------------------------------
+# Reading limits and paths
+# --------------------------------------------------------------------------------------------------
+
+
+def _num(d: Mapping[str, Any], key: str, default: float | None, file: str | None, *,
+         positive: bool = False, nonneg: bool = False) -> float:
+    if key not in d:
+        if default is None:
+            raise InputError("missing", file=file, field=key)
+        return float(default)
+    v = d[key]
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        raise InputError(f"must be a number, got {v!r}", file=file, field=key)
+    v = float(v)
+    if math.isnan(v) or (positive and not v > 0) or (nonneg and v < 0):
+        raise InputError(f"must be {'> 0' if positive else '>= 0'}, got {v!r}", file=file, field=key)
+    return v
+
+
+def limits_from_mapping(d: Mapping[str, Any], file: str | None = None) -> TimeLimits:
+    """Build :class:`TimeLimits` from a TOML-like mapping (keys as in the CLI's LIMITS.toml)."""
+    known = {"v_max", "a_max", "sdot_max", "sddot_max", "levels", "penalty", "tube_share",
+             "stop_percent", "sdot_start", "sdot_end", "points", "max_iterations", "accel_check"}
+    for k in d:
+        if k not in known:
+            raise InputError(f"unknown key (known: {', '.join(sorted(known))})", file=file, field=k)
+    vecs = {}
+    for key in ("v_max", "a_max"):
+        v = d.get(key)
+        if not isinstance(v, list) or not v:
+            raise InputError(f"must be a non-empty list of numbers, got {v!r}", file=file, field=key)
+        arr = []
+        for n, x in enumerate(v):
+            if isinstance(x, bool) or not isinstance(x, int | float) or not float(x) > 0:
+                raise InputError(f"item {n + 1} must be a number > 0, got {x!r}", file=file, field=key)
+            arr.append(float(x))
+        vecs[key] = tuple(arr)
+    if len(vecs["v_max"]) != len(vecs["a_max"]):
+        raise InputError(f"v_max has {len(vecs['v_max'])} items but a_max has {len(vecs['a_max'])}",
+                         file=file, field="a_max")
+    levels = d.get("levels", 100)
+    if isinstance(levels, bool) or not isinstance(levels, int) or not 2 <= levels <= _MAX_LEVELS:
+        raise InputError(f"must be an integer in 2..{_MAX_LEVELS}, got {levels!r}", file=file, field="levels")
+    maxit = d.get("max_iterations", 60)
+    if isinstance(maxit, bool) or not isinstance(maxit, int) or maxit < 1:
+        raise InputError(f"must be an integer >= 1, got {maxit!r}", file=file, field="max_iterations")
+    check = d.get("accel_check", "interval")
+    if check not in ("interval", "arrival"):
+        raise InputError(f"must be 'interval' or 'arrival', got {check!r}", file=file, field="accel_check")
+    points = []
+    raw_points = d.get("points", [])
+    if not isinstance(raw_points, list):
+        raise InputError("must be an array of tables [[points]]", file=file, field="points")
+    for n, pt in enumerate(raw_points):
+        fld = f"points[{n + 1}]"
+        if not isinstance(pt, Mapping):
+            raise InputError(f"must be a table, got {pt!r}", file=file, field=fld)
+        label = str(pt.get("label", f"point {n + 1}"))
+        extra = set(pt) - {"s", "s_from", "s_to", "sdot_max", "label"}
+        if extra:
+            raise InputError(f"unknown key(s) {sorted(extra)}", file=file, field=fld)
+        vmax = _num(pt, "sdot_max", None, file, nonneg=True) if "sdot_max" in pt else None
+        if vmax is None:
+            raise InputError(f"'{label}': sdot_max is missing", file=file, field=fld)
+        if "s" in pt and ("s_from" in pt or "s_to" in pt):
+            raise InputError(f"'{label}': give either s or s_from/s_to, not both", file=file, field=fld)
+        if "s" in pt:
+            points.append(TechPoint(vmax, s=_num(pt, "s", None, file), label=label))
+        elif "s_from" in pt and "s_to" in pt:
+            a, b = _num(pt, "s_from", None, file), _num(pt, "s_to", None, file)
+            if b < a:
+                raise InputError(f"'{label}': s_to = {b} is before s_from = {a}", file=file, field=fld)
+            points.append(TechPoint(vmax, s_from=a, s_to=b, label=label))
+        else:
+            raise InputError(f"'{label}': needs s, or s_from and s_to", file=file, field=fld)
+    return TimeLimits(
+        v_max=vecs["v_max"], a_max=vecs["a_max"],
+        sdot_max=_num(d, "sdot_max", math.inf, file, positive=True),
+        sddot_max=_num(d, "sddot_max", math.inf, file, positive=True),
+        levels=int(levels),
+        penalty=_num(d, "penalty", 0.5e-11, file, nonneg=True),
+        tube_share=_num(d, "tube_share", 0.1, file, positive=True),
+        stop_percent=_num(d, "stop_percent", 0.5, file, positive=True),
+        sdot_start=_num(d, "sdot_start", 0.0, file, nonneg=True),
+        sdot_end=_num(d, "sdot_end", 0.0, file, nonneg=True),
+        points=tuple(points), max_iterations=int(maxit), accel_check=str(check),
+    )
+
+
+def limits_from_toml(path: str | Path) -> TimeLimits:
+    """Read a LIMITS.toml file (see :func:`limits_from_mapping`)."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError("file not found", file=path) from None
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"not valid TOML: {exc}", file=path) from None
+    return limits_from_mapping(data, file=str(path))
+
+
+def load_path_npz(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Read ``s`` (N,), ``X``, ``dX``, ``ddX`` (N, p) from an ``.npz`` file."""
+    path = Path(path)
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            missing = [k for k in ("s", "X", "dX", "ddX") if k not in z]
+            if missing:
+                raise InputError(f"arrays {missing} missing (has {sorted(z.files)})", file=path)
+            return (np.asarray(z["s"], float), np.asarray(z["X"], float),
+                    np.asarray(z["dX"], float), np.asarray(z["ddX"], float))
+    except FileNotFoundError:
+        raise InputError("file not found", file=path) from None
+    except (OSError, ValueError) as exc:
+        raise InputError(f"not a readable .npz file: {exc}", file=path) from None
+
+
+# --------------------------------------------------------------------------------------------------
+# Problem set-up: interpolation, speed caps, constraint rows
+# --------------------------------------------------------------------------------------------------
+
+# power basis (degree 4) -> Bernstein basis: b_m = sum_{l<=m} C(m,l)/C(4,l) c_l
+_P2B = np.array([[math.comb(m, l) / math.comb(4, l) if l <= m else 0.0 for l in range(5)]
+                 for m in range(5)])
+
+
+@dataclass
+class _Problem:
+    s: np.ndarray            # (N,)
+    h: np.ndarray            # (N-1,)
+    p: int
+    d1: np.ndarray           # (N-1, p, 5) power coefficients in tau of X'(s)
+    d2: np.ndarray           # (N-1, p, 4) power coefficients in tau of X''(s)
+    cap_v: np.ndarray        # (N,) physical speed cap from axis speeds
+    cap_tech: np.ndarray     # (N,) min(sdot_T, sdot_TT)
+    cap: np.ndarray          # (N,) combined
+    xn: np.ndarray           # (N-1,) normaliser of x_j at node i (box half-size)
+    rq: np.ndarray           # right chains x_k = R(x_j), abscissa x_j/xn + 3i (flat)
+    rk: np.ndarray
+    lq: np.ndarray           # left chains x_k = L(x_j)
+    lk: np.ndarray
+    xjb: np.ndarray          # (N-1,) x_j range of each interval's polygon
+    xjt: np.ndarray
+    rows: np.ndarray         # (N-1, R, 2) all normalised rows n.(x_k, u) <= 1 (for brute force)
+    limits: TimeLimits
+    point_nodes: list[tuple[TechPoint, np.ndarray]]
+
+
+def _validate(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits) -> tuple[np.ndarray, ...]:
+    s = np.asarray(path_s, dtype=float)
+    if s.ndim != 1 or s.size < 2:
+        raise InputError(f"s must be a 1-D array of at least 2 values, got shape {s.shape}", field="s")
+    n = s.size
+    arrs = []
+    for name, a in (("X", X), ("dX", dX), ("ddX", ddX)):
+        a = np.asarray(a, dtype=float)
+        if a.ndim == 1:
+            a = a[:, None]
+        if a.ndim != 2 or a.shape[0] != n:
+            raise InputError(f"{name} must have shape (N={n}, p), got {a.shape}", field=name)
+        if not np.all(np.isfinite(a)):
+            raise InputError(f"{name} has non-finite values", field=name)
+        arrs.append(a)
+    p = arrs[0].shape[1]
+    if arrs[1].shape[1] != p or arrs[2].shape[1] != p:
+        raise InputError(f"X, dX, ddX disagree on p: {arrs[0].shape}, {arrs[1].shape}, {arrs[2].shape}",
+                         field="dX")
+    if not np.all(np.isfinite(s)) or np.any(np.diff(s) <= 0):
+        i = int(np.argmax(~(np.diff(s) > 0)))
+        raise InputError(f"s must increase strictly; s[{i}] = {s[i]} >= s[{i + 1}] = {s[i + 1]}", field="s")
+    if len(limits.v_max) != p or len(limits.a_max) != p:
+        raise InputError(f"the path has p = {p} coordinates but v_max has {len(limits.v_max)} and "
+                         f"a_max has {len(limits.a_max)} values", field="v_max")
+    if min(limits.v_max) <= 0 or min(limits.a_max) <= 0:
+        raise InputError("v_max and a_max must be > 0", field="a_max")
+    if not 2 <= limits.levels <= _MAX_LEVELS:
+        raise InputError(f"levels must be in 2..{_MAX_LEVELS}, got {limits.levels}", field="levels")
+    if limits.accel_check not in ("interval", "arrival"):
+        raise InputError(f"accel_check must be 'interval' or 'arrival', got {limits.accel_check!r}",
+                         field="accel_check")
+    return (s, *arrs)
+
+
+def _quintic(s: np.ndarray, X: np.ndarray, dX: np.ndarray, ddX: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Power coefficients in tau in [0, 1] of X'(s) (degree 4) and X''(s) (degree 3) per interval."""
+    h = np.diff(s)[:, None]
+    a0, a1, a2 = X[:-1], h * dX[:-1], h * h * ddX[:-1] / 2.0
+    r0 = X[1:] - a0 - a1 - a2
+    r1 = h * dX[1:] - a1 - 2.0 * a2
+    r2 = h * h * ddX[1:] - 2.0 * a2
+    a3 = 10.0 * r0 - 4.0 * r1 + 0.5 * r2
+    a4 = -15.0 * r0 + 7.0 * r1 - r2
+    a5 = 6.0 * r0 - 3.0 * r1 + 0.5 * r2
+    d1 = np.stack([a1, 2 * a2, 3 * a3, 4 * a4, 5 * a5], axis=-1) / h[..., None]
+    d2 = np.stack([2 * a2, 6 * a3, 12 * a4, 20 * a5], axis=-1) / (h * h)[..., None]
+    return d1, d2
+
+
+def _poly_eval(coef: np.ndarray, tau: np.ndarray) -> np.ndarray:
+    """Evaluate power-basis polynomials ``coef[..., n]`` at ``tau`` (broadcast on a new last axis)."""
+    out = np.zeros(coef.shape[:-1] + tau.shape)
+    for n in range(coef.shape[-1] - 1, -1, -1):
+        out = out * tau + coef[..., n, None]
+    return out
+
+
+def _hull_ccw(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Convex hull vertices of every row of ``pts`` (B, R, 2), counter-clockwise.
+
+    The origin must lie strictly inside every hull (true here: each constraint comes with its mirror
+    image and the box rows span the plane).  Points are sorted by polar angle and reflex points are
+    removed in parallel passes until the star-shaped polygon is convex (a hull vertex never makes a
+    reflex turn, so simultaneous removal is safe).  Returns ``(order, m)``: ``order[b, :m[b]]`` are
+    the indices of the hull vertices in CCW order.
+    """
+    B, R, _ = pts.shape
+    ang = np.arctan2(pts[..., 1], pts[..., 0])
+    rad = np.einsum("brk,brk->br", pts, pts)
+    # sort by angle, then radius (so that coincident points are neighbours)
+    srt = np.argsort(ang, axis=1, kind="stable")
+    srt = np.take_along_axis(srt, np.argsort(np.take_along_axis(rad, srt, 1), axis=1, kind="stable"), 1)
+    srt = np.take_along_axis(srt, np.argsort(np.take_along_axis(ang, srt, 1), axis=1, kind="stable"), 1)
+    rowoff = (np.arange(B) * R)[:, None]
+    Px = pts[..., 0].ravel()[srt + rowoff]
+    Py = pts[..., 1].ravel()[srt + rowoff]
+    r2 = Px * Px + Py * Py
+    scale = r2.max(axis=1, keepdims=True)
+    alive = r2 > 1e-28 * scale
+    dup = np.zeros_like(alive)
+    dup[:, 1:] = (Px[:, 1:] - Px[:, :-1]) ** 2 + (Py[:, 1:] - Py[:, :-1]) ** 2 <= 1e-26 * scale
+    alive &= ~dup
+    Pxf, Pyf = Px.ravel(), Py.ravel()
+    ar = np.arange(R)
+    big = 4 * R
+    lo_lap = np.broadcast_to(ar - R, (B, R))
+    hi_lap = np.broadcast_to(ar + R, (B, R))
+    for _ in range(R):
+        ext = np.concatenate([np.where(alive, lo_lap, -big), np.where(alive, ar, -big)], axis=1)
+        prv = np.maximum.accumulate(ext, axis=1)[:, R - 1:2 * R - 1]
+        prv %= R
+        prv += rowoff
+        ext = np.concatenate([np.where(alive, ar, big), np.where(alive, hi_lap, big)], axis=1)
+        nxt = np.minimum.accumulate(ext[:, ::-1], axis=1)[:, ::-1][:, 1:R + 1]
+        nxt %= R
+        nxt += rowoff
+        ax, ay = Pxf[prv], Pyf[prv]
+        cx, cy = Pxf[nxt], Pyf[nxt]
+        e1x, e1y, e2x, e2y = Px - ax, Py - ay, cx - Px, cy - Py
+        cross = e1x * e2y - e1y * e2x
+        tol = 1e-12 * np.sqrt((e1x * e1x + e1y * e1y) * (e2x * e2x + e2y * e2y))
+        reflex = alive & (cross <= tol)
+        if not reflex.any():
+            break
+        alive &= ~reflex
+    m = alive.sum(axis=1)
+    comp = np.argsort(~alive, axis=1, kind="stable")
+    return np.take_along_axis(srt, comp, axis=1), m
+
+
+def _chains(rows: np.ndarray, h: np.ndarray, xn_prev: np.ndarray, xn_cur: np.ndarray
+            ) -> dict[str, np.ndarray]:
+    """The feasible polygon of every interval in the ``(x_k, x_j) = (ṡ²_{i-1}, ṡ²_i)`` plane.
+
+    ``rows`` (B, R, 2) are normalised constraints ``n·(x_k, u) <= 1`` with ``u = (x_j - x_k)/(2h)``;
+    box rows ``|x_k| <= xn_prev``, ``|x_j| <= xn_cur`` are added (relaxations of the node caps) so
+    that the polygon is bounded.  Returns the right chain ``x_k = R(x_j)`` and the left chain
+    ``x_k = L(x_j)`` of each polygon, flattened for one global ``np.interp`` (abscissa
+    ``x_j / xn_cur + 3·i``), and the x_j range of each polygon.
+    """
+    B = rows.shape[0]
+    box = np.zeros((B, 4, 2))
+    box[:, 0, 0] = 1.0 / xn_prev
+    box[:, 1, 0] = -1.0 / xn_prev
+    box[:, 2, 0] = 1.0 / xn_cur
+    box[:, 2, 1] = 2.0 * h / xn_cur
+    box[:, 3] = -box[:, 2]
+    allr = np.concatenate([rows, box], axis=1)
+    order, m = _hull_ccw(allr)
+    V = int(m.max())
+    order = order[:, :V]
+    br = np.arange(B)[:, None]
+    tt = np.arange(V)[None, :]
+    valid = tt < m[:, None]
+    na = allr[br, order]                                           # (B, V, 2)
+    nb = allr[br, order[br, np.where(valid, (tt + 1) % m[:, None], 0)]]
+    det = na[..., 0] * nb[..., 1] - na[..., 1] * nb[..., 0]
+    det = np.where(valid, det, 1.0)
+    zx = (nb[..., 1] - na[..., 1]) / det                           # x_k of the polygon vertex
+    zu = (na[..., 0] - nb[..., 0]) / det                           # u
+    xk = zx
+    xj = zx + 2.0 * h[:, None] * zu
+    xj_v = np.where(valid, xj, np.inf)
+    bot = np.argmin(xj_v, axis=1)
+    top = np.argmax(np.where(valid, xj, -np.inf), axis=1)
+    c = (top - bot) % m + 1                                        # points on the right chain
+    L = V + 1
+    ll = np.arange(L)[None, :]
+    # right chain: bottom -> top (CCW); pad with the top
+    ridx = (bot[:, None] + np.minimum(ll, c[:, None] - 1)) % m[:, None]
+    # left chain: top -> bottom (CCW), reversed to run bottom -> top; pad with the top
+    nl = m - c + 2                                                 # points on the left chain
+    lpos = np.minimum(ll, nl[:, None] - 1)                         # 0 .. nl-1 along bottom -> top
+    lidx = (bot[:, None] - lpos) % m[:, None]
+    scale = xn_cur[:, None]
+    off = 3.0 * np.arange(B)[:, None]
+    return {
+        "rq": (xj[br, ridx] / scale + off).ravel(), "rk": xk[br, ridx].ravel(),
+        "lq": (xj[br, lidx] / scale + off).ravel(), "lk": xk[br, lidx].ravel(),
+        "xjb": xj[np.arange(B), bot], "xjt": xj[np.arange(B), top],
+    }
+
+
+def _prepare(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits) -> _Problem:
+    s, X, dX, ddX = _validate(path_s, X, dX, ddX, limits)
+    n, p = X.shape
+    h = np.diff(s)
+    A = np.asarray(limits.a_max, float)
+    V = np.asarray(limits.v_max, float)
+    d1, d2 = _quintic(s, X, dX, ddX)
+
+    # axis speed caps: Bernstein bound of |X'| on both adjacent intervals
+    b1 = np.abs(d1 @ _P2B.T).max(axis=-1)                     # (N-1, p)
+    if limits.accel_check == "arrival":
+        b1n = np.abs(dX)
+    else:
+        b1n = np.zeros((n, p))
+        b1n[:-1] = b1
+        b1n[1:] = np.maximum(b1n[1:], b1)
+        b1n = np.maximum(b1n, np.abs(dX))
+    with np.errstate(divide="ignore"):
+        cap_v = np.min(np.where(b1n > 0, V / np.where(b1n > 0, b1n, 1.0), np.inf), axis=1)
+
+    cap_tech = np.full(n, float(limits.sdot_max))
+    point_nodes: list[tuple[TechPoint, np.ndarray]] = []
+    tol = 1e-9 * max(1.0, abs(s[-1]), abs(s[0]))
+    for pt in limits.points:
+        lo_s = pt.s if pt.s is not None else pt.s_from
+        hi_s = pt.s if pt.s is not None else pt.s_to
+        if lo_s is None or hi_s is None:
+            raise InputError(f"{pt.describe()}: needs s or s_from/s_to", field="points")
+        if lo_s < s[0] - tol or hi_s > s[-1] + tol:
+            raise InputError(f"{pt.describe()} lies outside the path s = {s[0]:.2f}..{s[-1]:.2f} mm",
+                             field="points")
+        if pt.sdot_max < 0:
+            raise InputError(f"{pt.describe()}: sdot_max must be >= 0, got {pt.sdot_max}", field="points")
+        i0 = int(np.searchsorted(s, lo_s - tol, side="left"))          # first node >= lo
+        i1 = int(np.searchsorted(s, hi_s + tol, side="right")) - 1     # last node <= hi
+        if abs(s[min(i0, n - 1)] - lo_s) > tol:
+            i0 = max(i0 - 1, 0)                                          # bracketing node before
+        if abs(s[max(i1, 0)] - hi_s) > tol:
+            i1 = min(i1 + 1, n - 1)                                      # bracketing node after
+        nodes = np.arange(i0, i1 + 1)
+        cap_tech[nodes] = np.minimum(cap_tech[nodes], pt.sdot_max)
+        point_nodes.append((pt, nodes))
+    cap = np.minimum(cap_v, cap_tech)
+
+    # constraint rows n.(x_k, u) <= 1 per interval
+    if limits.accel_check == "arrival":
+        P = ddX[1:, :, None]                                            # (N-1, p, 1)
+        Q = (2 * h[:, None] * ddX[1:] + dX[1:])[:, :, None]
+    else:
+        Pp = np.concatenate([d2, np.zeros(d2.shape[:-1] + (1,))], axis=-1)       # degree 3 -> 4 slots
+        Qp = d1.copy()
+        Qp[..., 1:] += 2.0 * h[:, None, None] * d2
+        P = Pp @ _P2B.T
+        Q = Qp @ _P2B.T
+    g = (P / A[None, :, None]).reshape(n - 1, -1)
+    c = (Q / A[None, :, None]).reshape(n - 1, -1)
+    rows = np.stack([np.concatenate([g, -g], 1), np.concatenate([c, -c], 1)], axis=-1)
+    if math.isfinite(limits.sddot_max):
+        extra = np.zeros((n - 1, 2, 2))
+        extra[:, 0, 1] = 1.0 / limits.sddot_max
+        extra[:, 1, 1] = -1.0 / limits.sddot_max
+        rows = np.concatenate([rows, extra], axis=1)
+    cap_box = np.minimum(cap, 1e9)
+    xn = (1.5 * cap_box) ** 2 + 1.0
+    ch = _chains(rows, h, xn[:-1], xn[1:])
+    return _Problem(s=s, h=h, p=p, d1=d1, d2=d2, cap_v=cap_v, cap_tech=cap_tech, cap=cap, xn=xn[1:],
+                    rows=rows, limits=limits, point_nodes=point_nodes, **ch)
+
+
+# --------------------------------------------------------------------------------------------------
+# The DP procedure (init, forward pass, backward pass)
+# --------------------------------------------------------------------------------------------------
+
+
+def _infeasible(prob: _Problem, i: int, why: str) -> InfeasibleError:
+    s_i = prob.s[i]
+    near = [pt for pt, nodes in prob.point_nodes if nodes.size and nodes[0] - 2 <= i <= nodes[-1] + 2]
+    if near:
+        pt = near[0]
+        return InfeasibleError(f"{pt.describe()}: ṡ <= {pt.sdot_max:g} mm/s cannot be met -- no admissible "
+                               f"speed law reaches s = {s_i:.2f} mm ({why})", field="points")
+    return InfeasibleError(f"no admissible speed law reaches s = {s_i:.2f} mm (node {i}) within the axis "
+                           f"and technological limits ({why})", field="limits")
+
+
+_CHUNK = 1 << 15
+_LOBITS = 12
+_LOMASK = np.int64((1 << _LOBITS) - 1)
+_HIMASK = np.int64(~((1 << _LOBITS) - 1))
+
+
+def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | None = None,
+        square: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """One DP pass on the grid ``s_i × {M levels in [lo_i, hi_i]}``.
+
+    The levels are uniform in ṡ (``square=False``, the paper's tube) or in ṡ² (``square=True``).
+    Returns ``(sdot, jidx)``: the optimal speed at every node and its level index.  Minimises
+    ``Σ Δt + K·(p·s̈)²`` subject to every interval's constraint rows.
+    """
+    n = prob.s.size
+    K = prob.limits.penalty * prob.p ** 2
+    plo, phi = (lo * lo, hi * hi) if square else (lo, hi)
+    d = (phi - plo) / (M - 1)
+    degenerate = d <= 0
+    d = np.where(degenerate, 0.0, d)
+    jj = np.arange(M)
+    lev = np.minimum(plo[:, None] + d[:, None] * jj, phi[:, None])          # (N, M) in phi
+    if square:
+        xall = lev
+        lev = np.sqrt(lev)
+    else:
+        xall = lev * lev
+    # --- windows (closed form): the feasible x_k of level j at node i form [L(x_j), R(x_j)] ------
+    xj = xall[1:]
+    q = (xj / prob.xn[:, None] + 3.0 * np.arange(n - 1)[:, None]).ravel()
+    ub = np.interp(q, prob.rq, prob.rk).reshape(n - 1, M)
+    lb = np.interp(q, prob.lq, prob.lk).reshape(n - 1, M)
+    ok = (xj >= prob.xjb[:, None]) & (xj <= prob.xjt[:, None]) & (ub >= lb) & (ub >= 0)
+    ok[degenerate[1:], 1:] = False
+    if square:
+        pk_lo = np.maximum(lb, 0.0)
+        pk_hi = ub
+    else:
+        pk_lo = np.sqrt(np.maximum(lb, 0.0))
+        pk_hi = np.sqrt(np.maximum(ub, 0.0))
+    lo_p = plo[:-1, None]
+    dp_ = np.where(degenerate[:-1], 1.0, d[:-1])[:, None]
+    klo = np.maximum(np.ceil((pk_lo - lo_p) / dp_), 0.0)
+    khi = np.minimum(np.floor((pk_hi - lo_p) / dp_), M - 1.0)
+    degp = degenerate[:-1]
+    if degp.any():
+        inside = (lo_p[degp] >= pk_lo[degp]) & (lo_p[degp] <= pk_hi[degp])
+        klo[degp] = 0.0
+        khi[degp] = np.where(inside, 0.0, -1.0)
+    cnt = np.where(ok, khi - klo + 1.0, 0.0)
+    bad = cnt <= 0
+    cnt_eff = np.where(bad, 1, cnt).astype(np.int64)                       # (N-1, M)
+    klo_i = np.where(bad, 0.0, klo).astype(np.int64)
+    # --- forward pass, in chunks of whole intervals of <= _CHUNK candidates ----------------------
+    # Each candidate's cost has its position w in the window written into the low 12 bits of its
+    # float64 pattern (costs are >= 0, so the integer order is the float order): one integer
+    # minimum.reduceat then gives min and argmin together (J perturbed by <= 2^-40 relative).
+    h = prob.h
+    Kq = K / 4.0
+    per_int = cnt_eff.sum(axis=1)
+    bounds = [0]
+    acc = 0
+    for i, c in enumerate(per_int.tolist()):
+        if acc and acc + c > _CHUNK:
+            bounds.append(i)
+            acc = 0
+        acc += c
+    bounds.append(n - 1)
+    levf = lev.ravel()
+    Jf = np.full(n * M, np.inf)
+    Jf[0] = 0.0
+    kstar = np.empty((n - 1, M), np.int64)
+    two_h = 2.0 * h
+    kq_h = Kq / (h * h)
+    ar_all = np.arange(_CHUNK + int(per_int.max()), dtype=np.int64)
+    for i0, i1 in zip(bounds[:-1], bounds[1:]):
+        ni = i1 - i0
+        ce = cnt_eff[i0:i1].ravel()
+        st = np.zeros(ce.size + 1, np.int64)
+        np.cumsum(ce, out=st[1:])
+        T = int(st[-1])
+        # global index G = node*M + k of the departure level of every candidate
+        base = (np.arange(i0, i1, dtype=np.int64) * M)[:, None] + klo_i[i0:i1]
+        G = np.repeat(base.ravel() - st[:-1], ce)
+        G += ar_all[:T]
+        glow = G & _LOMASK
+        vk = levf[G]
+        vj = np.repeat(levf[(i0 + 1) * M:(i1 + 1) * M], ce)
+        ssum = vk + vj
+        vj -= vk
+        diff = vj
+        if np.ptp(h[i0:i1]) <= 1e-12 * h[i0]:
+            with np.errstate(divide="ignore"):
+                cost = np.divide(two_h[i0], ssum)
+            if K > 0:
+                diff *= ssum
+                diff *= diff
+                diff *= kq_h[i0]
+                cost += diff
+        else:
+            per = ce.reshape(ni, M).sum(axis=1)
+            with np.errstate(divide="ignore"):
+                cost = np.repeat(two_h[i0:i1], per) / ssum
+            if K > 0:
+                diff *= ssum
+                diff *= diff
+                diff *= np.repeat(kq_h[i0:i1], per)
+                cost += diff
+        cost[st[:-1][bad[i0:i1].ravel()]] = np.inf
+        seg = st[:-1].reshape(ni, M)
+        ends = np.append(seg[1:, 0], T).tolist()
+        starts0 = seg[:, 0].tolist()
+        for ii in range(ni):
+            i = i0 + ii
+            a, b = starts0[ii], ends[ii]
+            cand = Jf[G[a:b]]
+            cand += cost[a:b]
+            ci = cand.view(np.int64)
+            ci &= _HIMASK
+            ci |= glow[a:b]
+            jint = np.minimum.reduceat(ci, seg[ii] - a)
+            kstar[i] = jint & _LOMASK
+            jint &= _HIMASK
+            Jf[(i + 1) * M:(i + 2) * M] = jint.view(np.float64)
+        if state is not None:
+            check_cancel(state)
+    # low bits hold (node*M + k) mod 2^12: recover k
+    kstar -= (np.arange(n - 1, dtype=np.int64) * M)[:, None]
+    kstar &= _LOMASK
+    Jm = Jf.reshape(n, M)
+    reach = np.isfinite(Jm).any(axis=1)
+    if not reach.all():
+        i = int(np.argmin(reach))
+        raise _infeasible(prob, i, "every transition into this node breaks a limit")
+    if not np.isfinite(Jm[-1, 0]):
+        raise _infeasible(prob, n - 1, "the final speed cannot be reached")
+    # --- backward pass ---------------------------------------------------------------------------
+    jidx = np.zeros(n, np.int64)
+    j = 0
+    for i in range(n - 2, -1, -1):
+        j = int(kstar[i, j])
+        jidx[i] = j
+    sdot = lev[np.arange(n), jidx]
+    return sdot, jidx
+
+
+def _times(s: np.ndarray, sdot: np.ndarray) -> np.ndarray:
+    h = np.diff(s)
+    with np.errstate(divide="ignore"):
+        dt = 2.0 * h / (sdot[:-1] + sdot[1:])
+    return np.concatenate([[0.0], np.cumsum(dt)])
+
+
+def _runs(mask: np.ndarray) -> int:
+    m = mask.astype(np.int8)
+    return int(np.sum(np.diff(np.concatenate([[0], m])) == 1))
+
+
+# --------------------------------------------------------------------------------------------------
+# Quality figures
+# --------------------------------------------------------------------------------------------------
+
+
+def curvature_energy(t: np.ndarray, sdot: np.ndarray, speed_unit: float = 1000.0) -> float:
+    """Curvature energy ``E = ∫ k² dt`` of the plane curve ``(t, ṡ(t))`` (the paper's smoothness figure).
+
+    ``k = |ṡ''| / (1 + ṡ'²)^(3/2)`` with three-point finite differences on the (non-uniform) node
+    times; the integral is the trapezoid sum over the interior nodes.  ``ṡ`` is taken in mm/s divided
+    by ``speed_unit`` -- by default m/s (SI), so that the figure is dominated by the real changes of
+    acceleration; with ``speed_unit=1`` (mm/s) every ṡ' is large except at flat extrema, and a single
+    one-level zigzag of the DP grid at a speed peak dominates the sum.
+    """
+    t = np.asarray(t, float)
+    v = np.asarray(sdot, float) / speed_unit
+    if t.size < 3:
+        return 0.0
+    dt = np.diff(t)
+    h0, h1 = dt[:-1], dt[1:]
+    ok = (h0 > 0) & (h1 > 0) & np.isfinite(h0) & np.isfinite(h1)
+    h0, h1 = np.where(ok, h0, 1.0), np.where(ok, h1, 1.0)
+    g0 = (v[1:-1] - v[:-2]) / h0
+    g1 = (v[2:] - v[1:-1]) / h1
+    d1 = (g0 * h1 + g1 * h0) / (h0 + h1)
+    d2 = 2.0 * (g1 - g0) / (h0 + h1)
+    k = np.abs(d2) / (1.0 + d1 * d1) ** 1.5
+    return float(np.sum(np.where(ok, k * k * (h0 + h1) / 2.0, 0.0)))
+
+
+def evaluate_limits(prob_or_law: Any, sdot: np.ndarray | None = None, n_sub: int = _N_SUB
+                    ) -> dict[str, float]:
+    """Worst limit ratios of a speed law on a fine sub-grid inside every interval.
+
+    The path is the quintic Hermite interpolant of the nodes; ṡ² is linear in s inside an interval.
+    Returns ``accel`` (max |a_c|/A_c), ``speed`` (max |v_c|/V_c), ``sddot`` (max |s̈|/s̈_T), ``sdot``
+    (max ṡ/ṡ_T,max) and ``points`` (max ṡ/ṡ_TT at the technological points).
+    """
+    prob: _Problem = prob_or_law
+    lim = prob.limits
+    v = np.asarray(sdot, float)
+    tau = np.linspace(0.0, 1.0, n_sub + 1)
+    x0 = v[:-1] ** 2
+    u = (v[1:] ** 2 - x0) / (2.0 * prob.h)
+    x = x0[:, None] + 2.0 * u[:, None] * prob.h[:, None] * tau[None, :]        # (N-1, n_sub+1)
+    x = np.maximum(x, 0.0)
+    q1 = _poly_eval(prob.d1, tau)                                               # (N-1, p, n_sub+1)
+    q2 = _poly_eval(prob.d2, tau)
+    A = np.asarray(lim.a_max)[None, :, None]
+    V = np.asarray(lim.v_max)[None, :, None]
+    acc = np.abs(q2 * x[:, None, :] + q1 * u[:, None, None]) / A
+    spd = np.abs(q1) * np.sqrt(x)[:, None, :] / V
+    out = {
+        "accel": float(acc.max()),
+        "speed": float(spd.max()),
+        "sddot": float(np.abs(u).max() / lim.sddot_max) if math.isfinite(lim.sddot_max) else 0.0,
+        "sdot": float(v.max() / lim.sdot_max) if math.isfinite(lim.sdot_max) else 0.0,
+        "points": 0.0,
+    }
+    worst = 0.0
+    for pt, _nodes in prob.point_nodes:
+        a = pt.s if pt.s is not None else pt.s_from
+        b = pt.s if pt.s is not None else pt.s_to
+        i0 = max(int(np.searchsorted(prob.s, a, side="right")) - 1, 0)
+        i1 = min(int(np.searchsorted(prob.s, b, side="left")), prob.s.size - 1)
+        vmax = float(v[i0:i1 + 1].max())   # ṡ is monotone inside intervals: ends bound it
+        worst = max(worst, vmax / pt.sdot_max if pt.sdot_max > 0 else (np.inf if vmax > 0 else 0.0))
+    out["points"] = float(worst)
+    return out
+
+
+# --------------------------------------------------------------------------------------------------
+# The methods
+# --------------------------------------------------------------------------------------------------
+
+
+def _bounds_check(prob: _Problem) -> tuple[np.ndarray, np.ndarray]:
+    lim = prob.limits
+    n = prob.s.size
+    if lim.sdot_start > prob.cap[0] * (1 + 1e-12):
+        raise InfeasibleError(f"the start speed {lim.sdot_start:g} mm/s exceeds the speed limit "
+                              f"{prob.cap[0]:g} mm/s at s = {prob.s[0]:.2f} mm", field="sdot_start")
+    if lim.sdot_end > prob.cap[-1] * (1 + 1e-12):
+        raise InfeasibleError(f"the end speed {lim.sdot_end:g} mm/s exceeds the speed limit "
+                              f"{prob.cap[-1]:g} mm/s at s = {prob.s[-1]:.2f} mm", field="sdot_end")
+    lo = np.zeros(n)
+    hi = prob.cap.copy()
+    lo[0] = hi[0] = lim.sdot_start
+    lo[-1] = hi[-1] = lim.sdot_end
+    # an interval with zero speed at both ends is never traversed
+    zz = np.flatnonzero((hi[:-1] <= 0) & (hi[1:] <= 0))
+    if zz.size:
+        i = int(zz[0])
+        for pt, nodes in prob.point_nodes:
+            if pt.sdot_max <= 0 and nodes[0] <= i + 1 and i <= nodes[-1]:
+                raise InfeasibleError(
+                    f"{pt.describe()}: ṡ <= 0 between nodes s = {prob.s[i]:.2f} and {prob.s[i + 1]:.2f} mm "
+                    f"-- the path cannot stop there (a stop is possible only at a node; put the point "
+                    f"exactly on a node or give it a speed > 0)", field="points")
+        raise InfeasibleError(f"the speed limit is zero on both ends of the interval s = {prob.s[i]:.2f}.."
+                              f"{prob.s[i + 1]:.2f} mm; the path cannot be traversed", field="limits")
+    return lo, hi
+
+
+def _touches(jidx: np.ndarray, lo: np.ndarray, hi: np.ndarray, prob: _Problem, M: int
+             ) -> tuple[np.ndarray, np.ndarray]:
+    n = jidx.size
+    inner = np.zeros(n, bool)
+    inner[1:-1] = hi[1:-1] > lo[1:-1]
+    at_hi = inner & (jidx == M - 1)
+    at_lo = inner & (jidx == 0)
+    hi_on_limit = hi >= prob.cap * (1 - 1e-12)
+    lo_on_limit = lo <= 0.0
+    w = (at_hi & ~hi_on_limit) | (at_lo & ~lo_on_limit)
+    o = (at_hi & hi_on_limit) | (at_lo & lo_on_limit)
+    return w, o
+
+
+def _tube(prob: _Problem, state: State | None) -> tuple[np.ndarray, list[IterationLog]]:
+    lim = prob.limits
+    M = lim.levels
+    s = prob.s
+    sN = s[-1] - s[0]
+    lo, hi = _bounds_check(prob)
+    logs: list[IterationLog] = []
+    if state is not None:
+        state.progress(0.0, "nominal DP")
+    sdot, jidx = _dp(prob, lo, hi, M, state)
+    t_total = float(_times(s, sdot)[-1])
+    tsp_prev = t_total / sN
+    no_mask = np.zeros(s.size, bool)
+    log = IterationLog(1, t_total, tsp_prev, None, 0, 0, None, False, False, s, sdot, lo, hi, no_mask, no_mask)
+    logs.append(log)
+    if state is not None:
+        state.partial(log)
+    sh = lim.tube_share * float(sdot.max())
+    prev_touch_free = False
+    r = 1
+    while r < lim.max_iterations:
+        check_cancel(state)
+        r += 1
+        lo = np.maximum(sdot - sh, 0.0)
+        hi = np.minimum(sdot + sh, prob.cap)
+        lo[0] = hi[0] = lim.sdot_start
+        lo[-1] = hi[-1] = lim.sdot_end
+        lo = np.minimum(lo, hi)
+        sh_used = sh
+        sdot_r, jidx = _dp(prob, lo, hi, M, state)
+        t_total = float(_times(s, sdot_r)[-1])
+        tsp = t_total / sN
+        w, o = _touches(jidx, lo, hi, prob, M)
+        touch_free = not w.any()
+        halved = False
+        if touch_free:
+            sh /= 2.0
+            halved = True
+        P = (1.0 - tsp / tsp_prev) * 100.0
+        stop = touch_free and prev_touch_free and P < lim.stop_percent
+        log = IterationLog(r, t_total, tsp, sh_used, _runs(w), _runs(o), P, halved, stop, s, sdot_r,
+                           lo, hi, w, o)
+        logs.append(log)
+        if state is not None:
+            state.partial(log)
+            state.progress(min(0.95, 0.1 + 0.85 * (1 - 0.5 ** (r / 3))), f"tube iteration {r}")
+        sdot, tsp_prev, prev_touch_free = sdot_r, tsp, touch_free
+        if stop:
+            break
+    return sdot, logs
+
+
+class _ToppraPath:
+    """The quintic Hermite path in toppra's interface, parameter σ = s / 1000 (m) and an extra
+    coordinate equal to σ carrying the technological limits on ṡ and s̈."""
+
+    def __init__(self, prob: _Problem, X0: np.ndarray) -> None:
+        self.prob = prob
+        self.X0 = X0
+
+    @property
+    def dof(self) -> int:
+        return self.prob.p + 1
+
+    @property
+    def path_interval(self) -> np.ndarray:
+        return np.array([self.prob.s[0], self.prob.s[-1]]) / 1000.0
+
+    @property
+    def waypoints(self) -> None:
+        return None
+
+    def __call__(self, path_positions: Any, order: int = 0) -> np.ndarray:
+        sig = np.atleast_1d(np.asarray(path_positions, float))
+        ss = np.clip(sig * 1000.0, self.prob.s[0], self.prob.s[-1])
+        i = np.clip(np.searchsorted(self.prob.s, ss, side="right") - 1, 0, self.prob.s.size - 2)
+        tau = (ss - self.prob.s[i]) / self.prob.h[i]
+        out = np.zeros((sig.size, self.dof))
+        if order == 0:
+            # positions are not used by the constraints; return a first-order estimate
+            out[:, :-1] = self.X0[i]
+            out[:, -1] = sig
+        elif order == 1:
+            c = self.prob.d1[i]                                          # (n, p, 5)
+            out[:, :-1] = np.einsum("npk,nk->np", c, tau[:, None] ** np.arange(5)) * 1000.0
+            out[:, -1] = 1.0
+        elif order == 2:
+            c = self.prob.d2[i]
+            out[:, :-1] = np.einsum("npk,nk->np", c, tau[:, None] ** np.arange(4)) * 1.0e6
+        else:
+            raise ValueError(order)
+        return out if np.ndim(path_positions) else out[0]
+
+    eval = __call__  # noqa: A003
+
+    def evald(self, ss: Any) -> np.ndarray:
+        return self(ss, 1)
+
+    def evaldd(self, ss: Any) -> np.ndarray:
+        return self(ss, 2)
+
+
+def _toppra(prob: _Problem, X: np.ndarray) -> np.ndarray:
+    import logging
+
+    import toppra
+    import toppra.algorithm as algo
+    import toppra.constraint as constraint
+    from toppra.interpolator import AbstractGeometricPath
+
+    logging.getLogger("toppra").setLevel(logging.ERROR)
+    lim = prob.limits
+    path = type("TPath", (_ToppraPath, AbstractGeometricPath), {})(prob, X)
+    grid = prob.s / 1000.0
+    vnode = np.minimum(prob.cap_tech, 1e12) / 1000.0      # m/s
+    V = np.asarray(lim.v_max, float)
+
+    def vlim(sig: float) -> np.ndarray:
+        i = int(np.clip(np.searchsorted(grid, sig - 1e-12), 0, grid.size - 1))
+        out = np.empty((prob.p + 1, 2))
+        out[:-1, 0], out[:-1, 1] = -V, V
+        out[-1] = (-vnode[i] - 1e-12, vnode[i] + 1e-12)
+        return out
+
+    sdd = lim.sddot_max / 1000.0 if math.isfinite(lim.sddot_max) else 1e9
+    alim = np.concatenate([np.asarray(lim.a_max, float), [sdd]])
+    cons = [constraint.JointVelocityConstraintVarying(vlim),
+            constraint.JointAccelerationConstraint(np.stack([-alim, alim], 1),
+                                                   discretization_scheme=constraint.DiscretizationType.Interpolation)]
+    inst = algo.TOPPRA(cons, path, gridpoints=grid, solver_wrapper="seidel")
+    sdd_vec, sd_vec, _, _ = inst.compute_parameterization(lim.sdot_start / 1000.0, lim.sdot_end / 1000.0,
+                                                          return_data=True)
+    del toppra
+    if sd_vec is None:
+        raise InfeasibleError("TOPP-RA finds no admissible speed law under these limits", field="limits")
+    return np.maximum(np.asarray(sd_vec, float), 0.0) * 1000.0
+
+
+def parametrize(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, method: str = "tube",
+                state: State | None = None) -> TimeLaw:
+    """Find the time law ``ṡ(s)`` of a path under axis and technological limits.
+
+    Parameters
+    ----------
+    path_s:
+        Node values s_i (mm), strictly increasing, shape (N,).
+    X, dX, ddX:
+        Coordinates (rad or mm) and their first/second derivatives in s at the nodes, shape (N, p).
+    limits:
+        :class:`TimeLimits`.
+    method:
+        ``"tube"`` (DP + narrowing tube, the paper's algorithm), ``"dp"`` (a single DP with
+        ``limits.levels`` levels) or ``"toppra"`` (time-optimal reference).
+    state:
+        Optional job state (progress, cancellation, partial results = tube iterations).
+
+    Returns
+    -------
+    TimeLaw
+
+    Raises
+    ------
+    InputError
+        Malformed input.
+    InfeasibleError
+        No speed law satisfies the limits (names the technological point or the s where it fails).
+    """
+    if method not in METHODS:
+        raise InputError(f"unknown method {method!r}; use one of {', '.join(METHODS)}", field="method")
+    t0 = time.perf_counter()
+    prob = _prepare(path_s, X, dX, ddX, limits)
+    iterations: list[IterationLog] = []
+    if method == "tube":
+        sdot, iterations = _tube(prob, state)
+    elif method == "dp":
+        lo, hi = _bounds_check(prob)
+        if state is not None:
+            state.progress(0.0, f"DP with M = {limits.levels}")
+        sdot, _ = _dp(prob, lo, hi, limits.levels, state)
+    else:
+        _bounds_check(prob)
+        if state is not None:
+            state.progress(0.0, "TOPP-RA")
+        sdot = _toppra(prob, np.asarray(X, float).reshape(prob.s.size, -1))
+    compute = time.perf_counter() - t0
+    t = _times(prob.s, sdot)
+    ratios = evaluate_limits(prob, sdot)
+    if state is not None:
+        state.progress(1.0, "done")
+    return TimeLaw(method=method, s=prob.s, sdot=sdot, t=t, total_time_s=float(t[-1]), iterations=iterations,
+                   max_accel_ratio=ratios["accel"], max_speed_ratio=ratios["speed"],
+                   max_sddot_ratio=ratios["sddot"], energy=curvature_energy(t, sdot), compute_s=compute,
+                   levels=limits.levels if method != "toppra" else 0,
+                   energy_mm=curvature_energy(t, sdot, speed_unit=1.0))
+
+
+def prepare(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits) -> _Problem:
+    """The set-up shared by all methods (interpolant, speed caps, constraint rows); for tests/tools."""
+    return _prepare(path_s, X, dX, ddX, limits)
+
+
+# --------------------------------------------------------------------------------------------------
+# NC output
+# --------------------------------------------------------------------------------------------------
+
+
+def time_at(law: TimeLaw, s_query: Any) -> np.ndarray:
+    """Exact time (s) at arbitrary ``s`` values under the law (constant s̈ inside each interval)."""
+    s = law.s
+    sq = np.asarray(s_query, float)
+    i = np.clip(np.searchsorted(s, sq, side="right") - 1, 0, s.size - 2)
+    sig = sq - s[i]
+    v0 = law.sdot[i]
+    v1 = law.sdot[i + 1]
+    h = s[i + 1] - s[i]
+    u = (v1 ** 2 - v0 ** 2) / (2.0 * h)
+    vs = np.sqrt(np.maximum(v0 ** 2 + 2.0 * u * sig, 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # t = 2σ/(v0 + v(σ)) is exact for constant acceleration and stable for u -> 0
+        dt = np.where(sig > 0, 2.0 * sig / (v0 + vs), 0.0)
+    return law.t[i] + dt
+
+
+def block_feeds(law: TimeLaw, s_block_ends: Sequence[float] | np.ndarray, decimals: int | None = None
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Per-block durations and G93 inverse-time feed numbers for NC blocks along the path.
+
+    Parameters
+    ----------
+    law:
+        The time law.
+    s_block_ends:
+        End points of the NC blocks, in order: s values (mm, float array) or node indices (integer
+        array).  The first block starts at ``law.s[0]``; the last end should be the path end.
+    decimals:
+        Round the feed numbers to this many decimals as the controller would (rounded down, so no
+        block becomes faster than the law allows); ``None`` keeps them exact.
+
+    Returns
+    -------
+    durations_s, inverse_time_feed_per_min:
+        Block durations (s) and ``F = 1 / duration`` in 1/min (``G93 ... F``).
+    """
+    ends = np.asarray(s_block_ends)
+    if ends.ndim != 1 or ends.size == 0:
+        raise InputError(f"block ends must be a non-empty 1-D array, got shape {ends.shape}", field="blocks")
+    if np.issubdtype(ends.dtype, np.integer):
+        if ends.min() < 1 or ends.max() >= law.s.size:
+            raise InputError(f"block end indices must be in 1..{law.s.size - 1}, got {ends.min()}..{ends.max()}",
+                             field="blocks")
+        ends = law.s[ends]
+    ends = ends.astype(float)
+    tol = 1e-9 * max(1.0, abs(law.s[-1]))
+    if ends.min() < law.s[0] - tol or ends.max() > law.s[-1] + tol:
+        raise InputError(f"block ends must lie in s = {law.s[0]:.3f}..{law.s[-1]:.3f} mm", field="blocks")
+    allpts = np.concatenate([[law.s[0]], np.clip(ends, law.s[0], law.s[-1])])
+    if np.any(np.diff(allpts) <= 0):
+        i = int(np.argmax(np.diff(allpts) <= 0))
+        raise InputError(f"block ends must increase strictly; block {i + 1} ends at s = {allpts[i + 1]:.4f} mm",
+                         field="blocks")
+    tb = time_at(law, allpts)
+    dur = np.diff(tb)
+    if not np.all(np.isfinite(dur)):
+        raise InputError("a block has no finite duration (the law stops inside it)", field="blocks")
+    feed = 60.0 / dur
+    if decimals is not None:
+        q = 10.0 ** decimals
+        feed = np.floor(feed * q) / q
+        feed = np.maximum(feed, 1.0 / q)
+        dur = 60.0 / feed
+    return dur, feed
+
+
+def with_levels(limits: TimeLimits, levels: int) -> TimeLimits:
+    """``limits`` with another number of speed levels M."""
+    return replace(limits, levels=int(levels))

@@ -1,0 +1,424 @@
+"""Time parametrization by DP + tube (seed 003, MATH.md §B): engine tests."""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from scipy.integrate import quad
+
+from engine.errors import Cancelled, InfeasibleError, InputError
+from engine.state import RecordingState
+from engine.timeparam import (
+    IterationLog,
+    TechPoint,
+    TimeLimits,
+    _bounds_check,
+    _dp,
+    block_feeds,
+    curvature_energy,
+    limits_from_mapping,
+    parametrize,
+    prepare,
+    time_at,
+)
+from engine.timeparam_example import _HARMONICS, _TRACK_RAMP, N_PAPER, S_N_PAPER, example_limits, example_path
+
+# --------------------------------------------------------------------------------------------------
+# helpers
+# --------------------------------------------------------------------------------------------------
+
+
+def _random_path(rng: np.random.Generator, n: int, p: int) -> tuple[np.ndarray, ...]:
+    s = np.concatenate([[0.0], np.cumsum(rng.uniform(2.0, 5.0, n - 1))])
+    L = s[-1]
+    X = np.zeros((n, p))
+    dX = np.zeros((n, p))
+    ddX = np.zeros((n, p))
+    for c in range(p):
+        a, k, ph = rng.uniform(0.2, 1.0), rng.uniform(0.3, 2.0), rng.uniform(0, 6)
+        w = 2 * np.pi * k / L
+        X[:, c] = a * np.sin(w * s + ph)
+        dX[:, c] = a * w * np.cos(w * s + ph)
+        ddX[:, c] = -a * w * w * np.sin(w * s + ph)
+    return s, X, dX, ddX
+
+
+def _brute_force(prob, lo, hi, M, square):
+    """Enumerate every level sequence; feasibility straight from the constraint rows."""
+    n = prob.s.size
+    plo, phi = (lo**2, hi**2) if square else (lo, hi)
+    lev = []
+    for i in range(n):
+        if phi[i] <= plo[i]:
+            vals = [plo[i]]
+        else:
+            vals = list(plo[i] + (phi[i] - plo[i]) * np.arange(M) / (M - 1))
+        lev.append(np.sqrt(vals) if square else np.asarray(vals))
+    K = prob.limits.penalty * prob.p**2
+    best = math.inf
+    for combo in itertools.product(*[range(len(v)) for v in lev[1:-1]]):
+        v = np.array([lev[0][0], *[lev[i + 1][j] for i, j in enumerate(combo)], lev[-1][0]])
+        x = v * v
+        u = (x[1:] - x[:-1]) / (2 * prob.h)
+        val = np.einsum("irk,ik->ir", prob.rows, np.stack([x[:-1], u], 1))
+        if np.any(val > 1.0) or np.any(v[:-1] + v[1:] <= 0):
+            continue
+        cost = float(np.sum(2 * prob.h / (v[:-1] + v[1:]) + K * u * u))
+        best = min(best, cost)
+    return best
+
+
+def _path_cost(prob, v):
+    K = prob.limits.penalty * prob.p**2
+    u = (v[1:] ** 2 - v[:-1] ** 2) / (2 * prob.h)
+    return float(np.sum(2 * prob.h / (v[:-1] + v[1:]) + K * u * u))
+
+
+@pytest.fixture(scope="module")
+def example():
+    s, X, dX, ddX = example_path()
+    lim = example_limits()
+    return s, X, dX, ddX, lim
+
+
+@pytest.fixture(scope="module")
+def tube_law(example):
+    s, X, dX, ddX, lim = example
+    return parametrize(s, X, dX, ddX, lim, method="tube")
+
+
+@pytest.fixture(scope="module")
+def toppra_law(example):
+    s, X, dX, ddX, lim = example
+    return parametrize(s, X, dX, ddX, lim, method="toppra")
+
+
+# --------------------------------------------------------------------------------------------------
+# the DP procedure
+# --------------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_dp_equals_brute_force(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    n, p, M = 6, 2, 4
+    s, X, dX, ddX = _random_path(rng, n, p)
+    check = "arrival" if seed % 3 == 0 else "interval"
+    lim = TimeLimits(v_max=(1.0, 1.0), a_max=tuple(rng.uniform(0.05, 1.0, p)), sdot_max=float(rng.uniform(20, 60)),
+                     sddot_max=float(rng.uniform(100, 400)), levels=M, penalty=float(rng.choice([0.0, 1e-6])),
+                     accel_check=check)
+    prob = prepare(s, X, dX, ddX, lim)
+    lo, hi = _bounds_check(prob)
+    if seed % 2:                                    # a tube-like band for odd seeds
+        mid = rng.uniform(0.3, 0.8, n) * hi
+        lo, hi = np.maximum(mid - 10, 0), np.minimum(mid + 10, hi)
+        lo[0] = hi[0] = 0.0
+        lo[-1] = hi[-1] = 0.0
+    square = seed % 4 == 1
+    best = _brute_force(prob, lo, hi, M, square)
+    if math.isinf(best):
+        with pytest.raises(InfeasibleError):
+            _dp(prob, lo, hi, M, square=square)
+        return
+    v, _ = _dp(prob, lo, hi, M, square=square)
+    assert _path_cost(prob, v) == pytest.approx(best, rel=1e-9)
+
+
+def test_brute_force_instances_are_mostly_feasible() -> None:
+    """Guard for the test above: most random instances must have an answer to compare."""
+    feasible = binding = 0
+    for seed in range(12):
+        rng = np.random.default_rng(seed)
+        s, X, dX, ddX = _random_path(rng, 6, 2)
+        lim = TimeLimits(v_max=(1.0, 1.0), a_max=tuple(rng.uniform(0.05, 1.0, 2)), sdot_max=40.0,
+                         sddot_max=300.0, levels=4)
+        prob = prepare(s, X, dX, ddX, lim)
+        lo, hi = _bounds_check(prob)
+        best = _brute_force(prob, lo, hi, 4, False)
+        feasible += math.isfinite(best)
+        # the limits bind: without acceleration limits the optimum would be faster
+        free = prepare(s, X, dX, ddX, replace(lim, a_max=(1e9, 1e9), sddot_max=1e9))
+        binding += math.isfinite(best) and _brute_force(free, lo, hi, 4, False) < best * (1 - 1e-9)
+    assert feasible >= 8 and binding >= 6
+
+
+def test_arrival_check_matches_the_paper_formula() -> None:
+    """With accel_check='arrival' the rows are exactly the paper's check at node i (Table 2 data)."""
+    rng = np.random.default_rng(7)
+    s, X, dX, ddX = _random_path(rng, 8, 3)
+    lim = TimeLimits(v_max=(1, 1, 1), a_max=(0.1, 0.2, 0.3), sddot_max=250.0, accel_check="arrival")
+    prob = prepare(s, X, dX, ddX, lim)
+    for _ in range(200):
+        i = int(rng.integers(0, 7))
+        vk, vj = rng.uniform(0, 40, 2)
+        u = (vj**2 - vk**2) / (2 * prob.h[i])
+        paper_ok = np.all(np.abs(ddX[i + 1] * vj**2 + dX[i + 1] * u) <= np.array(lim.a_max)) and abs(u) <= 250
+        rows_ok = np.all(prob.rows[i] @ np.array([vk**2, u]) <= 1.0)
+        assert paper_ok == rows_ok
+
+
+def test_bernstein_rows_bound_the_acceleration_inside_intervals() -> None:
+    """Any (ṡ_k², s̈) admitted by the rows keeps |a_c| <= A_c on a fine sub-grid of the quintic path."""
+    rng = np.random.default_rng(3)
+    s, X, dX, ddX = _random_path(rng, 10, 3)
+    A = np.array([0.1, 0.2, 0.3])
+    lim = TimeLimits(v_max=(1, 1, 1), a_max=tuple(A))
+    prob = prepare(s, X, dX, ddX, lim)
+    tau = np.linspace(0, 1, 201)
+    worst = 0.0
+    for _ in range(300):
+        i = int(rng.integers(0, 9))
+        z = np.array([rng.uniform(0, 1), rng.uniform(-1, 1)])
+        z *= rng.uniform(0.9, 1.0) / np.max(prob.rows[i] @ z)     # admitted, close to the boundary
+        x0, u = z
+        q1 = np.polynomial.polynomial.polyval(tau, prob.d1[i].T)           # (p, 201)
+        q2 = np.polynomial.polynomial.polyval(tau, prob.d2[i].T)
+        x = x0 + 2 * u * prob.h[i] * tau
+        worst = max(worst, float(np.max(np.abs(q2 * x + q1 * u) / A[:, None])))
+    assert 0.9 < worst <= 1.0 + 1e-12
+
+
+def test_quintic_interpolant_reproduces_the_example_derivatives(example) -> None:
+    s, X, dX, ddX, lim = example
+    prob = prepare(s, X, dX, ddX, lim)
+    tau = 0.37
+    i = 300
+    sq = s[i] + tau * prob.h[i]
+    u = sq / S_N_PAPER
+    exact1 = np.zeros(7)
+    for c, terms in enumerate(_HARMONICS):
+        for amp, k, ph in terms:
+            w = 2 * np.pi * k / S_N_PAPER
+            exact1[c] += amp * w * np.cos(2 * np.pi * k * u + ph)
+    exact1[-1] += _TRACK_RAMP / S_N_PAPER
+    got = np.polynomial.polynomial.polyval(tau, prob.d1[i].T)
+    assert np.allclose(got, exact1, rtol=1e-9, atol=1e-12)
+
+
+# --------------------------------------------------------------------------------------------------
+# the tube algorithm on the paper's setting
+# --------------------------------------------------------------------------------------------------
+
+
+def test_example_has_the_papers_size(example) -> None:
+    s, X, dX, ddX, lim = example
+    assert s.size == N_PAPER == 893 and X.shape == (893, 7)
+    assert s[-1] == pytest.approx(2846.9)
+    assert lim.v_max[6] == pytest.approx(1866.667) and lim.a_max[3] == pytest.approx(0.611)
+    assert [p.label for p in lim.points] == ["feed", "cut"]
+    assert lim.levels == 100 and lim.penalty == 0.5e-11 and lim.tube_share == 0.1 and lim.stop_percent == 0.5
+
+
+def _exact_ratios(law, lim):
+    """Limit ratios on a fine sub-grid, with the example's exact (analytic) derivatives."""
+    s, v = law.s, law.sdot
+    h = np.diff(s)
+    u = (v[1:] ** 2 - v[:-1] ** 2) / (2 * h)
+    tau = np.linspace(0, 1, 9)
+    sq = (s[:-1, None] + h[:, None] * tau).ravel()
+    x = np.maximum((v[:-1, None] ** 2 + 2 * (u * h)[:, None] * tau).ravel(), 0)
+    uq = np.repeat(u, tau.size)
+    d1 = np.zeros((sq.size, 7))
+    d2 = np.zeros((sq.size, 7))
+    for c, terms in enumerate(_HARMONICS):
+        for amp, k, ph in terms:
+            w = 2 * np.pi * k / S_N_PAPER
+            d1[:, c] += amp * w * np.cos(w * sq + ph)
+            d2[:, c] += -amp * w * w * np.sin(w * sq + ph)
+    d1[:, -1] += _TRACK_RAMP / S_N_PAPER
+    acc = np.abs(d2 * x[:, None] + d1 * uq[:, None]) / np.array(lim.a_max)
+    spd = np.abs(d1) * np.sqrt(x)[:, None] / np.array(lim.v_max)
+    return acc.max(), spd.max(), np.abs(u).max() / lim.sddot_max
+
+
+def test_tube_result_keeps_every_limit(tube_law, example) -> None:
+    s, X, dX, ddX, lim = example
+    law = tube_law
+    acc, spd, sdd = _exact_ratios(law, lim)
+    assert acc <= 1.0 + 1e-6 and spd <= 1.0 + 1e-9 and sdd <= 1.0 + 1e-9
+    assert law.max_accel_ratio <= 1.0 + 1e-9 and law.max_speed_ratio <= 1.0 + 1e-9
+    assert law.sdot.max() <= lim.sdot_max + 1e-9
+    assert law.sdot[0] == 0.0 and law.sdot[-1] == 0.0
+    for pt in lim.points:                       # ṡ is monotone inside an interval: bracketing nodes
+        i = int(np.searchsorted(s, pt.s))
+        assert law.sdot[i - 1] <= pt.sdot_max + 1e-9 and law.sdot[i] <= pt.sdot_max + 1e-9
+    assert acc > 0.99                             # and the law really uses the limits
+
+
+def test_arrival_check_overshoots_inside_intervals(example) -> None:
+    """The paper's check at the arrival node lets the acceleration exceed A_c inside intervals."""
+    s, X, dX, ddX, lim = example
+    law = parametrize(s, X, dX, ddX, replace(lim, accel_check="arrival"), method="dp")
+    acc, _, _ = _exact_ratios(law, lim)
+    assert acc > 1.01
+
+
+def test_tube_is_near_the_time_optimum(tube_law, toppra_law) -> None:
+    assert toppra_law.total_time_s <= tube_law.total_time_s * (1 + 1e-6)
+    assert tube_law.total_time_s <= 1.005 * toppra_law.total_time_s
+
+
+def test_iteration_log_follows_the_paper_rules(tube_law, example) -> None:
+    s, X, dX, ddX, lim = example
+    its = tube_law.iterations
+    assert its[0].r == 1 and its[0].half_width is None and its[0].decrease_percent is None
+    assert its[1].half_width == pytest.approx(lim.tube_share * its[0].sdot.max())
+    for a, b in zip(its[:-1], its[1:]):
+        assert b.r == a.r + 1
+        assert b.specific_time == pytest.approx(b.total_time_s / (s[-1] - s[0]))
+        assert b.decrease_percent == pytest.approx((1 - b.specific_time / a.specific_time) * 100)
+        assert b.halved == (b.w_touches == 0)
+        assert b.w_touches == _runs(b.w_mask)
+        if a.r >= 2:
+            assert b.half_width == pytest.approx(a.half_width / 2 if a.halved else a.half_width)
+        stop_rule = b.w_touches == 0 and a.r >= 2 and a.w_touches == 0 and b.decrease_percent < lim.stop_percent
+        assert b.stop == stop_rule
+        assert np.all(b.lower <= b.sdot + 1e-9) and np.all(b.sdot <= b.upper + 1e-9)
+    assert its[-1].stop and not any(it.stop for it in its[:-1])
+    assert np.array_equal(its[-1].sdot, tube_law.sdot)
+    assert tube_law.total_time_s == pytest.approx(its[-1].total_time_s)
+
+
+def _runs(mask):
+    m = np.concatenate([[0], mask.astype(int)])
+    return int(np.sum(np.diff(m) == 1))
+
+
+def test_touch_masks_mark_the_bounds(tube_law) -> None:
+    for it in tube_law.iterations[1:]:
+        at_bound = np.isclose(it.sdot, it.upper) | np.isclose(it.sdot, it.lower)
+        assert np.all(at_bound[it.w_mask]) and np.all(at_bound[it.o_mask])
+        assert not np.any(it.w_mask & it.o_mask)
+
+
+def test_state_gets_every_iteration_and_can_cancel(example) -> None:
+    s, X, dX, ddX, lim = example
+    st = RecordingState()
+    law = parametrize(s[:200], X[:200], dX[:200], ddX[:200], replace(lim, points=()), state=st)
+    assert [p.r for p in st.partials] == [it.r for it in law.iterations]
+    assert all(isinstance(p, IterationLog) for p in st.partials)
+    assert st.fractions[-1] == 1.0 and all(0 <= f <= 1 for f in st.fractions)
+    with pytest.raises(Cancelled):
+        parametrize(s[:200], X[:200], dX[:200], ddX[:200], replace(lim, points=()),
+                    state=RecordingState(cancel_after=1))
+
+
+# --------------------------------------------------------------------------------------------------
+# technological points and infeasibility
+# --------------------------------------------------------------------------------------------------
+
+
+def test_zero_speed_point_inside_an_interval_is_infeasible(example) -> None:
+    s, X, dX, ddX, lim = example
+    pts = (TechPoint(0.0, s=1000.5, label="clamp"),)
+    with pytest.raises(InfeasibleError) as err:
+        parametrize(s, X, dX, ddX, replace(lim, points=pts), method="dp")
+    msg = str(err.value)
+    assert "'clamp'" in msg and "1000.50" in msg
+
+
+def test_zero_speed_point_on_a_node_stops_there(example) -> None:
+    s, X, dX, ddX, lim = example
+    law = parametrize(s, X, dX, ddX, replace(lim, points=(TechPoint(0.0, s=float(s[400]), label="stop"),)),
+                      method="dp")
+    assert law.sdot[400] == 0.0 and law.sdot[399] > 0 and law.sdot[401] > 0
+    assert math.isfinite(law.total_time_s)
+
+
+def test_interval_point_caps_the_speed(example) -> None:
+    s, X, dX, ddX, lim = example
+    pt = TechPoint(120.0, s_from=1500.0, s_to=1700.0, label="lay-up")
+    law = parametrize(s, X, dX, ddX, replace(lim, points=(pt,)), method="dp")
+    i0 = int(np.searchsorted(s, 1500.0)) - 1
+    i1 = int(np.searchsorted(s, 1700.0))
+    assert law.sdot[i0:i1 + 1].max() <= 120.0 + 1e-9
+    assert law.sdot[i0:i1 + 1].max() >= 119.0
+
+
+def test_unreachable_start_speed_is_reported(example) -> None:
+    s, X, dX, ddX, lim = example
+    with pytest.raises(InfeasibleError, match="start speed"):
+        parametrize(s, X, dX, ddX, replace(lim, sdot_start=5000.0))
+
+
+def test_infeasible_acceleration_is_reported_with_s() -> None:
+    """Start at a speed that cannot be braked to the technological point in time."""
+    s = np.linspace(0, 10, 11)
+    X = s[:, None] * 1.0
+    one = np.ones_like(X)
+    lim = TimeLimits(v_max=(1e6,), a_max=(100.0,), sdot_start=300.0, sdot_end=0.0,
+                     points=(TechPoint(10.0, s=3.0, label="feed"),))
+    with pytest.raises(InfeasibleError) as err:
+        parametrize(s, X, one, 0 * one, lim, method="dp")
+    assert "'feed'" in str(err.value) and "s = " in str(err.value)
+
+
+def test_bad_inputs_are_input_errors(example) -> None:
+    s, X, dX, ddX, lim = example
+    with pytest.raises(InputError, match="increase"):
+        parametrize(s[::-1], X, dX, ddX, lim)
+    with pytest.raises(InputError, match="p = 7"):
+        parametrize(s, X, dX, ddX, replace(lim, v_max=(1.0,), a_max=(1.0,)))
+    with pytest.raises(InputError, match="outside"):
+        parametrize(s, X, dX, ddX, replace(lim, points=(TechPoint(1.0, s=5000.0),)))
+    with pytest.raises(InputError, match="method"):
+        parametrize(s, X, dX, ddX, lim, method="magic")
+    with pytest.raises(InputError, match="s_to"):
+        limits_from_mapping({"v_max": [1.0], "a_max": [1.0], "points": [{"s_from": 5.0, "s_to": 1.0,
+                                                                         "sdot_max": 1.0}]})
+    with pytest.raises(InputError, match="levels"):
+        limits_from_mapping({"v_max": [1.0], "a_max": [1.0], "levels": 1})
+
+
+# --------------------------------------------------------------------------------------------------
+# curvature energy and NC feeds
+# --------------------------------------------------------------------------------------------------
+
+
+def test_curvature_energy_of_a_circle_arc() -> None:
+    R = 2.0
+    t = np.linspace(-1.0, 1.0, 4001)
+    y = np.sqrt(R * R - t * t)
+    E = curvature_energy(t, y, speed_unit=1.0)
+    assert E == pytest.approx((t[-1] - t[0] - (t[1] - t[0])) / R**2, rel=1e-6)   # dual cells of interior nodes
+    assert curvature_energy(t, 3 * t + 1) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_energies_are_reported(tube_law, toppra_law) -> None:
+    for law in (tube_law, toppra_law):
+        assert law.energy > 0 and law.energy_mm > 0
+
+
+def test_time_at_matches_quadrature(tube_law) -> None:
+    law = tube_law
+    i = 500
+    h = law.s[i + 1] - law.s[i]
+    x0 = law.sdot[i] ** 2
+    u = (law.sdot[i + 1] ** 2 - x0) / (2 * h)
+    for frac in (0.1, 0.5, 0.9):
+        sig = frac * h
+        ref, _ = quad(lambda q: 1.0 / math.sqrt(x0 + 2 * u * q), 0.0, sig)
+        assert time_at(law, law.s[i] + sig) - law.t[i] == pytest.approx(ref, rel=1e-10)
+
+
+def test_block_feeds_reproduce_the_program_time(tube_law) -> None:
+    law = tube_law
+    ends = np.arange(10, law.s.size, 10)
+    ends = np.append(ends, law.s.size - 1) if ends[-1] != law.s.size - 1 else ends
+    dur, feed = block_feeds(law, ends)
+    assert dur.sum() == pytest.approx(law.total_time_s, rel=1e-12)
+    assert np.allclose(feed, 60.0 / dur)
+    # arbitrary s values, and the controller's rounding of F to 3 decimals
+    rng = np.random.default_rng(1)
+    s_ends = np.sort(rng.uniform(law.s[0], law.s[-1], 150))
+    s_ends = np.append(s_ends, law.s[-1])
+    dur2, feed2 = block_feeds(law, s_ends, decimals=3)
+    program_time = float(np.sum(60.0 / feed2))
+    assert abs(program_time / law.total_time_s - 1) < 0.01
+    assert np.all(np.round(feed2, 3) == feed2)
+    with pytest.raises(InputError, match="increase"):
+        block_feeds(law, np.array([100.0, 50.0]))
