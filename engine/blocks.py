@@ -33,7 +33,7 @@ Algorithm: (1) a feasible start - the greatest element of the constraints with e
 ``|v_i| a_i + |v_j| a_j <= p`` replaced by the split ``a <= p / (|v_i| + |v_j|)``, found by a
 vectorised fixed-point iteration from ``alpha = 1`` (with a safe fallback); (2) sweeps of exact
 pairwise minimisations (18) (vertex enumeration + Lagrange points, neighbours held fixed, pairs that
-share no block solved together, vectorised), only where a neighbour changed, until no pair improves.
+share neither a block nor a neighbour solved together, vectorised), only where a neighbour changed, until no pair improves.
 Every pair step keeps the current point as a candidate, so the program time never increases.
 """
 
@@ -383,9 +383,13 @@ def optimise_block_times(blocks: Blocks, machine: MachineTemplate, max_sweeps: i
     if nb >= 2:
         pi, pj = _pair_indices(nb, cyclic)
         npair = pi.size
-        color = pi % 2
-        if cyclic and nb % 2 == 1:
-            color[-1] = 2
+        # pairs solved together must not touch each other's blocks or neighbours: pair i and
+        # pair i + 3 are independent; the (up to two) wrap-around pairs of a cyclic program get
+        # colours of their own
+        color = pi % 3
+        if cyclic and nb % 3:
+            rem = nb % 3
+            color[nb - rem:] = 3 + np.arange(rem)
         # neighbours of each pair: left block h of i, right block l of j
         h = (pi - 1) % nb
         l_ = (pj + 1) % nb
@@ -405,7 +409,7 @@ def optimise_block_times(blocks: Blocks, machine: MachineTemplate, max_sweeps: i
         for _sweep in range(max_sweeps):
             check_cancel(state)
             changed_blocks = np.zeros(nb, dtype=bool)
-            for c in (0, 1, 2):
+            for c in range(5):
                 sel = np.flatnonzero((color == c) & dirty)
                 if sel.size == 0:
                     continue
