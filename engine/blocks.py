@@ -33,7 +33,8 @@ Algorithm: (1) a feasible start - the greatest element of the constraints with e
 ``|v_i| a_i + |v_j| a_j <= p`` replaced by the split ``a <= p / (|v_i| + |v_j|)``, found by a
 vectorised fixed-point iteration from ``alpha = 1`` (with a safe fallback); (2) sweeps of exact
 pairwise minimisations (18) (vertex enumeration + Lagrange points, neighbours held fixed, pairs that
-share neither a block nor a neighbour solved together, vectorised), only where a neighbour changed, until no pair improves.
+share neither a block nor a neighbour solved together, vectorised), only where a neighbour changed,
+until no pair improves.
 Every pair step keeps the current point as a candidate, so the program time never increases.
 """
 
