@@ -122,3 +122,12 @@ def test_missing_tool_factor_is_shown_not_raised(dialog: TurningDialog, qtbot) -
     assert xs is None or len(xs) == 0
     out = _wait(qtbot, dialog, lambda: dialog._set_combo(dialog.tool, "VK8"))
     assert out["result"] is not None and dialog.message.text() == ""
+
+
+def test_rows_to_expert_keeps_the_optimum(dialog: TurningDialog, qtbot) -> None:
+    before = dialog.result
+    _wait(qtbot, dialog, dialog.rows_to_expert)
+    assert dialog.current_mode() == "expert"
+    assert not dialog.edits["depth_mm"].isEnabled() and dialog.edits["diameter_mm"].isEnabled()
+    assert dialog.result.n_rpm == pytest.approx(before.n_rpm, rel=1e-9)
+    assert dialog.result.feed_mm_rev == pytest.approx(before.feed_mm_rev, rel=1e-9)

@@ -342,6 +342,11 @@ class TurningDialog(QDialog):
         except InputError as exc:
             self.message.setText(str(exc))
             return
+        i = self.example.findData(str(path))
+        if i >= 0:
+            self.example.blockSignals(True)
+            self.example.setCurrentIndex(i)
+            self.example.blockSignals(False)
         self.set_case(case)
 
     def set_case(self, case: TurningCase) -> None:
