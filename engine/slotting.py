@@ -20,7 +20,7 @@ in the part's frame that crossing lies at ``β − iθ``, which must be the slot
 
 The paper prints the first equation as ``A = −R_u + sqrt(ρ² − (R_u sin θ)²)``; since
 ``R_u sin θ = ρ sin β`` this is ``−R_u + ρ|cos β|`` — the exact closure with ``cos θ`` replaced by 1.
-It gives a tool setting whose real slot is shorter (at ``i = 0``, ``l = 20 mm``: 18.0 mm).  Both are
+It gives a tool setting whose real slot is shorter (at ``i = 0``, ``l = 20 mm``: 18.06 mm).  Both are
 reported: ``A`` (exact, the default answer) and ``A_paper`` (as printed).  The ``θ`` equation — the
 one the iteration solves and the one whose iteration counts the paper tabulates — is unchanged.
 
@@ -883,7 +883,7 @@ def slot_study(
     check_cancel(state)
     row = solve_slot(float(focus_length), s)
     histories = error_histories(float(focus_length), history_ratios, s)
-    traj = slot_trajectory(row.A_exact, s) if row.ok else None
+    traj = slot_trajectory(row.A, s) if row.ok and math.isfinite(row.A) else None  # the reported A
     if state is not None:
         state.progress(1.0, "done")
     return SlotStudy(table, curves, histories, float(focus_length), traj, row)

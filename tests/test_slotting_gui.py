@@ -139,6 +139,8 @@ def test_paper_formula_choice(dialog: SlotDialog) -> None:
     assert dialog.study is not None
     row = dialog.study.table.rows[-1]
     assert row.A == row.A_paper and float(dialog.table.item(9, 1).text()) == pytest.approx(row.A_paper, abs=1e-4)
+    # the path S shows what the printed closure really cuts: 18.06 mm instead of 20 mm
+    assert "slot 18.06" in dialog.plot_path.getPlotItem().titleLabel.text
 
 
 def test_parse_inputs_defaults() -> None:

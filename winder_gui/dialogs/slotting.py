@@ -545,7 +545,7 @@ class SlotDialog(QDialog):
             p.plot(ends_x, ends_y, pen=None, symbol="o", symbolSize=8, symbolBrush=(200, 30, 30))
             arc = np.linspace(-h, h, 120)
             p.plot(s.rho * np.cos(arc), s.rho * np.sin(arc), pen=pg.mkPen((200, 30, 30), width=3))
-        p.setTitle(f"Path S (part frame): A = {row.A_exact:.3f} mm → slot {tr.slot_length:.3f} mm")
+        p.setTitle(f"Path S (part frame): A = {row.A:.3f} mm → slot {tr.slot_length:.3f} mm")
         p.autoRange()
 
     def _show_reduced(self, study: SlotStudy) -> None:
