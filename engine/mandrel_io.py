@@ -810,9 +810,10 @@ def export_stl(mandrel: Mandrel, path: str | Path, tolerance_mm: float = 0.01, a
 # ================================================================================================
 # STEP import
 # ================================================================================================
-# planes through the axis (6 half-planes); 37° is no divisor of 360° / n for small n, so prisms with n-fold
-# symmetry are caught
-_SECTION_ANGLES_DEG = (0.0, 90.0, 37.0)
+# Half-planes probed besides the 0°/180° section.  37° is no divisor of 360° / n for small n, so prisms with
+# n-fold symmetry are caught.
+_PROBE_ANGLES_DEG = (37.0, 90.0, 127.0, 217.0, 270.0, 307.0)
+_PROBE_Z = 48  # heights probed per half-plane
 
 
 def load_step(path: str | Path) -> Mandrel:
@@ -820,9 +821,12 @@ def load_step(path: str | Path) -> Mandrel:
 
     The axis is taken from the faces of revolution (cylinders, cones, tori, surfaces of revolution,
     sphere centres), else from the principal axes of inertia, else Z through the centroid.  The
-    solid is cut by planes through the axis at 0°, 37° and 90°; the outer profiles r(z) of the six
-    half-sections must agree within 1e-4 of the model size.  Section edges on the axis and
-    perpendicular to it (end faces) are dropped; the outer envelope of the rest is the generatrix.
+    solid is cut by the plane through the axis at 0°/180°: section edges on the axis and
+    perpendicular to it (end faces) are dropped, the outer envelope of the rest is the profile of
+    each half-plane, and the two must agree within 1e-4 of the model size.  Six more half-planes
+    (37°, 90°, 127°, 217°, 270°, 307°) are probed with rays from the axis at 48 heights (the
+    farthest hit is the outer radius there; rays are exact and much cheaper than more sections of
+    B-spline faces), and the body must not reach beyond the revolved 0° profile.
     z is measured along the axis from the foot of the global origin, so a solid revolved about Z
     keeps its z coordinates.
 
@@ -971,7 +975,7 @@ def _revolution_axis(solid: Any) -> tuple[FloatArray, FloatArray, str]:
 
 
 def _fmt_pt(p: FloatArray) -> str:
-    return "(" + ", ".join(f"{x:.6g}" for x in p) + ")"
+    return "(" + ", ".join(f"{x + 0.0:.6g}" for x in np.asarray(p, dtype=float)) + ")"
 
 
 def _dist_to_line(p: FloatArray, o: FloatArray, d: FloatArray) -> float:
@@ -988,9 +992,16 @@ def _bbox(shape: Any) -> tuple[FloatArray, FloatArray]:
     return np.array([x0, y0, z0]), np.array([x1, y1, z1])
 
 
+_Perp = tuple[float, float, float]  # an edge perpendicular to the axis: z, r from, r to (mm)
+
+
 def _section_halves(solid: Any, o: FloatArray, d: FloatArray, u: FloatArray, h: float,
-                    tol: float) -> tuple[list[FloatArray], list[FloatArray]]:
-    """Cut with the plane through the axis spanned by d and u; polylines (z, r) of the +u and -u halves."""
+                    tol: float) -> tuple[list[FloatArray], list[FloatArray], list[_Perp], list[_Perp]]:
+    """Cut with the plane through the axis spanned by d and u.
+
+    Returns the polylines (z, r) of the +u and the −u half, and for each half the edges
+    perpendicular to the axis (z, r_lo, r_hi); edges on the axis are dropped.
+    """
     from OCP.BRepAdaptor import BRepAdaptor_Curve
     from OCP.BRepAlgoAPI import BRepAlgoAPI_Section
     from OCP.GCPnts import GCPnts_AbscissaPoint, GCPnts_TangentialDeflection, GCPnts_UniformAbscissa
@@ -1007,6 +1018,8 @@ def _section_halves(solid: Any, o: FloatArray, d: FloatArray, u: FloatArray, h: 
         raise InputError("cannot cut the solid with a plane through its axis")
     plus: list[FloatArray] = []
     minus: list[FloatArray] = []
+    perp_plus: list[_Perp] = []
+    perp_minus: list[_Perp] = []
     exp = TopExp_Explorer(sec.Shape(), TopAbs_EDGE)
     while exp.More():
         edge = TopoDS.Edge_s(exp.Current())
@@ -1027,15 +1040,22 @@ def _section_halves(solid: Any, o: FloatArray, d: FloatArray, u: FloatArray, h: 
         rel = pts - o
         zz = rel @ d
         ss = rel @ u
-        if np.abs(ss).max() <= tol or np.ptp(zz) <= tol:
-            continue  # on the axis, or perpendicular to it (an end face)
+        if np.abs(ss).max() <= tol:
+            continue  # on the axis
+        if np.ptp(zz) <= tol:  # perpendicular to the axis (an end face, or a step)
+            ze = float(np.mean(zz))
+            if ss.max() > tol:
+                perp_plus.append((ze, max(float(ss.min()), 0.0), float(ss.max())))
+            if ss.min() < -tol:
+                perp_minus.append((ze, max(float(-ss.max()), 0.0), float(-ss.min())))
+            continue
         if ss.max() > tol:
             m = ss >= -tol
             plus.append(np.column_stack([zz[m], np.maximum(ss[m], 0.0)]))
         if ss.min() < -tol:
             m = ss <= tol
             minus.append(np.column_stack([zz[m], np.maximum(-ss[m], 0.0)]))
-    return plus, minus
+    return plus, minus, perp_plus, perp_minus
 
 
 def _monotone_runs(pl: FloatArray, ztol: float) -> list[FloatArray]:
@@ -1055,11 +1075,12 @@ def _monotone_runs(pl: FloatArray, ztol: float) -> list[FloatArray]:
     return runs
 
 
-def _outer_envelope(polylines: list[FloatArray], tol: float) -> FloatArray:
+def _outer_envelope(polylines: list[FloatArray], tol: float, perps: Sequence[_Perp] = ()) -> FloatArray:
     """Points (z, r) of the outer envelope r(z) of the section polylines, z increasing.
 
     ``tol`` is the geometric tolerance (mm); points closer than ``1e-3 tol`` in z are merged, and
-    a jump in r between such points is a step in the profile.
+    a jump in r between such points, or an edge perpendicular to the axis that reaches the envelope
+    between its ends (``perps``), is a step in the profile.
     """
     ztol = 1e-3 * tol
     runs = [r for pl in polylines for r in _monotone_runs(pl, ztol)]
@@ -1071,7 +1092,7 @@ def _outer_envelope(polylines: list[FloatArray], tol: float) -> FloatArray:
         for j, other in enumerate(runs):
             if i == j:
                 continue
-            inside = (run[:, 0] > other[0, 0] + tol) & (run[:, 0] < other[-1, 0] - tol)
+            inside = (run[:, 0] >= other[0, 0] - ztol) & (run[:, 0] <= other[-1, 0] + ztol)
             if inside.any():
                 best[inside] = np.maximum(best[inside], np.interp(run[inside, 0], other[:, 0], other[:, 1]))
         m = run[:, 1] >= best - tol
@@ -1088,12 +1109,22 @@ def _outer_envelope(polylines: list[FloatArray], tol: float) -> FloatArray:
                     "perpendicular to the axis inside the winding zone); the generatrix must be smooth")
             continue
         out.append(q)
-    return np.array(out)
+    env = np.array(out)
+    for ze, lo, hi in perps:
+        if env[0, 0] + 10 * tol < ze < env[-1, 0] - 10 * tol and hi - lo > 10 * tol:
+            r_env = float(np.interp(ze, env[:, 0], env[:, 1]))
+            if hi >= r_env - 10 * tol:
+                raise InputError(
+                    f"the profile steps between r = {lo:.6g} and {hi:.6g} mm at z = {ze:.6g} mm (a face perpendicular "
+                    "to the axis inside the winding zone); the generatrix must be smooth")
+    return env
 
 
 def _step_profile(solid: Any, o: FloatArray, d: FloatArray, how: str) -> tuple[FloatArray, FloatArray]:
     lo, hi = _bbox(solid)
     size = float(np.max(hi - lo))
+    if not size < MAX_COORD_MM:
+        raise InputError(f"the model is {size:.3g} mm across, more than {MAX_COORD_MM:g} mm; check the units")
     tol = 1e-6 * max(size, 1.0)
     # the axial extent sets the sampling step
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
@@ -1104,36 +1135,81 @@ def _step_profile(solid: Any, o: FloatArray, d: FloatArray, how: str) -> tuple[F
     e2 = np.cross(d, e1)
     if abs(d[2]) > 1 - 1e-12:  # axis along Z: 0° is +X, as a user expects
         e1, e2 = np.array([1.0, 0.0, 0.0]), np.array([0.0, float(np.sign(d[2])), 0.0])
-    profiles: dict[float, FloatArray] = {}
-    for ang in _SECTION_ANGLES_DEG:
-        u = math.cos(math.radians(ang)) * e1 + math.sin(math.radians(ang)) * e2
-        plus, minus = _section_halves(solid, o, d, u, h, tol)
-        for a, pls in ((ang, plus), (ang + 180.0, minus)):
-            if not pls:
-                raise InputError(f"not a solid of revolution about the axis through {_fmt_pt(o)} along "
-                                 f"{_fmt_pt(d)} ({how}): the half-section at {a:g}° is empty")
-            profiles[a] = _outer_envelope(pls, tol)
-    ref = profiles[0.0]
+    where = f"axis through {_fmt_pt(o)} along {_fmt_pt(d)}, from the {how}"
     rev_tol = max(1e-4 * size, 1e-3)
-    for a in sorted(profiles):
-        if a == 0.0:
-            continue
-        q = profiles[a]
-        for end, zr, zq in (("start", ref[0, 0], q[0, 0]), ("end", ref[-1, 0], q[-1, 0])):
-            if abs(zr - zq) > rev_tol:
-                raise InputError(
-                    f"not a solid of revolution about the axis through {_fmt_pt(o)} along {_fmt_pt(d)} ({how}): "
-                    f"the profile at {a:g}° {end}s at z = {zq:.6g} mm, the one at 0° at z = {zr:.6g} mm")
-        zq = q[:, 0]
-        m = (zq >= ref[0, 0]) & (zq <= ref[-1, 0])
-        diff = np.abs(q[m, 1] - np.interp(zq[m], ref[:, 0], ref[:, 1]))
-        if diff.size and diff.max() > rev_tol:
-            k = int(np.argmax(diff))
-            raise InputError(
-                f"not a solid of revolution: profiles at 0° and {a:g}° differ by {diff[k]:.4g} mm at z = "
-                f"{zq[m][k]:.6g} mm (axis through {_fmt_pt(o)} along {_fmt_pt(d)}, from the {how}; tolerance "
-                f"{rev_tol:.3g} mm)")
+
+    def differ(a: float, dr: float, z: float) -> InputError:
+        return InputError(f"not a solid of revolution: profiles at 0° and {a:g}° differ by {dr:.4g} mm at z = "
+                          f"{z:.6g} mm ({where}; tolerance {rev_tol:.3g} mm)")
+
+    # 1) the plane at 0°/180°: the profile, and a first comparison of two half-planes
+    plus, minus, perp_plus, perp_minus = _section_halves(solid, o, d, e1, h, tol)
+    profiles: dict[float, FloatArray] = {}
+    for a, pls, perps in ((0.0, plus, perp_plus), (180.0, minus, perp_minus)):
+        if not pls:
+            raise InputError(f"not a solid of revolution: the half-section at {a:g}° is empty ({where})")
+        profiles[a] = _outer_envelope(pls, tol, perps)
+    ref, q = profiles[0.0], profiles[180.0]
+    for end, zr, zq in (("start", ref[0, 0], q[0, 0]), ("end", ref[-1, 0], q[-1, 0])):
+        if abs(zr - zq) > rev_tol:
+            raise InputError(f"not a solid of revolution: the profile at 180° {end}s at z = {zq:.6g} mm, the one at "
+                             f"0° at z = {zr:.6g} mm ({where})")
+    m = (q[:, 0] >= ref[0, 0]) & (q[:, 0] <= ref[-1, 0])
+    diff = np.abs(q[m, 1] - np.interp(q[m, 0], ref[:, 0], ref[:, 1]))
+    if diff.size and diff.max() > rev_tol:
+        k = int(np.argmax(diff))
+        raise differ(180.0, float(diff[k]), float(q[m][k, 0]))
+    # 2) other half-planes, probed by rays from the axis: the farthest hit is the outer radius there
+    zs = ref[0, 0] + (ref[-1, 0] - ref[0, 0]) * (np.arange(_PROBE_Z) + 0.5) / _PROBE_Z
+    r_ref = np.interp(zs, ref[:, 0], ref[:, 1])
+    for a in _PROBE_ANGLES_DEG:
+        u = math.cos(math.radians(a)) * e1 + math.sin(math.radians(a)) * e2
+        r_a = _probe_radii(solid, o, d, u, zs, tol)
+        diff = np.abs(np.where(np.isnan(r_a), 0.0, r_a) - r_ref)
+        k = int(np.argmax(diff))
+        if diff[k] > rev_tol:
+            raise differ(a, float(diff[k]), float(zs[k]))
+    # 3) nothing may stick out of the body of revolution of the 0° profile (axial and radial extent)
+    zlo, zhi, rho = _extent_in_axis_frame(solid, o, d, e1)
+    rmax = float(ref[:, 1].max())
+    if zlo < ref[0, 0] - rev_tol or zhi > ref[-1, 0] + rev_tol or rho > rmax + rev_tol:
+        raise InputError(
+            f"not a solid of revolution: the body spans z = {zlo:.6g}..{zhi:.6g} mm and reaches {rho:.6g} mm from the "
+            f"axis, the profile at 0° spans z = {ref[0, 0]:.6g}..{ref[-1, 0]:.6g} mm with r <= {rmax:.6g} mm ({where})")
     return _resample_chain(ref[:, 0], ref[:, 1])
+
+
+def _probe_radii(solid: Any, o: FloatArray, d: FloatArray, u: FloatArray, zs: FloatArray, tol: float) -> FloatArray:
+    """Farthest intersection of the rays o + z·d + t·u (t >= 0) with the solid, NaN where none (mm)."""
+    from OCP.gp import gp_Dir, gp_Lin, gp_Pnt
+    from OCP.IntCurvesFace import IntCurvesFace_ShapeIntersector
+
+    si = IntCurvesFace_ShapeIntersector()
+    si.Load(solid, tol)
+    out = np.full(len(zs), np.nan)
+    direction = gp_Dir(*map(float, u))
+    for i, z in enumerate(zs):
+        p = o + z * d
+        si.Perform(gp_Lin(gp_Pnt(*map(float, p)), direction), 0.0, 1e12)
+        if si.IsDone() and si.NbPnt() > 0:
+            out[i] = max(si.WParameter(j) for j in range(1, si.NbPnt() + 1))
+    return out
+
+
+def _extent_in_axis_frame(solid: Any, o: FloatArray, d: FloatArray, e1: FloatArray) -> tuple[float, float, float]:
+    """(z min, z max, largest distance from the axis bound) of the solid in the frame of the axis (mm)."""
+    from OCP.Bnd import Bnd_Box
+    from OCP.BRepBndLib import BRepBndLib
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_Transform
+    from OCP.gp import gp_Ax3, gp_Dir, gp_Pnt, gp_Trsf
+
+    trsf = gp_Trsf()
+    trsf.SetTransformation(gp_Ax3(gp_Pnt(*map(float, o)), gp_Dir(*map(float, d)), gp_Dir(*map(float, e1))))
+    local = BRepBuilderAPI_Transform(solid, trsf, True).Shape()
+    box = Bnd_Box()
+    BRepBndLib.AddOptimal_s(local, box, False, False)
+    x0, y0, z0, x1, y1, z1 = box.Get()
+    return z0, z1, max(abs(x0), abs(x1), abs(y0), abs(y1))
 
 
 # ================================================================================================

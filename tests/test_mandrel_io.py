@@ -524,7 +524,7 @@ def _export_cq(shape, tmp_path: Path, name: str) -> Path:  # noqa: ANN001
     return p
 
 
-@pytest.mark.parametrize("kind", ["box", "square_prism", "eccentric_boss", "cross_hole"])
+@pytest.mark.parametrize("kind", ["box", "square_prism", "eccentric_boss", "cross_hole", "tab_on_top"])
 def test_step_not_a_solid_of_revolution(tmp_path: Path, kind: str) -> None:
     import cadquery as cq
 
@@ -535,11 +535,27 @@ def test_step_not_a_solid_of_revolution(tmp_path: Path, kind: str) -> None:
     elif kind == "eccentric_boss":  # a cylinder with an off-axis cylinder on top
         shape = (cq.Workplane("XY").circle(30.0).extrude(80.0)
                  .faces(">Z").workplane().center(12.0, 0.0).circle(8.0).extrude(20.0))
-    else:  # a cylinder with a transverse hole
+    elif kind == "cross_hole":  # a cylinder with a transverse hole
         shape = (cq.Workplane("XY").circle(30.0).extrude(80.0)
                  .cut(cq.Workplane("YZ").workplane(offset=-50).center(0, 40).circle(5.0).extrude(100.0)))
+    else:  # a small block on the top face, off the 0° half-plane: caught by the extent check
+        shape = (cq.Workplane("XY").circle(30.0).extrude(80.0)
+                 .union(cq.Workplane("XY").workplane(offset=80).center(0, 10).rect(4, 4).extrude(5)))
     err = _err(load_step, _export_cq(shape, tmp_path, f"{kind}.step"))
     assert "not a solid of revolution" in err.message, str(err)
+
+
+def test_step_hollow_body_gives_outer_profile_and_steps_are_refused(tmp_path: Path) -> None:
+    import cadquery as cq
+
+    tube = (cq.Workplane("XY").circle(30.0).extrude(80.0).cut(cq.Workplane("XY").circle(10.0).extrude(40.0))
+            .cut(cq.Workplane("XY").circle(5.0).extrude(80.0)))  # stepped through-bore
+    m = load_step(_export_cq(tube, tmp_path, "tube.step"))
+    assert (m.z_min, m.z_max) == pytest.approx((0.0, 80.0), abs=1e-9)
+    np.testing.assert_allclose(m.r(np.linspace(0.0, 80.0, 81)), 30.0, rtol=1e-9)
+    shoulder = cq.Workplane("XY").circle(30.0).extrude(50.0).faces(">Z").workplane().circle(20.0).extrude(30.0)
+    err = _err(load_step, _export_cq(shoulder, tmp_path, "shoulder.step"))
+    assert "steps between r = 20 and 30 mm at z = 50 mm" in err.message
 
 
 def test_step_bad_files(tmp_path: Path) -> None:
