@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import sys
 import threading
 from pathlib import Path
 
@@ -13,7 +12,7 @@ import pytest
 
 from engine.slotting import SlotSetup, slot_table, table_csv
 from winder_gui.dialogs import slotting as dlg_mod
-from winder_gui.dialogs.slotting import SlotDialog, guard_singleton_refcounts, parse_inputs
+from winder_gui.dialogs.slotting import SlotDialog, parse_inputs
 
 
 @pytest.fixture
@@ -150,7 +149,3 @@ def test_parse_inputs_defaults() -> None:
     assert inp.focus_length == 20.0 and math.isclose(inp.curve_ratios[-1], 4.0)
 
 
-def test_guard_keeps_singletons_alive() -> None:
-    guard_singleton_refcounts()
-    for obj in (None, True, False):
-        assert sys.getrefcount(obj) >= 200_000

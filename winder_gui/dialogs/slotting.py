@@ -15,15 +15,13 @@ Export writes the table as CSV atomically (:func:`engine.slotting.write_table_cs
 
 from __future__ import annotations
 
-import ctypes
 import math
-import sys
 import time
 from dataclasses import dataclass
 
 import numpy as np
 import pyqtgraph as pg
-from PySide6.QtCore import QCoreApplication, QEventLoop, Qt, QThread, QTimer, Signal
+from PySide6.QtCore import QCoreApplication, QEventLoop, Qt, QThread, Signal
 from PySide6.QtGui import QBrush, QColor
 from PySide6.QtWidgets import (
     QAbstractItemView,
@@ -59,23 +57,6 @@ from winder_gui.workers import JobRunner
 _ERR_STYLE = "color: #b00020;"
 _NOTE_STYLE = "color: #555555;"
 _MAX_CURVE_POINTS = 20000
-
-
-def guard_singleton_refcounts(minimum: int = 200_000, chunk: int = 500_000) -> None:
-    """Keep ``None``, ``True`` and ``False`` alive despite reference leaks in PySide6 6.12.0.
-
-    PySide6 6.12.0 drops a reference to ``True`` each time a signal is emitted with that value,
-    and to ``None`` each time ``None`` is passed to (or returned from an override back to) Qt, e.g.
-    ``QGraphicsItem.setParentItem(None)``.  pyqtgraph does both hundreds of times per plot, so
-    after some dozens of redraws the count reaches zero and the interpreter aborts
-    ("none_dealloc" / "bool_dealloc").  This tops each count up with a list of references that is
-    itself never freed (so the counts also survive interpreter shutdown).  Harmless once PySide6 is
-    fixed; about 4 MB per top-up, needed every few hundred computations.
-    """
-    for obj in (None, True, False):
-        if sys.getrefcount(obj) < minimum:
-            ballast = [obj] * chunk
-            ctypes.pythonapi.Py_IncRef(ctypes.py_object(ballast))  # never freed on purpose
 
 
 @dataclass(frozen=True)
@@ -182,7 +163,6 @@ class SlotDialog(QDialog):
     computed = Signal(object)
 
     def __init__(self, parent: QWidget | None = None) -> None:
-        guard_singleton_refcounts()
         super().__init__(parent)
         self.setWindowTitle("Slot forming — cycloidal slotting with a rotating blade tool")
         self.resize(1400, 860)
@@ -193,10 +173,6 @@ class SlotDialog(QDialog):
         self._runner.finished.connect(self._on_finished)
         self._runner.failed.connect(self._on_failed)
         self._runner.busy.connect(self._on_busy)
-        self._guard_timer = QTimer(self)  # see guard_singleton_refcounts: hover/paint leak too
-        self._guard_timer.setInterval(1000)
-        self._guard_timer.timeout.connect(guard_singleton_refcounts)
-        self._guard_timer.start()
 
         # ---- inputs ------------------------------------------------------------------------
         self.edits: dict[str, QLineEdit] = {}
@@ -385,7 +361,6 @@ class SlotDialog(QDialog):
         if not self._validate() or self._inputs is None:
             return
         inp = self._inputs
-        guard_singleton_refcounts()
         self.status_label.setText("Computing…")
         self._runner.submit(
             slot_study, inp.setup, inp.lengths, inp.curve_lengths, inp.curve_ratios, inp.history_ratios,
@@ -402,7 +377,6 @@ class SlotDialog(QDialog):
         while self._runner.is_busy():
             if time.monotonic() > deadline:
                 return False
-            guard_singleton_refcounts()
             QCoreApplication.processEvents(QEventLoop.ProcessEventsFlag.AllEvents, 20)
             QThread.msleep(2)
         QCoreApplication.processEvents()
@@ -423,7 +397,6 @@ class SlotDialog(QDialog):
         self._update_buttons()
 
     def _on_finished(self, study: object) -> None:
-        guard_singleton_refcounts()
         assert isinstance(study, SlotStudy)
         self.study = study
         self._stale = False
@@ -591,4 +564,4 @@ class SlotDialog(QDialog):
         super().closeEvent(event)
 
 
-__all__ = ["SlotDialog", "SlotInputs", "guard_singleton_refcounts", "parse_inputs"]
+__all__ = ["SlotDialog", "SlotInputs", "parse_inputs"]

@@ -17,7 +17,6 @@ paper's Mathcad sheet; *Rows → expert* copies the current physical rows there.
 
 from __future__ import annotations
 
-import ctypes
 import html
 import math
 import sys
@@ -80,21 +79,6 @@ COLOURS: dict[str, str] = {
 }
 _USER_COLOURS = ("#ff7f0e", "#bcbd22", "#8c564b", "#d62728")
 
-def _guard_bool_refs(minimum: int = 200_000) -> None:
-    """Keep ``True``/``False`` alive despite a reference leak in PySide6 6.12 (CPython 3.11).
-
-    Every emission of a Qt signal carrying a ``bool`` to a Python slot drops one reference to the
-    bool (measured: ``sys.getrefcount(True)`` falls by 1 per emission), and pyqtgraph emits such
-    signals for every item it creates or updates — about 20 per new curve, 2 per ``setData``.  After a
-    few dozen redraws the count reaches zero, ``True`` is deallocated and the interpreter aborts
-    ("bool_dealloc").  Until PySide6 is fixed, top the count up here before each redraw; the added
-    references are owned by nobody, so they also survive interpreter shutdown (where the leaked
-    decrements would otherwise still hit zero).
-    """
-    for b in (True, False):
-        for _ in range(max(0, minimum - sys.getrefcount(b))):
-            ctypes.pythonapi.Py_IncRef(ctypes.py_object(b))
-
 # (section, key, label with unit, tooltip)
 _NUM_FIELDS: tuple[tuple[str, str, str, str], ...] = (
     ("machine", "n_min_rpm", "n min, rpm", "Lowest spindle speed, constraint (12)."),
@@ -149,7 +133,6 @@ class TurningDialog(QDialog):
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
-        _guard_bool_refs()
         self.setWindowTitle("Turning optimiser — spindle speed and feed for minimum machine time")
         self.resize(1500, 900)
         self.data: CuttingData = load_data()
@@ -711,8 +694,7 @@ class TurningDialog(QDialog):
         return items[i]
 
     def _draw(self, pd: dict[str, Any] | None) -> None:
-        """Show ``plot_data`` output.  Plot items are pooled and updated in place (see :func:`_guard_bool_refs`)."""
-        _guard_bool_refs()
+        """Show ``plot_data`` output.  Plot items are pooled and updated in place."""
         used: dict[str, int] = {}
         self.curves, self.region_items, self.label_items = {}, [], []
         legend: list[tuple[Any, str]] = []
