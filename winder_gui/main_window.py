@@ -29,7 +29,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from PySide6.QtCore import QEventLoop, QPoint, QRect, Qt, QTimer, Signal
 from PySide6.QtGui import QAction, QCloseEvent, QImage, QKeySequence, QPainter
@@ -51,7 +51,6 @@ from engine import __version__
 from engine.errors import InputError
 from engine.job import FileSpec, Job, PointsSpec, build_mandrel, default_job, load_job
 from engine.job import save_job as _write_job
-from engine.mandrel import Mandrel
 from engine.state import check_cancel
 from winder_gui.panels.mandrel_panel import MandrelPanel
 from winder_gui.panels.steps import StepBar
@@ -59,6 +58,9 @@ from winder_gui.views.geometry import MandrelViewData, mandrel_view_data
 from winder_gui.views.profile_plot import ProfilePlot
 from winder_gui.views.view3d import MandrelView3D
 from winder_gui.workers import JobRunner, cad_call
+
+if TYPE_CHECKING:  # engine.mandrel (scipy) is first imported by the build worker, off the start-up path
+    from engine.mandrel import Mandrel
 
 EDIT_DEBOUNCE_MS = 150
 JOB_FILTER = "Winding jobs (*.toml);;All files (*)"

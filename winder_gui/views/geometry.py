@@ -7,11 +7,13 @@ The GUI thread only hands these arrays to pyqtgraph / pyvista; everything numeri
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
-from engine.mandrel import Mandrel
+if TYPE_CHECKING:
+    from engine.mandrel import Mandrel
 
 FloatArray = NDArray[np.float64]
 

@@ -1,0 +1,70 @@
+"""The view data computed off the GUI thread (winder_gui.views.geometry): no Qt needed."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from engine.mandrel import Mandrel
+from winder_gui.views.geometry import check_points, handle_points, mandrel_view_data
+
+
+def test_surface_is_the_revolved_generatrix() -> None:
+    m = Mandrel.cone(50.0, 30.0, 200.0)
+    d = mandrel_view_data(m, n_z=101, n_theta=37)
+    assert d.surface_x.shape == (len(d.z), 37)
+    np.testing.assert_allclose(d.r, 50.0 - 20.0 * d.z / 200.0, rtol=1e-12)  # closed form of the cone
+    np.testing.assert_allclose(np.hypot(d.surface_y, d.surface_z), np.repeat(d.r[:, None], 37, axis=1), rtol=1e-12)
+    np.testing.assert_allclose(d.surface_x[:, 0], d.z)
+    # the ring closes: last angle = first angle
+    np.testing.assert_allclose(d.surface_y[:, -1], d.surface_y[:, 0], atol=1e-9)
+    np.testing.assert_allclose(d.surface_z[:, -1], d.surface_z[:, 0], atol=1e-9)
+    np.testing.assert_allclose(d.d2r, 0.0, atol=1e-12)
+    assert d.concave == ()
+
+
+def test_hemisphere_curvature_and_handles() -> None:
+    m = Mandrel.vessel(100.0, 300.0, dome="hemisphere", pole_radii=30.0)
+    d = mandrel_view_data(m)
+    dome = d.z < -1.0
+    # r = sqrt(R² - z²)  =>  r'' = -R² / r³
+    np.testing.assert_allclose(d.d2r[dome], -(100.0**2) / d.r[dome] ** 3, rtol=1e-9)
+    assert d.concave == ()
+    hz, hr = handle_points(m)
+    assert np.all(np.diff(hz) > 0) and hz[0] == pytest.approx(m.z_min) and hz[-1] == pytest.approx(m.z_max)
+    for joint in (0.0, 300.0):
+        assert np.any(np.isclose(hz, joint))  # segment joints are kept
+    zl = np.clip(hz, None, 0.0)  # distance into the left dome
+    zr = np.clip(hz - 300.0, 0.0, None)  # and into the right dome
+    np.testing.assert_allclose(hr, np.sqrt(np.maximum(100.0**2 - zl**2 - zr**2, 0.0)), rtol=1e-9)
+
+
+def test_sketch_points_are_the_handles() -> None:
+    z, r = [0.0, 10.0, 20.0, 30.0, 40.0], [20.0, 30.0, 35.0, 30.0, 20.0]
+    m = Mandrel.from_points(z, r)
+    d = mandrel_view_data(m, sketch=(z, r))
+    np.testing.assert_array_equal(d.handle_z, z)
+    np.testing.assert_array_equal(d.handle_r, r)
+
+
+@pytest.mark.parametrize(
+    ("z", "r", "index", "words"),
+    [
+        ([0, 1, 2, 3], [1, 1, 1, 1], None, ""),
+        ([0, 1, 2, 3], [0, 1, 1, 0], None, ""),  # closed poles are fine
+        ([0, 1, 1, 3], [1, 1, 1, 1], 2, "z must increase"),
+        ([0, 2, 1, 3], [1, 1, 1, 1], 2, "z must increase"),
+        ([0, 1, 2, 3], [1, 0, 1, 1], 1, "radius must be > 0"),
+        ([0, 1, 2, 3], [-1, 1, 1, 1], 0, "radius must be > 0"),
+        ([0, 1, 2], [1, 1, 1], 2, "at least 4 points"),
+        ([0, 1, math.nan, 3], [1, 1, 1, 1], 2, "not a finite"),
+    ],
+)
+def test_check_points(z, r, index, words) -> None:
+    res = check_points(np.asarray(z, dtype=float), np.asarray(r, dtype=float))
+    if index is None:
+        assert res is None
+    else:
+        assert res is not None and res[0] == index and words in res[1]
