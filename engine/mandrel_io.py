@@ -608,16 +608,18 @@ def _resample_chain(z: FloatArray, r: FloatArray, n: int = _PROFILE_POINTS) -> t
         out_r.append(r[i] + (r[i + 1] - r[i]) * t)
     zz = np.concatenate(out_z)
     rr = np.concatenate(out_r)
+    if len(zz) < 3:
+        return zz, rr
     s = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(zz), np.diff(rr)))])
     ang = np.arctan2(np.diff(rr), np.diff(zz))  # direction of each chord
-    keep = [0]
-    hmin = h / 8.0
-    last_dir = ang[0]
-    for i in range(1, len(zz) - 1):
-        if (s[i] - s[keep[-1]] >= hmin or abs(ang[i] - last_dir) > 0.01) and s[-1] - s[i] >= 1e-3 * hmin:
-            keep.append(i)
-            last_dir = ang[i]
-    keep.append(len(zz) - 1)
+    turn = np.concatenate([[0.0, 0.0], np.cumsum(np.abs(np.angle(np.exp(1j * np.diff(ang)))))])
+    # keep the first point of every arc-length bucket of h/8 and of every 0.01 rad of turning
+    bucket_s = np.floor(s / (h / 8.0))
+    bucket_t = np.floor(turn / 0.01)
+    keep = np.flatnonzero(np.diff(bucket_s) != 0) + 1
+    keep = np.union1d(keep, np.flatnonzero(np.diff(bucket_t) != 0) + 1)
+    keep = keep[(keep > 0) & (keep < len(zz) - 1) & (s[-1] - s[keep] >= 1e-3 * h / 8.0)]
+    keep = np.concatenate([[0], keep, [len(zz) - 1]])
     return zz[keep], rr[keep]
 
 
