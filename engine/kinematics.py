@@ -614,6 +614,7 @@ class AxisPath:
     fibre_dir, contact_xyz: (N,3) the inputs (mandrel frame).
     eye_shift: (N,) how far the eye was slid along the fibre, mm (0 when the machine reaches it).
     violations: located limit/workspace violations (empty when the path is feasible).
+    x: (N,) the payout stage's process parameter, passed through (None when not given).
     """
 
     machine: str
@@ -624,6 +625,7 @@ class AxisPath:
     contact_xyz: np.ndarray
     eye_shift: np.ndarray
     violations: tuple[Violation, ...] = field(default_factory=tuple)
+    x: np.ndarray | None = None
 
     @property
     def ok(self) -> bool:
@@ -651,7 +653,8 @@ def _unwrap_near(a: np.ndarray, ref: float = 0.0) -> np.ndarray:
 
 
 def inverse_kinematics(machine: MachineTemplate, eye_xyz: np.ndarray, fibre_dir: np.ndarray,
-                       contact_xyz: np.ndarray, state: State | None = None) -> AxisPath:
+                       contact_xyz: np.ndarray, state: State | None = None,
+                       x: np.ndarray | None = None) -> AxisPath:
     """Axis positions that put the eye on the path with the eye axis along the fibre.
 
     Closed form for cartesian winders; warm-started, vectorised Newton for robot cells.  Angles are
@@ -664,6 +667,7 @@ def inverse_kinematics(machine: MachineTemplate, eye_xyz: np.ndarray, fibre_dir:
     eye_xyz, fibre_dir, contact_xyz: (N,3) in the mandrel frame (mm; unit vectors from the contact
         point to the eye).
     state: progress / cancellation.
+    x: (N,) process parameter of the payout stage, kept in the result for plots (optional).
 
     Returns
     -------
@@ -719,10 +723,15 @@ def inverse_kinematics(machine: MachineTemplate, eye_xyz: np.ndarray, fibre_dir:
                                      what="position")
     if state is not None:
         state.progress(1.0, "inverse kinematics done")
+    xs = None
+    if x is not None:
+        xs = np.asarray(x, dtype=float)
+        if xs.shape != (n,):
+            raise InputError(f"x must have shape ({n},), got {xs.shape}", field="x")
     arrs = [np.ascontiguousarray(a) for a in (q, eye, d, c, shift)]
     for a in arrs:
         a.flags.writeable = False
-    return AxisPath(machine.name, machine.axis_names, *arrs, violations=tuple(viol))
+    return AxisPath(machine.name, machine.axis_names, *arrs, violations=tuple(viol), x=xs)
 
 
 def _slide_to_radius(eye: np.ndarray, d: np.ndarray, c: np.ndarray, r0: float

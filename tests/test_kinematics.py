@@ -291,3 +291,13 @@ def test_bad_inputs():
         inverse_kinematics(m, bad, p.fibre_dir, p.contact_xyz)
     with pytest.raises(InputError, match="shape"):
         inverse_kinematics(m, p.eye_xyz[:, :2], p.fibre_dir, p.contact_xyz)
+
+
+def test_process_parameter_passes_through():
+    m = load_machine("lathe3")
+    p = _path("helix", n=200, circuits=1)
+    ap = inverse_kinematics(m, p.eye_xyz, p.fibre_dir, p.contact_xyz, x=p.x)
+    assert np.array_equal(ap.x, p.x)
+    assert inverse_kinematics(m, p.eye_xyz, p.fibre_dir, p.contact_xyz).x is None
+    with pytest.raises(InputError, match="x must have shape"):
+        inverse_kinematics(m, p.eye_xyz, p.fibre_dir, p.contact_xyz, x=p.x[:10])

@@ -14,11 +14,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from engine.blocks import make_blocks, optimise_block_times
-from engine.errors import InputError
+from engine.blocks import check_program, make_blocks, optimise_block_times
+from engine.errors import InfeasibleError, InputError
 from engine.fileio import atomic_write_text
-from engine.kinematics import demo_eye_path, inverse_kinematics, load_machine
-from engine.post import get_post, list_controllers, list_posts, load_controller
+from engine.kinematics import demo_eye_path, inverse_kinematics, load_machine, parse_machine
+from engine.post import get_post, list_controllers, list_posts, load_controller, write_nc
 from engine.post.base import parse_controller
 
 GOLDEN = Path(__file__).resolve().parent / "golden" / "post"
@@ -185,3 +185,36 @@ def test_linuxcnc_output_runs_in_rs274(tmp_path, machine):
     # inverse-time words: the interpreter switched to G93 and got an F on every block
     assert "inverse time" in out
     assert out.count("SET_FEED_RATE") >= b.n
+
+
+def test_nc_file_not_written_when_limits_are_violated(tmp_path):
+    import tomllib
+
+    m = load_machine("lathe3")
+    p = demo_eye_path("dome", n=1500, circuits=1)
+    with open(m.source, "rb") as fh:
+        data = tomllib.load(fh)
+    data["axes"][2]["max"] = 150.0           # cross feed cannot reach the dome path's largest radius
+    tight = parse_machine(data, "tight.toml")
+    ap = inverse_kinematics(tight, p.eye_xyz, p.fibre_dir, p.contact_xyz)
+    b = optimise_block_times(make_blocks(tight, ap, 0.1), tight)
+    problems = check_program(ap, b, tight)
+    assert problems and all(v.axis == "Y" for v in problems)
+    text = get_post("linuxcnc").render(b, tight, load_controller("linuxcnc"))
+    out = tmp_path / "p.ngc"
+    with pytest.raises(InfeasibleError, match="axis Y") as ei:
+        write_nc(out, text, problems)
+    assert "not written" in str(ei.value) and "exceeds the limit 150" in str(ei.value)
+    assert not out.exists() and not list(tmp_path.iterdir())
+    write_nc(out, text, problems, force=True)
+    assert out.read_bytes() == text.encode()
+    ok = tmp_path / "crlf.nc"
+    m4, b4 = _program("lathe4")
+    t4 = get_post("fanuc").render(b4, m4, load_controller("fanuc"))
+    write_nc(ok, t4, check_program(inverse_kinematics(m4, *_eye(1500)), None, m4))
+    assert ok.read_bytes() == t4.encode() and b"\r\n" in ok.read_bytes()
+
+
+def _eye(n):
+    p = demo_eye_path("dome", n=n, circuits=1)
+    return p.eye_xyz, p.fibre_dir, p.contact_xyz

@@ -12,8 +12,11 @@ from __future__ import annotations
 
 import importlib
 import pkgutil
+from collections.abc import Sequence
+from pathlib import Path
 
-from engine.errors import InputError
+from engine.errors import InfeasibleError, InputError
+from engine.fileio import atomic_write_text
 from engine.post.base import ControllerProfile, Option, PostProcessor, list_controllers, load_controller
 
 
@@ -42,5 +45,28 @@ def get_post(name: str) -> PostProcessor:
     return reg[name]()
 
 
+def write_nc(path: str | Path, text: str, violations: Sequence[object] = (), force: bool = False) -> Path:
+    """Write NC text atomically - unless the program has violations and the user did not force it.
+
+    Parameters
+    ----------
+    path: target file.  text: output of ``PostProcessor.render`` (line endings kept as they are).
+    violations: from :func:`engine.blocks.check_program`; each has a ``message``.
+    force: write even when there are violations.
+
+    Raises
+    ------
+    InfeasibleError
+        There are violations and ``force`` is false; nothing is written.  The message lists the first
+        few (axis, place, amount) and how many there are.
+    """
+    if violations and not force:
+        msgs = [getattr(v, "message", str(v)) for v in violations]
+        more = f" (and {len(msgs) - 5} more)" if len(msgs) > 5 else ""
+        raise InfeasibleError(f"not written: the program violates {len(msgs)} limit(s){more}: "
+                              + "; ".join(msgs[:5]) + ". Use force to write it anyway.", file=path)
+    return atomic_write_text(path, text, newline="")
+
+
 __all__ = ["ControllerProfile", "Option", "PostProcessor", "get_post", "list_controllers", "list_posts",
-           "load_controller"]
+           "load_controller", "write_nc"]
