@@ -151,8 +151,8 @@ class MandrelPanel(QWidget):
                     v.addLayout(h)
                 else:
                     v.addWidget(row.editor)
-                v.addWidget(row.error)
                 form.addRow(label, cell)
+                form.addRow(row.error)  # full width under its field; hidden while the value is fine
             if kind == "points":
                 self.points_info = QLabel("")
                 self.points_info.setWordWrap(True)
@@ -188,7 +188,7 @@ class MandrelPanel(QWidget):
         editor.setObjectName(f"{kind}.{key}")
         err = QLabel("")
         err.setObjectName(f"error.{kind}.{key}")
-        err.setStyleSheet("color: #c01010; font-size: 9pt;")
+        err.setStyleSheet("color: #c01010; font-size: 9pt; padding-left: 12px;")
         err.setWordWrap(True)
         err.hide()
         row = _Row(key, editor, err)
