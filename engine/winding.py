@@ -220,10 +220,15 @@ def _crossing(mandrel: Any, C: float, z_start: float, z_stop: float) -> float | 
         if z_stop < z_start:
             z = z[::-1]
     f = mandrel.r(z) - C
-    s0 = f[0]
-    if s0 == 0.0:
+    # skip samples on the starting parallel itself (a turnaround the search starts from)
+    live = np.flatnonzero(np.abs(f) > 1e-12 * max(1.0, abs(C)))
+    if not live.size:
+        return None
+    i0 = int(live[0])
+    s0 = f[i0]
+    if i0 > 0 and abs(f[0]) > 0.0 and np.sign(f[0]) != np.sign(s0):
         return float(z[0])
-    idx = np.flatnonzero(np.sign(f) != np.sign(s0))
+    idx = np.flatnonzero(np.sign(f[i0:]) != np.sign(s0)) + i0
     if not idx.size:
         return None
     i = int(idx[0])
@@ -350,10 +355,11 @@ def solve_pass(
         if zt is not None:
             zb, right_kind = zt, wc.TURN
     concave = [zn for zn in mandrel.concave_zones() if zn.z_to > za and zn.z_from < zb]
+    same_c = max(c.C for c in conds) - min(c.C for c in conds) <= 1e-12 * max(c.C for c in conds)
     if mode == "auto":
         if concave:
             mode = "minimax"
-        elif len(conds) == 1:
+        elif len(conds) == 1 or same_c:
             mode = "geodesic"
         elif len(conds) == 2:
             mode = "constant-lambda"
@@ -373,6 +379,11 @@ def solve_pass(
     cvals = [float(rn[i]) if c.what == wc.TURN else c.C for c, i in zip(conds, idx)]
     # the natural solution: one constant λ per interval between conditions, geodesic free ends
     pieces: list[dict[str, float]] = []
+    if same_c and mode != "piecewise-lambda":
+        C[:] = conds[0].C
+        cvals = [conds[0].C] * len(conds)
+        conds = conds[:1]
+        idx = idx[:1]
     try:
         for j in range(len(conds) - 1):
             i0, i1 = idx[j], idx[j + 1]

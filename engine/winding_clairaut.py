@@ -21,8 +21,8 @@ blow-up and no loss of accuracy near C = r.
 ODE (3) is ``C' = λ·(a·C² + b)`` with ``a = 1/r² + r''/(r(1 + r'²))``, ``b = −r·r''/(1 + r'²)``
 (a Riccati equation); it is integrated in t with classical RK4 on a grid that has every segment
 joint of the mandrel (where r'' may jump) and every constraint point as a node, so each step
-sees a smooth right-hand side.  The twist and the band length are integrated with Simpson's rule
-on the same steps (C at the step midpoint from the cubic Hermite interpolant).
+sees a smooth right-hand side.  The twist and the band length are integrated
+on the same steps with 3-point Gauss-Legendre (C between nodes from the cubic Hermite interpolant).
 """
 
 from __future__ import annotations
@@ -38,6 +38,8 @@ FloatArray = NDArray[np.float64]
 
 TURN = "turn"
 OPEN = "open"
+_GL_A = 0.5 - math.sqrt(15.0) / 10.0  # 3-point Gauss-Legendre nodes on [0, 1]
+_GL_B = 0.5 + math.sqrt(15.0) / 10.0
 
 
 def eval_on_segments(mandrel: Any, z: FloatArray, seg: NDArray[np.int64]) -> tuple[FloatArray, ...]:
@@ -184,21 +186,27 @@ def build_grid(
     is_out = np.zeros(n_uni, dtype=bool)
     is_out[::refine] = True
     bz = [z for z in joints(mandrel) + list(extra_z) if za + 1e-9 * max(1.0, L) < z < zb - 1e-9 * max(1.0, L)]
+    exact_u = np.full(n_uni, np.nan)
     if bz:
-        tb = t_of_z(kind, za, L, np.array(bz))
+        bza = np.array(bz)
+        tb = t_of_z(kind, za, L, bza)
         tol = 1e-9 * (t1 - t0)
         keep = np.array([np.min(np.abs(tu - x)) > tol for x in tb], dtype=bool)
         # snap uniform nodes that coincide with a breakpoint onto it
-        for x in tb[~keep]:
-            tu[np.argmin(np.abs(tu - x))] = x
-        tb = tb[keep]
-        t = np.concatenate([tu, tb])
-        out = np.concatenate([is_out, np.ones(len(tb), dtype=bool)])
+        for x, zx in zip(tb[~keep], bza[~keep]):
+            j = int(np.argmin(np.abs(tu - x)))
+            tu[j] = x
+            exact_u[j] = zx
+        t = np.concatenate([tu, tb[keep]])
+        out = np.concatenate([is_out, np.ones(int(keep.sum()), dtype=bool)])
+        exact = np.concatenate([exact_u, bza[keep]])
         order = np.argsort(t, kind="stable")
-        t, out = t[order], out[order]
+        t, out, exact = t[order], out[order], exact[order]
     else:
-        t, out = tu, is_out
+        t, out, exact = tu, is_out, exact_u
     z, dzdt, w, ratio = t_map(kind, za, L, t)
+    fixed = ~np.isnan(exact)
+    z[fixed] = exact[fixed]  # joints and condition points exactly
     z[0], z[-1] = za, zb
     grid = PassGrid(mandrel, za, zb, left, right, t, z, dzdt, w, ratio, out, np.zeros(len(t) - 1, dtype=np.int64))
     tm = 0.5 * (t[:-1] + t[1:])
@@ -208,11 +216,17 @@ def build_grid(
     zl, zr = z[:-1], z[1:]
     grid.zs = (zl, zm, zr)
     ns = len(seg)
-    r3, dr3, d2r3 = eval_on_segments(mandrel, np.concatenate([zl, zm, zr]), np.concatenate([seg, seg, seg]))
+    h = np.diff(t)
+    tg1, tg2 = t[:-1] + _GL_A * h, t[:-1] + _GL_B * h
+    z1, dz1, w1, rat1 = t_map(kind, za, L, tg1)
+    z2, dz2, w2, rat2 = t_map(kind, za, L, tg2)
+    r5, dr5, d2r5 = eval_on_segments(mandrel, np.concatenate([zl, zm, zr, z1, z2]), np.tile(seg, 5))
     geo = {}
-    for i, name in enumerate(("L", "M", "R")):
+    for i, name in enumerate(("L", "M", "R", "G1", "G2")):
         sl = slice(i * ns, (i + 1) * ns)
-        geo[name] = (r3[sl], dr3[sl], d2r3[sl])
+        geo[name] = (r5[sl], dr5[sl], d2r5[sl])
+    geo["G1_map"] = (dz1, w1, rat1)
+    geo["G2_map"] = (dz2, w2, rat2)
     grid.geo = geo
     grid.h = np.diff(t).tolist()
     grid.geo["mid_map"] = (dzm, wm, ratm)
@@ -231,15 +245,24 @@ def node_geometry(grid: PassGrid) -> tuple[FloatArray, FloatArray, FloatArray]:
     return (np.append(rl, rr[-1]), np.append(drl, drr[-1]), np.append(d2l, d2rr[-1]))
 
 
-def lower_bound(grid: PassGrid) -> FloatArray:
-    """Smallest admissible C at each node: the no-bridging bound of (6) where r'' > 0, else 0."""
+def lower_bound(grid: PassGrid, margin: float = 1e-4) -> FloatArray:
+    """Smallest admissible C at each node: the no-bridging bound of (6) where r'' > 0, else 0.
+
+    Each node takes the largest bound over its own parallel and the Gauss and mid points of the
+    two steps next to it (so the line also clears the bound between nodes), raised by the
+    relative ``margin``.
+    """
     out = np.zeros(grid.n)
-    for side, idx in (("L", slice(0, -1)), ("R", slice(1, None))):
+    for side in ("L", "R", "M", "G1", "G2"):
         r, dr, d2r = grid.geo[side]
         with np.errstate(invalid="ignore", divide="ignore"):
             cb2 = np.where(d2r > 0, r**3 * d2r / (1.0 + dr * dr + r * d2r), 0.0)
-        out[idx] = np.maximum(out[idx], np.sqrt(np.maximum(cb2, 0.0)))
-    return out
+        cb = np.sqrt(np.maximum(cb2, 0.0))
+        if side != "R":
+            out[:-1] = np.maximum(out[:-1], cb)
+        if side != "L":
+            out[1:] = np.maximum(out[1:], cb)
+    return out * (1.0 + margin)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -399,7 +422,7 @@ class PassProfile:
 
 
 def twist(grid: PassGrid, C: FloatArray, lam_step: FloatArray) -> tuple[FloatArray, FloatArray, tuple[float, float]]:
-    """Twist v (rad) and laid band length s (mm) at the nodes by Simpson's rule per step.
+    """Twist v (rad) and laid band length s (mm) at the nodes (3-point Gauss-Legendre per step).
 
     Raises ``ValueError`` if the line reaches C = r inside the pass or cannot turn around
     tangentially (``r' − C'`` of the wrong sign at a turnaround).
@@ -419,6 +442,10 @@ def twist(grid: PassGrid, C: FloatArray, lam_step: FloatArray) -> tuple[FloatArr
 
     def dvdt(r: FloatArray, dr: FloatArray, c: FloatArray, q: FloatArray, ratio: FloatArray) -> FloatArray:
         return c * np.sqrt(1.0 + dr * dr) / (r * np.sqrt((r + c) * q)) * ratio
+
+    def hermite(th: float) -> FloatArray:
+        return ((2 * th**3 - 3 * th**2 + 1) * cl + (th**3 - 2 * th**2 + th) * h * fl
+                + (-2 * th**3 + 3 * th**2) * cr + (th**3 - th**2) * h * fr)
 
     with np.errstate(divide="ignore", invalid="ignore"):
         ql = (rl - cl) / grid.w[:-1]
@@ -440,14 +467,23 @@ def twist(grid: PassGrid, C: FloatArray, lam_step: FloatArray) -> tuple[FloatArr
             k = int(np.flatnonzero(bad)[0])
             zz = grid.zs[{"start": 0, "mid": 1, "end": 2}[name]][k]
             raise ValueError(f"C reaches the local radius at z = {zz:.6g} mm before the intended turnaround")
-    phl = dvdt(rl, drl, cl, ql, grid.ratio[:-1])
-    phr = dvdt(rr, drr, cr, qr, grid.ratio[1:])
-    phm = dvdt(rm, drm, cm, qm, ratm)
-    dv = h / 6.0 * (phl + 4.0 * phm + phr)
-    sl = np.sqrt((1.0 + drl * drl) * grid.dzdt[:-1] ** 2 + (rl * phl) ** 2)
-    sr = np.sqrt((1.0 + drr * drr) * grid.dzdt[1:] ** 2 + (rr * phr) ** 2)
-    sm = np.sqrt((1.0 + drm * drm) * dzm**2 + (rm * phm) ** 2)
-    ds = h / 6.0 * (sl + 4.0 * sm + sr)
+    # 3-point Gauss-Legendre per step (6th order; the turnaround ends are never evaluated)
+    dv = np.zeros(len(h))
+    ds = np.zeros(len(h))
+    for name, th, wgt in (("G1", _GL_A, 5.0 / 18.0), ("M", 0.5, 8.0 / 18.0), ("G2", _GL_B, 5.0 / 18.0)):
+        r, dr, _ = grid.geo[name]
+        dz, w, rat = grid.geo["mid_map"] if name == "M" else grid.geo[name + "_map"]
+        c = hermite(th)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            q = (r - c) / w
+        if not (q > 0).all():
+            k = int(np.flatnonzero(~(q > 0))[0])
+            raise ValueError(f"C reaches the local radius near z = {grid.zs[1][k]:.6g} mm before the turnaround")
+        ph = dvdt(r, dr, c, q, rat)
+        dv += wgt * ph
+        ds += wgt * np.sqrt((1.0 + dr * dr) * dz**2 + (r * ph) ** 2)
+    dv *= h
+    ds *= h
     v = np.concatenate([[0.0], np.cumsum(dv)])
     s = np.concatenate([[0.0], np.cumsum(ds)])
     return v, s, (q_a, q_b)
