@@ -132,6 +132,10 @@ class TimeLimits:
     accel_check:
         ``"interval"`` (limits hold inside every interval) or ``"arrival"`` (the paper's check at the
         arrival node only).
+    tube_cluster:
+        Placement of the M levels inside the tube: ``ṡ = lo + (hi - lo)·(1 + (ξ + aξ³)/(1 + a))/2``
+        for ξ uniform in [-1, 1]; ``a = 0`` is uniform, the default ``a = 8`` makes the levels near the
+        tube's centre (the previous solution) 9x denser (the paper does not fix the placement).
     """
 
     v_max: tuple[float, ...]
@@ -147,6 +151,7 @@ class TimeLimits:
     points: tuple[TechPoint, ...] = ()
     max_iterations: int = 60
     accel_check: str = "interval"
+    tube_cluster: float = 8.0
 
 
 @dataclass(frozen=True)
@@ -269,7 +274,8 @@ def _num(d: Mapping[str, Any], key: str, default: float | None, file: str | None
 def limits_from_mapping(d: Mapping[str, Any], file: str | None = None) -> TimeLimits:
     """Build :class:`TimeLimits` from a TOML-like mapping (keys as in the CLI's LIMITS.toml)."""
     known = {"v_max", "a_max", "sdot_max", "sddot_max", "levels", "penalty", "tube_share",
-             "stop_percent", "sdot_start", "sdot_end", "points", "max_iterations", "accel_check"}
+             "stop_percent", "sdot_start", "sdot_end", "points", "max_iterations", "accel_check",
+             "tube_cluster"}
     for k in d:
         if k not in known:
             raise InputError(f"unknown key (known: {', '.join(sorted(known))})", file=file, field=k)
@@ -333,6 +339,7 @@ def limits_from_mapping(d: Mapping[str, Any], file: str | None = None) -> TimeLi
         sdot_start=_num(d, "sdot_start", 0.0, file, nonneg=True),
         sdot_end=_num(d, "sdot_end", 0.0, file, nonneg=True),
         points=tuple(points), max_iterations=int(maxit), accel_check=str(check),
+        tube_cluster=_num(d, "tube_cluster", 8.0, file, nonneg=True),
     )
 
 
@@ -456,54 +463,92 @@ def _poly_eval(coef: np.ndarray, tau: np.ndarray) -> np.ndarray:
 def _hull_ccw(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Convex hull vertices of every row of ``pts`` (B, R, 2), counter-clockwise.
 
-    The origin must lie strictly inside every hull (true here: each constraint comes with its mirror
-    image and the box rows span the plane).  Points are sorted by polar angle and reflex points are
-    removed in parallel passes until the star-shaped polygon is convex (a hull vertex never makes a
-    reflex turn, so simultaneous removal is safe).  Returns ``(order, m)``: ``order[b, :m[b]]`` are
-    the indices of the hull vertices in CCW order.
+    Andrew's monotone chain, vectorised over the rows (the scan over the R points is the only
+    Python loop).  Collinear and duplicate points are dropped.  Returns ``(order, m)``:
+    ``order[b, :m[b]]`` are the indices of the hull vertices of row b in CCW order.
     """
-    B, R, _ = pts.shape
-    ang = np.arctan2(pts[..., 1], pts[..., 0])
-    rad = np.einsum("brk,brk->br", pts, pts)
-    # sort by angle, then radius (so that coincident points are neighbours)
-    srt = np.argsort(ang, axis=1, kind="stable")
-    srt = np.take_along_axis(srt, np.argsort(np.take_along_axis(rad, srt, 1), axis=1, kind="stable"), 1)
-    srt = np.take_along_axis(srt, np.argsort(np.take_along_axis(ang, srt, 1), axis=1, kind="stable"), 1)
-    rowoff = (np.arange(B) * R)[:, None]
-    Px = pts[..., 0].ravel()[srt + rowoff]
-    Py = pts[..., 1].ravel()[srt + rowoff]
-    r2 = Px * Px + Py * Py
-    scale = r2.max(axis=1, keepdims=True)
-    alive = r2 > 1e-28 * scale
-    dup = np.zeros_like(alive)
-    dup[:, 1:] = (Px[:, 1:] - Px[:, :-1]) ** 2 + (Py[:, 1:] - Py[:, :-1]) ** 2 <= 1e-26 * scale
-    alive &= ~dup
-    Pxf, Pyf = Px.ravel(), Py.ravel()
-    ar = np.arange(R)
-    big = 4 * R
-    lo_lap = np.broadcast_to(ar - R, (B, R))
-    hi_lap = np.broadcast_to(ar + R, (B, R))
-    for _ in range(R):
-        ext = np.concatenate([np.where(alive, lo_lap, -big), np.where(alive, ar, -big)], axis=1)
-        prv = np.maximum.accumulate(ext, axis=1)[:, R - 1:2 * R - 1]
-        prv %= R
-        prv += rowoff
-        ext = np.concatenate([np.where(alive, ar, big), np.where(alive, hi_lap, big)], axis=1)
-        nxt = np.minimum.accumulate(ext[:, ::-1], axis=1)[:, ::-1][:, 1:R + 1]
-        nxt %= R
-        nxt += rowoff
-        ax, ay = Pxf[prv], Pyf[prv]
-        cx, cy = Pxf[nxt], Pyf[nxt]
-        e1x, e1y, e2x, e2y = Px - ax, Py - ay, cx - Px, cy - Py
-        cross = e1x * e2y - e1y * e2x
-        tol = 1e-12 * np.sqrt((e1x * e1x + e1y * e1y) * (e2x * e2x + e2y * e2y))
-        reflex = alive & (cross <= tol)
-        if not reflex.any():
-            break
-        alive &= ~reflex
-    m = alive.sum(axis=1)
-    comp = np.argsort(~alive, axis=1, kind="stable")
-    return np.take_along_axis(srt, comp, axis=1), m
+    B, R0, _ = pts.shape
+    # exact pre-filter: drop the points strictly inside the polygon of the extreme points in 16
+    # directions (they cannot be hull vertices), then scan only the few that are left
+    th = np.linspace(0.0, 2.0 * np.pi, 9)[:-1]
+    px, py = pts[..., 0], pts[..., 1]
+    ext = np.argmax(px[..., None] * np.cos(th) + py[..., None] * np.sin(th), axis=1)     # (B, 8)
+    vx = np.take_along_axis(px, ext, 1)
+    vy = np.take_along_axis(py, ext, 1)
+    inside = np.ones(px.shape, bool)
+    for k in range(th.size):
+        k2 = (k + 1) % th.size
+        ex, ey = (vx[:, k2] - vx[:, k])[:, None], (vy[:, k2] - vy[:, k])[:, None]
+        dx, dy = px - vx[:, k, None], py - vy[:, k, None]
+        crs = ex * dy - ey * dx
+        e2 = ex * ex + ey * ey
+        inside &= (e2 == 0) | ((crs > 0) & (crs * crs > 1e-18 * e2 * (dx * dx + dy * dy)))
+    keep = ~inside
+    kidx = np.argsort(~keep, axis=1, kind="stable")
+    nk = keep.sum(axis=1)
+    # scan the rows in two groups (a few thin polygons keep many points)
+    Rs = int(np.percentile(nk, 97)) + 1
+    out_o = np.zeros((B, 1), np.int64)
+    out_m = np.zeros(B, np.int64)
+    parts = []
+    for sel in (nk <= Rs, nk > Rs):
+        rows_sel = np.flatnonzero(sel)
+        if rows_sel.size:
+            o, m = _monotone_chain(pts[rows_sel], kidx[rows_sel], nk[rows_sel])
+            parts.append((rows_sel, o, m))
+    V = max(o.shape[1] for _, o, _ in parts)
+    out_o = np.zeros((B, V), np.int64)
+    for rows_sel, o, m in parts:
+        out_o[rows_sel, :o.shape[1]] = o
+        out_m[rows_sel] = m
+    return out_o, out_m
+
+
+def _monotone_chain(pts: np.ndarray, kidx: np.ndarray, nk: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Andrew's monotone chain on the first ``nk[b]`` points ``kidx[b]`` of every row of ``pts``."""
+    B = pts.shape[0]
+    R = int(nk.max())
+    kidx = kidx[:, :R]
+    kidx = np.where(np.arange(R)[None, :] < nk[:, None], kidx, kidx[:, :1])   # pad with a duplicate
+    sub = np.take_along_axis(pts, kidx[..., None], 1)
+    order = np.lexsort((sub[..., 1], sub[..., 0]), axis=-1)
+    X = np.take_along_axis(sub[..., 0], order, axis=1)
+    Y = np.take_along_axis(sub[..., 1], order, axis=1)
+    order = np.take_along_axis(kidx, order, 1)
+    rows = np.arange(B)
+
+    def chain(seq: range) -> tuple[np.ndarray, np.ndarray]:
+        st = np.zeros((B, R), np.int64)
+        ln = np.zeros(B, np.int64)
+        for q in seq:
+            px, py = X[:, q], Y[:, q]
+            while True:
+                m = ln >= 2
+                if not m.any():
+                    break
+                o = st[rows, np.maximum(ln - 2, 0)]
+                a_ = st[rows, np.maximum(ln - 1, 0)]
+                ox, oy, ax, ay = X[rows, o], Y[rows, o], X[rows, a_], Y[rows, a_]
+                e1x, e1y, e2x, e2y = ax - ox, ay - oy, px - ax, py - ay
+                cr = e1x * e2y - e1y * e2x
+                tol = 1e-12 * np.sqrt((e1x * e1x + e1y * e1y) * (e2x * e2x + e2y * e2y))
+                pop = m & (cr <= tol)
+                if not pop.any():
+                    break
+                ln -= pop
+            st[rows, ln] = q
+            ln += 1
+        return st, ln
+
+    lo_st, lo_n = chain(range(R))
+    up_st, up_n = chain(range(R - 1, -1, -1))
+    m = lo_n + up_n - 2
+    tt = np.arange(int(m.max()))[None, :]
+    in_lo = tt < (lo_n - 1)[:, None]
+    pos = np.where(in_lo, np.take_along_axis(lo_st, np.minimum(tt, R - 1), 1),
+                   np.take_along_axis(up_st, np.clip(tt - (lo_n - 1)[:, None], 0, R - 1), 1))
+    pos = np.where(tt < m[:, None], pos, 0)
+    return np.take_along_axis(order, pos, 1), m
 
 
 def _chains(rows: np.ndarray, h: np.ndarray, xn_prev: np.ndarray, xn_cur: np.ndarray
@@ -621,9 +666,24 @@ def _prepare(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits) -> _Pro
         extra[:, 0, 1] = 1.0 / limits.sddot_max
         extra[:, 1, 1] = -1.0 / limits.sddot_max
         rows = np.concatenate([rows, extra], axis=1)
+    # exact pre-pruning: an inner Bernstein point inside the triangle (origin, first, last) of its
+    # own axis is implied by those two (the origin lies inside the hull), so the hull skips it
+    hull_rows = rows
+    if P.shape[-1] == 5:
+        g5, c5 = P / A[None, :, None], Q / A[None, :, None]
+        det = g5[..., 0] * c5[..., 4] - c5[..., 0] * g5[..., 4]
+        sd = np.where(np.abs(det) > 0, det, 1.0)
+        al = (g5[..., 1:4] * c5[..., 4:5] - c5[..., 1:4] * g5[..., 4:5]) / sd[..., None]
+        be = (g5[..., 0:1] * c5[..., 1:4] - c5[..., 0:1] * g5[..., 1:4]) / sd[..., None]
+        inner = (np.abs(det)[..., None] > 0) & (al >= 0) & (be >= 0) & (al + be <= 1.0 - 1e-12)
+        drop = np.zeros(g5.shape, bool)
+        drop[..., 1:4] = inner
+        drop = drop.reshape(n - 1, -1)
+        keep = ~np.concatenate([drop, drop, np.zeros((n - 1, rows.shape[1] - 2 * drop.shape[1]), bool)], 1)
+        hull_rows = rows * keep[..., None]
     cap_box = np.minimum(cap, 1e9)
     xn = (1.5 * cap_box) ** 2 + 1.0
-    ch = _chains(rows, h, xn[:-1], xn[1:])
+    ch = _chains(hull_rows, h, xn[:-1], xn[1:])
     return _Problem(s=s, h=h, p=p, d1=d1, d2=d2, cap_v=cap_v, cap_tech=cap_tech, cap=cap, xn=xn[1:],
                     rows=rows, limits=limits, point_nodes=point_nodes, **ch)
 
@@ -645,13 +705,14 @@ def _infeasible(prob: _Problem, i: int, why: str) -> InfeasibleError:
 
 
 _CHUNK = 1 << 15
+_STATS: dict[str, int] = {}  # size of the last DP pass (for the benchmark)
 _LOBITS = 12
 _LOMASK = np.int64((1 << _LOBITS) - 1)
 _HIMASK = np.int64(~((1 << _LOBITS) - 1))
 
 
 def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | None = None,
-        square: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        square: bool = False, cluster: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """One DP pass on the grid ``s_i × {M levels in [lo_i, hi_i]}``.
 
     The levels are uniform in ṡ (``square=False``, the paper's tube) or in ṡ² (``square=True``).
@@ -661,11 +722,14 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
     n = prob.s.size
     K = prob.limits.penalty * prob.p ** 2
     plo, phi = (lo * lo, hi * hi) if square else (lo, hi)
-    d = (phi - plo) / (M - 1)
-    degenerate = d <= 0
-    d = np.where(degenerate, 0.0, d)
-    jj = np.arange(M)
-    lev = np.minimum(plo[:, None] + d[:, None] * jj, phi[:, None])          # (N, M) in phi
+    span = phi - plo
+    degenerate = span <= 0
+    span = np.where(degenerate, 0.0, span)
+    xi = np.linspace(-1.0, 1.0, M)
+    a = float(cluster)
+    frac = (1.0 + (xi + a * xi**3) / (1.0 + a)) / 2.0 if a > 0 else (xi + 1.0) / 2.0
+    frac[0], frac[-1] = 0.0, 1.0
+    lev = np.minimum(plo[:, None] + span[:, None] * frac, phi[:, None])   # (N, M) in phi
     if square:
         xall = lev
         lev = np.sqrt(lev)
@@ -685,9 +749,18 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
         pk_lo = np.sqrt(np.maximum(lb, 0.0))
         pk_hi = np.sqrt(np.maximum(ub, 0.0))
     lo_p = plo[:-1, None]
-    dp_ = np.where(degenerate[:-1], 1.0, d[:-1])[:, None]
-    klo = np.maximum(np.ceil((pk_lo - lo_p) / dp_), 0.0)
-    khi = np.minimum(np.floor((pk_hi - lo_p) / dp_), M - 1.0)
+    sp_p = np.where(degenerate[:-1], 1.0, span[:-1])[:, None]
+    ylo = (pk_lo - lo_p) / sp_p                               # fraction of the span
+    yhi = (pk_hi - lo_p) / sp_p
+    klo = np.searchsorted(frac, ylo.ravel(), side="left").reshape(ylo.shape).astype(float)
+    khi = np.searchsorted(frac, yhi.ravel(), side="right").reshape(yhi.shape) - 1.0
+    # exact correction against the actual level values (the index maps are only rounded)
+    rowp = (np.arange(n - 1) * M)[:, None]
+    levp = lev.ravel() if not square else xall.ravel()
+    kli = np.minimum(klo, M - 1).astype(np.int64)
+    klo = np.where((klo <= M - 1) & (levp[rowp + kli] < pk_lo), klo + 1, klo)
+    khi_i = np.maximum(khi, 0).astype(np.int64)
+    khi = np.where((khi >= 0) & (levp[rowp + khi_i] > pk_hi), khi - 1, khi)
     degp = degenerate[:-1]
     if degp.any():
         inside = (lo_p[degp] >= pk_lo[degp]) & (lo_p[degp] <= pk_hi[degp])
@@ -704,6 +777,7 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
     h = prob.h
     Kq = K / 4.0
     per_int = cnt_eff.sum(axis=1)
+    _STATS["candidates"] = int(per_int.sum())
     bounds = [0]
     acc = 0
     for i, c in enumerate(per_int.tolist()):
@@ -715,7 +789,7 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
     levf = lev.ravel()
     Jf = np.full(n * M, np.inf)
     Jf[0] = 0.0
-    kstar = np.empty((n - 1, M), np.int64)
+    Jraw = Jf.view(np.int64).reshape(n, M)
     two_h = 2.0 * h
     kq_h = Kq / (h * h)
     ar_all = np.arange(_CHUNK + int(per_int.max()), dtype=np.int64)
@@ -754,25 +828,27 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
                 cost += diff
         cost[st[:-1][bad[i0:i1].ravel()]] = np.inf
         seg = st[:-1].reshape(ni, M)
+        segl = seg - seg[:, :1]
         ends = np.append(seg[1:, 0], T).tolist()
         starts0 = seg[:, 0].tolist()
-        for ii in range(ni):
-            i = i0 + ii
-            a, b = starts0[ii], ends[ii]
-            cand = Jf[G[a:b]]
-            cand += cost[a:b]
-            ci = cand.view(np.int64)
-            ci &= _HIMASK
-            ci |= glow[a:b]
-            jint = np.minimum.reduceat(ci, seg[ii] - a)
-            kstar[i] = jint & _LOMASK
-            jint &= _HIMASK
-            Jf[(i + 1) * M:(i + 2) * M] = jint.view(np.float64)
+        with np.errstate(invalid="ignore"):
+            for ii in range(ni):
+                i = i0 + ii
+                a, b = starts0[ii], ends[ii]
+                cand = Jf.take(G[a:b])
+                cand += cost[a:b]
+                ci = cand.view(np.int64)
+                ci &= _HIMASK
+                ci |= glow[a:b]
+                # min and argmin at once; the low bits stay in J (<= 2^-40 relative; infeasible -> NaN)
+                np.minimum.reduceat(ci, segl[ii], out=Jraw[i + 1])
         if state is not None:
             check_cancel(state)
     # low bits hold (node*M + k) mod 2^12: recover k
+    kstar = Jraw[1:] & _LOMASK
     kstar -= (np.arange(n - 1, dtype=np.int64) * M)[:, None]
     kstar &= _LOMASK
+    Jraw &= _HIMASK
     Jm = Jf.reshape(n, M)
     reach = np.isfinite(Jm).any(axis=1)
     if not reach.all():
@@ -949,7 +1025,7 @@ def _tube(prob: _Problem, state: State | None) -> tuple[np.ndarray, list[Iterati
         lo[-1] = hi[-1] = lim.sdot_end
         lo = np.minimum(lo, hi)
         sh_used = sh
-        sdot_r, jidx = _dp(prob, lo, hi, M, state)
+        sdot_r, jidx = _dp(prob, lo, hi, M, state, cluster=lim.tube_cluster)
         t_total = float(_times(s, sdot_r)[-1])
         tsp = t_total / sN
         w, o = _touches(jidx, lo, hi, prob, M)
