@@ -20,6 +20,7 @@ from PySide6.QtGui import QGuiApplication, QImage
 from PySide6.QtWidgets import QLabel, QVBoxLayout, QWidget
 
 from winder_gui.views.geometry import MandrelViewData
+from winder_gui.workers import JobRunner
 
 HEADLESS_PLATFORMS = {"offscreen", "minimal", "vnc"}
 
@@ -29,6 +30,14 @@ def gl_available() -> bool:
     if os.environ.get("WINDER_NO_3D", "") not in ("", "0"):
         return False
     return QGuiApplication.platformName() not in HEADLESS_PLATFORMS
+
+
+def _preload_vtk(*, state: Any) -> bool:
+    """Import pyvista/pyvistaqt (seconds of VTK loading) off the GUI thread."""
+    import pyvista  # noqa: F401
+    import pyvistaqt  # noqa: F401
+
+    return True
 
 
 class MandrelView3D(QWidget):
@@ -43,6 +52,7 @@ class MandrelView3D(QWidget):
         self.plotter: Any = None
         self.data: MandrelViewData | None = None
         self._scheduled = False
+        self._loader: JobRunner | None = None
         self._reset_camera = True
         self._label = QLabel("3D view: loading…")
         self._label.setAlignment(Qt.AlignmentFlag.AlignCenter)
@@ -52,13 +62,24 @@ class MandrelView3D(QWidget):
     # -- lifecycle -------------------------------------------------------------------------------
     def showEvent(self, event) -> None:  # noqa: N802 - Qt override
         super().showEvent(event)
-        if self.backend == "pending" and not self._scheduled:
+        self._maybe_start()
+
+    def _maybe_start(self) -> None:
+        """Start loading the backend once the view is visible and has a mandrel to show (plots first)."""
+        if self.backend == "pending" and not self._scheduled and self.isVisible() and self.data is not None:
             self._scheduled = True
-            QTimer.singleShot(0, self.ensure_backend)
+            if gl_available():
+                # import VTK in a worker so the GUI stays live; only the widget is made on the GUI thread
+                self._loader = JobRunner(self)
+                self._loader.finished.connect(lambda _r: self.ensure_backend())
+                self._loader.failed.connect(lambda exc, _tb: self._use_placeholder(f"3D view unavailable: {exc}"))
+                self._loader.submit(_preload_vtk)
+            else:
+                QTimer.singleShot(0, self.ensure_backend)
 
     def ensure_backend(self) -> str:
         """Create the backend now if not done yet; returns :attr:`backend`."""
-        if self.backend != "pending":
+        if self.backend not in ("pending",):
             return self.backend
         if not gl_available():
             self._use_placeholder(f"3D view unavailable on the '{QGuiApplication.platformName()}' Qt platform")
@@ -90,6 +111,8 @@ class MandrelView3D(QWidget):
 
     def close_backend(self) -> None:
         """Release VTK resources (call before the window closes)."""
+        if self._loader is not None:
+            self._loader.wait(30000)
         if self.plotter is not None:
             try:
                 self.plotter.close()
@@ -102,6 +125,7 @@ class MandrelView3D(QWidget):
         """Show the revolved surface of ``data``."""
         self.data = data
         self._reset_camera = self._reset_camera or reset_camera
+        self._maybe_start()
         if self.backend == "vtk":
             self._render()
         elif self.backend == "placeholder":
