@@ -262,6 +262,11 @@ def _end_condition(
     name = "left" if side == 0 else "right"
     if C_end is None:
         return wc.OPEN, z_end, None
+    if C_end >= mandrel.r_max * (1.0 - 1e-12) and (user or _end_is_dome(mandrel, side)):
+        raise _err(
+            f"{name} pole: Clairaut constant C = {C_end:.6g} mm is not below the largest mandrel radius "
+            f"({mandrel.r_max:.6g} mm): the line cannot turn around (pole opening + band/2 >= local radius)",
+            fld, ctx)
     if C_end > r_end:
         zt = _crossing(mandrel, C_end, z_end, z_other)
         if zt is None and not user and not _end_is_dome(mandrel, side):
@@ -431,7 +436,15 @@ def solve_pass(
             except ValueError as exc:
                 raise _err(f"minimax winding line: {exc}", "winding.mode", ctx, InfeasibleError) from None
             C, lam = wc.tube_path(grid, tb, lam_star)
-            pieces = _pieces_from_steps(grid, lam)
+            touch = np.flatnonzero(C[1:-1] >= hi[1:-1] * (1.0 - 1e-7)) + 1
+            if touch.size:
+                k = int(touch[0])
+                raise _err(
+                    f"minimax winding line: the line would have to touch the parallel z = {grid.z[k]:.6g} mm "
+                    f"(r = {rn[k]:.6g} mm, winding angle 90°) to stay clear of bridging (6) elsewhere (C >= "
+                    f"{float(np.max(lo)):.6g} mm needed); no realisable line passes there — move the pole "
+                    "condition so the line turns around before it", "winding.pole_c_mm", ctx, InfeasibleError)
+            pieces = _pieces_from_steps(grid, lam, lam_star)
             notes.append(f"minimax direct search: max |λ| = {lam_star:.6g} (bisection on the reachable tube)")
     try:
         v, s, _ = wc.twist(grid, C, lam)
@@ -525,15 +538,17 @@ def _ranges(z: FloatArray, mask: NDArray[np.bool_]) -> list[tuple[float, float]]
     return [(float(z[a]), float(z[b - 1])) for a, b in zip(edges[0::2], edges[1::2])]
 
 
-def _pieces_from_steps(grid: wc.PassGrid, lam: FloatArray) -> list[dict[str, float]]:
+def _pieces_from_steps(grid: wc.PassGrid, lam: FloatArray, scale: float) -> list[dict[str, float]]:
+    """Runs of (nearly) equal λ per step as pieces {z_from, z_to, lambda}; differences below
+    1e-4·``scale`` (single clamped steps at joints) do not start a new piece."""
+    tol = 1e-4 * max(scale, 1e-6)
     pieces: list[dict[str, float]] = []
     start = 0
     for k in range(1, len(lam) + 1):
-        if k == len(lam) or abs(lam[k] - lam[start]) > 1e-6 * max(1e-3, abs(lam[start])):
+        if k == len(lam) or abs(lam[k] - lam[start]) > tol:
             seg = lam[start:k]
             pieces.append({"z_from": float(grid.z[start]), "z_to": float(grid.z[k]), "lambda": float(np.mean(seg))})
             start = k
-    # merge tiny pieces (single clamped steps) into a compact list for reports
     return pieces
 
 
