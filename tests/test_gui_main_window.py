@@ -371,6 +371,32 @@ def test_bad_import_keeps_job(window, tmp_path) -> None:
     assert ".csv" in w.error_box.text() and w.job == before
 
 
+@pytest.mark.parametrize(
+    ("name", "content"),
+    [
+        ("empty.csv", b""),
+        ("text.csv", b"z,r\n0,50\n10,abc\n20,50\n30,50\n"),
+        ("garbage.dxf", b"this is not a drawing\n"),
+        ("garbage.step", b"ISO-10303-21;\nnot really\n"),
+        ("binary.csv", bytes(range(256))),
+    ],
+)
+def test_bad_profile_files_show_a_dialog(window, tmp_path, name: str, content: bytes) -> None:
+    w = window
+    _open(w, ROOT / "resources/examples/bottle.toml")
+    before, curve = w.job, _curve(w)[1]
+    f = tmp_path / name
+    f.write_bytes(content)
+    w.import_generatrix(f)
+    assert w.wait_idle(60000)
+    shown = w.error_box.text()
+    assert name in shown and "Traceback" not in shown and "Internal error" not in shown
+    assert w.job == before and not w.dirty
+    np.testing.assert_array_equal(_curve(w)[1], curve)
+    assert w.mandrel_panel.current_kind() == "bottle"
+    assert f.read_bytes() == content
+
+
 def test_good_import_then_save_keeps_relative_path(window, tmp_path) -> None:
     w = window
     csv = tmp_path / "data" / "profile.csv"
