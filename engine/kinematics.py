@@ -699,9 +699,13 @@ def inverse_kinematics(machine: MachineTemplate, eye_xyz: np.ndarray, fibre_dir:
     dth = np.diff(theta)
     if np.any(dth > 0) and np.any(dth < 0):
         major = np.sign(theta[-1] - theta[0]) or 1.0
-        viol += violations_from_mask("reverse", machine.axes[machine.axis_index("mandrel")].name,
-                                     np.concatenate(([False], np.sign(dth) == -major)),
-                                     np.concatenate(([0.0], dth)), 0.0, " rad", what="mandrel reverses by")
+        ax = machine.axes[machine.axis_index("mandrel")]
+        for a, b in _runs(np.concatenate(([False], np.sign(dth) == -major))):
+            back = float(abs(theta[b - 1] - theta[a - 1]) * abs(ax.scale))     # controller units
+            viol.append(Violation(
+                "reverse", ax.name, back, back, 0.0, index=a, count=b - a,
+                message=f"axis {ax.name}: the mandrel turns back by {back:.4g} {ax.units} between points "
+                        f"{a - 1} and {b - 1} (winding needs one direction of rotation)"))
     ct, st = np.cos(theta), np.sin(theta)
     pw = np.stack([ct * eye[:, 0] - st * eye[:, 1], st * eye[:, 0] + ct * eye[:, 1], eye[:, 2]], axis=1)
     dw = np.stack([ct * d[:, 0] - st * d[:, 1], st * d[:, 0] + ct * d[:, 1], d[:, 2]], axis=1)
