@@ -216,6 +216,8 @@ def test_workspace_and_reverse_violations():
     ap2 = inverse_kinematics(m, eye, d, con)
     rev = [v for v in ap2.violations if v.kind == "reverse"]
     assert rev and rev[0].index == k and rev[0].axis == "A"
+    assert rev[0].amount == pytest.approx(math.degrees(0.5), abs=0.5)      # deg, the axis' units
+    assert "turns back" in rev[0].message
 
 
 @pytest.mark.parametrize(
