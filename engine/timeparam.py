@@ -52,10 +52,12 @@ sequential pass does one gather + ``minimum.reduceat`` per interval.
 
 from __future__ import annotations
 
+import bisect
 import math
 import time
 import tomllib
 from collections.abc import Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -604,7 +606,7 @@ def _chains(rows: np.ndarray, h: np.ndarray, xn_prev: np.ndarray, xn_cur: np.nda
     }
 
 
-def _prepare(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits) -> _Problem:
+def _prepare(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, chains: bool = True) -> _Problem:
     s, X, dX, ddX = _validate(path_s, X, dX, ddX, limits)
     n, p = X.shape
     h = np.diff(s)
@@ -683,7 +685,11 @@ def _prepare(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits) -> _Pro
         hull_rows = rows * keep[..., None]
     cap_box = np.minimum(cap, 1e9)
     xn = (1.5 * cap_box) ** 2 + 1.0
-    ch = _chains(hull_rows, h, xn[:-1], xn[1:])
+    if chains:
+        ch = _chains(hull_rows, h, xn[:-1], xn[1:])
+    else:
+        e = np.zeros(0)
+        ch = {"rq": e, "rk": e, "lq": e, "lk": e, "xjb": e, "xjt": e}
     return _Problem(s=s, h=h, p=p, d1=d1, d2=d2, cap_v=cap_v, cap_tech=cap_tech, cap=cap, xn=xn[1:],
                     rows=rows, limits=limits, point_nodes=point_nodes, **ch)
 
@@ -705,6 +711,14 @@ def _infeasible(prob: _Problem, i: int, why: str) -> InfeasibleError:
 
 
 _CHUNK = 1 << 15
+_THREADS = False  # build the next chunk's candidates in a worker thread while the DP runs
+_POOL: list[ThreadPoolExecutor] = []
+
+
+def _pool() -> ThreadPoolExecutor:
+    if not _POOL:
+        _POOL.append(ThreadPoolExecutor(max_workers=1, thread_name_prefix="timeparam"))
+    return _POOL[0]
 _STATS: dict[str, int] = {}  # size of the last DP pass (for the benchmark)
 _LOBITS = 12
 _LOMASK = np.int64((1 << _LOBITS) - 1)
@@ -793,7 +807,7 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
     two_h = 2.0 * h
     kq_h = Kq / (h * h)
     ar_all = np.arange(_CHUNK + int(per_int.max()), dtype=np.int64)
-    for i0, i1 in zip(bounds[:-1], bounds[1:]):
+    def build(i0: int, i1: int) -> tuple:
         ni = i1 - i0
         ce = cnt_eff[i0:i1].ravel()
         st = np.zeros(ce.size + 1, np.int64)
@@ -831,6 +845,19 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
         segl = seg - seg[:, :1]
         ends = np.append(seg[1:, 0], T).tolist()
         starts0 = seg[:, 0].tolist()
+        return G, glow, cost, segl, starts0, ends
+
+    chunks = list(zip(bounds[:-1], bounds[1:]))
+    pool = _pool() if _THREADS and len(chunks) > 1 else None
+    fut = pool.submit(build, *chunks[0]) if pool is not None else None
+    for c, (i0, i1) in enumerate(chunks):
+        if pool is not None:
+            G, glow, cost, segl, starts0, ends = fut.result()
+            if c + 1 < len(chunks):
+                fut = pool.submit(build, *chunks[c + 1])       # build the next chunk meanwhile
+        else:
+            G, glow, cost, segl, starts0, ends = build(i0, i1)
+        ni = i1 - i0
         with np.errstate(invalid="ignore"):
             for ii in range(ni):
                 i = i0 + ii
@@ -1113,12 +1140,14 @@ def _toppra(prob: _Problem, X: np.ndarray) -> np.ndarray:
     vnode = np.minimum(prob.cap_tech, 1e12) / 1000.0      # m/s
     V = np.asarray(lim.v_max, float)
 
+    table = np.empty((grid.size, prob.p + 1, 2))
+    table[:, :-1, 0], table[:, :-1, 1] = -V, V
+    table[:, -1, 0], table[:, -1, 1] = -vnode - 1e-12, vnode + 1e-12
+    glist = grid.tolist()
+
     def vlim(sig: float) -> np.ndarray:
-        i = int(np.clip(np.searchsorted(grid, sig - 1e-12), 0, grid.size - 1))
-        out = np.empty((prob.p + 1, 2))
-        out[:-1, 0], out[:-1, 1] = -V, V
-        out[-1] = (-vnode[i] - 1e-12, vnode[i] + 1e-12)
-        return out
+        i = min(max(bisect.bisect_left(glist, float(sig) - 1e-12), 0), len(glist) - 1)
+        return table[i]
 
     sdd = lim.sddot_max / 1000.0 if math.isfinite(lim.sddot_max) else 1e9
     alim = np.concatenate([np.asarray(lim.a_max, float), [sdd]])
@@ -1166,7 +1195,7 @@ def parametrize(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, meth
     if method not in METHODS:
         raise InputError(f"unknown method {method!r}; use one of {', '.join(METHODS)}", field="method")
     t0 = time.perf_counter()
-    prob = _prepare(path_s, X, dX, ddX, limits)
+    prob = _prepare(path_s, X, dX, ddX, limits, chains=method != "toppra")
     iterations: list[IterationLog] = []
     if method == "tube":
         sdot, iterations = _tube(prob, state)

@@ -422,3 +422,26 @@ def test_block_feeds_reproduce_the_program_time(tube_law) -> None:
     assert np.all(np.round(feed2, 3) == feed2)
     with pytest.raises(InputError, match="increase"):
         block_feeds(law, np.array([100.0, 50.0]))
+
+
+def test_uniform_tube_levels_follow_the_same_rules(example) -> None:
+    """tube_cluster = 0 is the paper's uniform level grid: same rules, a valid (slower) answer."""
+    s, X, dX, ddX, lim = example
+    law = parametrize(s, X, dX, ddX, replace(lim, tube_cluster=0.0, levels=74))
+    assert law.max_accel_ratio <= 1.0 + 1e-9
+    its = law.iterations
+    assert its[-1].stop and all(b.halved == (b.w_touches == 0) for b in its[1:])
+    assert law.total_time_s < its[0].total_time_s
+
+
+def test_threaded_chunk_building_gives_the_same_answer(example, monkeypatch) -> None:
+    import engine.timeparam as tp
+
+    s, X, dX, ddX, lim = example
+    prob = prepare(s, X, dX, ddX, replace(lim, levels=300))
+    lo, hi = _bounds_check(prob)
+    monkeypatch.setattr(tp, "_THREADS", False)
+    v0, j0 = _dp(prob, lo, hi, 300)
+    monkeypatch.setattr(tp, "_THREADS", True)
+    v1, j1 = _dp(prob, lo, hi, 300)
+    assert np.array_equal(j0, j1) and np.array_equal(v0, v1)
