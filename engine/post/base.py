@@ -275,12 +275,20 @@ def fmt(x: float, decimals: int, force_point: bool = False) -> str:
 
 
 def format_columns(values: np.ndarray, decimals: list[int], force_point: bool = False) -> list[list[str]]:
-    """Format a (n, m) array column-wise; returns rows of strings."""
+    """Format a (n, m) array column-wise (same rules as :func:`fmt`); returns rows of strings."""
     cols = []
     for k, d in enumerate(decimals):
-        col = np.round(values[:, k], d)
-        col = np.where(col == 0, 0.0, col)
-        cols.append([fmt(float(v), d, force_point) for v in col])
+        col = np.round(np.asarray(values[:, k], dtype=float), d)
+        col = np.where(col == 0, 0.0, col)                      # no "-0"
+        if d == 0:
+            strs = [f"{v:.0f}" + ("." if force_point else "") for v in col.tolist()]
+        else:
+            strs = [f"{v:.{d}f}".rstrip("0") for v in col.tolist()]
+            if not force_point:
+                strs = [s[:-1] if s[-1] == "." else s for s in strs]
+            strs = ["0." if s in ("-0.", "-0") and force_point else ("0" if s in ("-0", "-0.", "-") else s)
+                    for s in strs]
+        cols.append(strs)
     return [list(r) for r in zip(*cols)] if cols else []
 
 
