@@ -990,6 +990,10 @@ def _bounds_check(prob: _Problem) -> tuple[np.ndarray, np.ndarray]:
     if lim.sdot_end > prob.cap[-1] * (1 + 1e-12):
         raise InfeasibleError(f"the end speed {lim.sdot_end:g} mm/s exceeds the speed limit "
                               f"{prob.cap[-1]:g} mm/s at s = {prob.s[-1]:.2f} mm", field="sdot_end")
+    if not np.all(np.isfinite(prob.cap)):
+        i = int(np.argmin(np.isfinite(prob.cap)))
+        raise InputError(f"the path speed is unbounded at s = {prob.s[i]:.2f} mm (no axis moves there and "
+                         f"no technological limit): give sdot_max", field="sdot_max")
     lo = np.zeros(n)
     hi = prob.cap.copy()
     lo[0] = hi[0] = lim.sdot_start

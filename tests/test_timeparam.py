@@ -47,16 +47,18 @@ def _random_path(rng: np.random.Generator, n: int, p: int) -> tuple[np.ndarray, 
     return s, X, dX, ddX
 
 
-def _brute_force(prob, lo, hi, M, square):
+def _brute_force(prob, lo, hi, M, square, cluster=0.0):
     """Enumerate every level sequence; feasibility straight from the constraint rows."""
     n = prob.s.size
     plo, phi = (lo**2, hi**2) if square else (lo, hi)
+    xi = np.array([-1.0 + 2.0 * j / (M - 1) for j in range(M)])
+    frac = 0.5 * (1.0 + (xi + cluster * xi**3) / (1.0 + cluster))
     lev = []
     for i in range(n):
         if phi[i] <= plo[i]:
             vals = [plo[i]]
         else:
-            vals = list(plo[i] + (phi[i] - plo[i]) * np.arange(M) / (M - 1))
+            vals = list(plo[i] + (phi[i] - plo[i]) * frac)
         lev.append(np.sqrt(vals) if square else np.asarray(vals))
     K = prob.limits.penalty * prob.p**2
     best = math.inf
@@ -119,12 +121,13 @@ def test_dp_equals_brute_force(seed: int) -> None:
         lo[0] = hi[0] = 0.0
         lo[-1] = hi[-1] = 0.0
     square = seed % 4 == 1
-    best = _brute_force(prob, lo, hi, M, square)
+    cluster = 8.0 if seed % 4 == 3 else 0.0
+    best = _brute_force(prob, lo, hi, M, square, cluster)
     if math.isinf(best):
         with pytest.raises(InfeasibleError):
-            _dp(prob, lo, hi, M, square=square)
+            _dp(prob, lo, hi, M, square=square, cluster=cluster)
         return
-    v, _ = _dp(prob, lo, hi, M, square=square)
+    v, _ = _dp(prob, lo, hi, M, square=square, cluster=cluster)
     assert _path_cost(prob, v) == pytest.approx(best, rel=1e-9)
 
 
@@ -372,6 +375,9 @@ def test_bad_inputs_are_input_errors(example) -> None:
                                                                          "sdot_max": 1.0}]})
     with pytest.raises(InputError, match="levels"):
         limits_from_mapping({"v_max": [1.0], "a_max": [1.0], "levels": 1})
+    flat = np.zeros_like(dX)
+    with pytest.raises(InputError, match="unbounded"):
+        parametrize(s, flat, flat, flat, replace(lim, sdot_max=math.inf, points=()))
 
 
 # --------------------------------------------------------------------------------------------------
