@@ -415,37 +415,43 @@ def solve_pass(
                 f"{max(cvals):.6g} mm; use mode = 'auto' or 'constant-lambda'", "winding.mode", ctx)
     lo = wc.lower_bound(grid)
     if mode == "minimax":
+        # each interval between conditions is its own problem (5)-(6): the natural constant-λ
+        # piece where it keeps the band on the surface, else the direct search on that interval
+        hi = rn.copy()
+        hi[1:-1] *= 1.0 - 1e-9
+        points = {i: v for i, v in zip(idx, cvals)}
+        if left_kind == wc.TURN:
+            points[0] = float(rn[0])
+        if right_kind == wc.TURN:
+            points[grid.n - 1] = float(rn[-1])
         F = _bracket(grid, C)
-        ok = bool((F >= -1e-12).all()) and bool((C[1:-1] < rn[1:-1]).all())
-        if ok:
+        bounds = sorted(set([0, *idx, grid.n - 1]))
+        searched: list[float] = []
+        for i0, i1 in zip(bounds[:-1], bounds[1:]):
+            inner = slice(max(i0, 1), min(i1, grid.n - 2) + 1)
+            if (F[i0 : i1 + 1] >= -1e-12).all() and (C[inner] < rn[inner]).all():
+                continue
+            lam0 = float(np.max(np.abs(lam[i0:i1]))) if i1 > i0 else 0.0
             try:
-                wc.twist(grid, C, lam)
-            except ValueError:
-                ok = False
-        if not ok:
-            hi = rn.copy()
-            hi[1:-1] *= 1.0 - 1e-9
-            points = {i: v for i, v in zip(idx, cvals)}
-            if left_kind == wc.TURN:
-                points[0] = float(rn[0])
-            if right_kind == wc.TURN:
-                points[grid.n - 1] = float(rn[-1])
-            lam0 = max([abs(p["lambda"]) for p in pieces] + [0.0])
-            try:
-                lam_star, tb = wc.minimax_search(grid, lo, hi, points, lam0, state=state)
+                lam_star, tb = wc.minimax_search(grid, lo, hi, points, lam0, state=state, i0=i0, i1=i1)
             except ValueError as exc:
                 raise _err(f"minimax winding line: {exc}", "winding.mode", ctx, InfeasibleError) from None
-            C, lam = wc.tube_path(grid, tb, lam_star)
-            touch = np.flatnonzero(C[1:-1] >= hi[1:-1] * (1.0 - 1e-7)) + 1
+            Cp, lp = wc.tube_path(grid, tb, lam_star)
+            C[i0 : i1 + 1] = Cp[i0 : i1 + 1]
+            lam[i0:i1] = lp[i0:i1]
+            touch = np.flatnonzero(C[inner] >= hi[inner] * (1.0 - 1e-7)) + inner.start
             if touch.size:
                 k = int(touch[0])
                 raise _err(
                     f"minimax winding line: the line would have to touch the parallel z = {grid.z[k]:.6g} mm "
                     f"(r = {rn[k]:.6g} mm, winding angle 90°) to stay clear of bridging (6) elsewhere (C >= "
-                    f"{float(np.max(lo)):.6g} mm needed); no realisable line passes there — move the pole "
-                    "condition so the line turns around before it", "winding.pole_c_mm", ctx, InfeasibleError)
-            pieces = _pieces_from_steps(grid, lam, lam_star)
-            notes.append(f"minimax direct search: max |λ| = {lam_star:.6g} (bisection on the reachable tube)")
+                    f"{float(np.max(lo[i0 : i1 + 1])):.6g} mm needed); no realisable line passes there — move the "
+                    "pole condition so the line turns around before it", "winding.pole_c_mm", ctx, InfeasibleError)
+            searched.append(lam_star)
+            notes.append(f"minimax direct search on z {grid.z[i0]:.6g}..{grid.z[i1]:.6g} mm: max |λ| = "
+                         f"{lam_star:.6g} (bisection on the reachable tube)")
+        if searched:
+            pieces = _pieces_from_steps(grid, lam, max(searched))
     try:
         v, s, _ = wc.twist(grid, C, lam)
     except ValueError as exc:
@@ -540,8 +546,8 @@ def _ranges(z: FloatArray, mask: NDArray[np.bool_]) -> list[tuple[float, float]]
 
 def _pieces_from_steps(grid: wc.PassGrid, lam: FloatArray, scale: float) -> list[dict[str, float]]:
     """Runs of (nearly) equal λ per step as pieces {z_from, z_to, lambda}; differences below
-    1e-4·``scale`` (single clamped steps at joints) do not start a new piece."""
-    tol = 1e-4 * max(scale, 1e-6)
+    1e-3·``scale`` (single clamped steps at joints) do not start a new piece."""
+    tol = 1e-3 * max(scale, 1e-6)
     pieces: list[dict[str, float]] = []
     start = 0
     for k in range(1, len(lam) + 1):

@@ -503,15 +503,18 @@ class Tube:
     up_b: FloatArray
     fail_z: float = math.nan
     reason: str = ""
+    i0: int = 0
+    i1: int = -1
 
 
 def _sweep(
-    grid: PassGrid, lam_max: float, lo: FloatArray, hi: FloatArray, points: dict[int, float], forward: bool
+    grid: PassGrid, lam_max: float, lo: FloatArray, hi: FloatArray, points: dict[int, float], forward: bool,
+    i0: int, i1: int,
 ) -> tuple[bool, FloatArray, FloatArray, int]:
     n = grid.n
-    idx = range(n) if forward else range(n - 1, -1, -1)
-    up = np.empty(n)
-    dn = np.empty(n)
+    idx = range(i0, i1 + 1) if forward else range(i1, i0 - 1, -1)
+    up = np.full(n, np.nan)
+    dn = np.full(n, np.nan)
     first = True
     u = d = 0.0
     prev = 0
@@ -547,38 +550,48 @@ def _sweep(
     return True, up, dn, -1
 
 
-def tube(grid: PassGrid, lam_max: float, lo: FloatArray, hi: FloatArray, points: dict[int, float]) -> Tube:
-    """Envelopes of all lines with |λ| <= ``lam_max`` inside [lo, hi] through the point constraints."""
-    ok_f, up_f, lo_f, kf = _sweep(grid, lam_max, lo, hi, points, True)
+def tube(
+    grid: PassGrid, lam_max: float, lo: FloatArray, hi: FloatArray, points: dict[int, float],
+    i0: int = 0, i1: int | None = None,
+) -> Tube:
+    """Envelopes of all lines with |λ| <= ``lam_max`` inside [lo, hi] through the point constraints,
+    on the nodes ``i0..i1`` (default: the whole pass)."""
+    i1 = grid.n - 1 if i1 is None else i1
+    ok_f, up_f, lo_f, kf = _sweep(grid, lam_max, lo, hi, points, True, i0, i1)
     if not ok_f:
         return Tube(False, lo_f, up_f, lo_f, up_f, float(grid.z[kf]), "forward envelope empty")
-    ok_b, up_b, lo_b, kb = _sweep(grid, lam_max, lo, hi, points, False)
+    ok_b, up_b, lo_b, kb = _sweep(grid, lam_max, lo, hi, points, False, i0, i1)
     if not ok_b:
         return Tube(False, lo_f, up_f, lo_b, up_b, float(grid.z[kb]), "backward envelope empty")
-    width = np.minimum(up_f, up_b) - np.maximum(lo_f, lo_b)
+    sl = slice(i0, i1 + 1)
+    width = np.minimum(up_f[sl], up_b[sl]) - np.maximum(lo_f[sl], lo_b[sl])
     if (width < -1e-9).any():
-        k = int(np.argmin(width))
+        k = int(np.argmin(width)) + i0
         return Tube(False, lo_f, up_f, lo_b, up_b, float(grid.z[k]), "envelopes do not overlap")
-    return Tube(True, lo_f, up_f, lo_b, up_b)
+    return Tube(True, lo_f, up_f, lo_b, up_b, i0=i0, i1=i1)
 
 
 def tube_path(grid: PassGrid, tb: Tube, lam_max: float) -> tuple[FloatArray, FloatArray]:
     """A line inside the tube: geodesic where it can be, on an envelope (λ = ±Λ) where it must.
 
-    Starts at the pinch of the tube (its narrowest interior node) and runs both ways.
+    Starts at the pinch of the tube (its narrowest interior node) and runs both ways.  Returns C
+    at the nodes and λ per step, filled on the tube's node range only.
     """
     n = grid.n
+    i0, i1 = tb.i0, (tb.i1 if tb.i1 >= 0 else n - 1)
     upper = np.minimum(tb.up_f, tb.up_b)
     lower = np.maximum(tb.lo_f, tb.lo_b)
     width = upper - lower
-    inner = width[1:-1] if n > 2 else width
-    k0 = int(np.argmin(inner)) + (1 if n > 2 else 0)
-    C = np.empty(n)
+    if i1 - i0 >= 2:
+        k0 = int(np.argmin(width[i0 + 1 : i1])) + i0 + 1
+    else:
+        k0 = i0
+    C = np.full(n, np.nan)
     lam = np.zeros(n - 1)
     C[k0] = 0.5 * (upper[k0] + lower[k0])
     # forward from the pinch: stay inside the backward-viable envelope
     c = C[k0]
-    for k in range(k0, n - 1):
+    for k in range(k0, i1):
         nxt = step_value(grid, k, c, 0.0, True)
         target = min(max(nxt, tb.lo_b[k + 1]), tb.up_b[k + 1])
         if target != nxt:
@@ -587,7 +600,7 @@ def tube_path(grid: PassGrid, tb: Tube, lam_max: float) -> tuple[FloatArray, Flo
         c = target
         C[k + 1] = c
     c = C[k0]
-    for k in range(k0 - 1, -1, -1):
+    for k in range(k0 - 1, i0 - 1, -1):
         nxt = step_value(grid, k, c, 0.0, False)
         target = min(max(nxt, tb.lo_f[k]), tb.up_f[k])
         if target != nxt:
@@ -607,6 +620,8 @@ def minimax_search(
     lam_cap: float = 4.0,
     rel_tol: float = 1e-7,
     state: Any = None,
+    i0: int = 0,
+    i1: int | None = None,
 ) -> tuple[float, Tube]:
     """Smallest Λ for which a line with |λ| <= Λ satisfies (6) and the point constraints (bisection).
 
@@ -615,7 +630,7 @@ def minimax_search(
     from engine.state import check_cancel
 
     hi_l = max(lam_start, 1e-3)
-    tb = tube(grid, hi_l, lo, hi, points)
+    tb = tube(grid, hi_l, lo, hi, points, i0, i1)
     while not tb.ok:
         check_cancel(state)
         if hi_l >= lam_cap:
@@ -624,13 +639,13 @@ def minimax_search(
                 f"({tb.reason})"
             )
         hi_l = min(2.0 * hi_l, lam_cap)
-        tb = tube(grid, hi_l, lo, hi, points)
+        tb = tube(grid, hi_l, lo, hi, points, i0, i1)
     lo_l = lam_start if lam_start < hi_l else 0.0
     best = tb
     while hi_l - lo_l > rel_tol * max(hi_l, 1e-6):
         check_cancel(state)
         mid = 0.5 * (lo_l + hi_l)
-        tm = tube(grid, mid, lo, hi, points)
+        tm = tube(grid, mid, lo, hi, points, i0, i1)
         if tm.ok:
             hi_l, best = mid, tm
         else:

@@ -431,3 +431,21 @@ def test_cli_subprocess() -> None:
     assert res.returncode == 0, res.stderr
     rep = json.loads(res.stdout)
     assert rep["mode"] == "geodesic" and rep["max_abs_lambda"] == 0.0
+
+
+def test_minimax_solves_each_interval_between_conditions_on_its_own() -> None:
+    m = Mandrel.bottle(waist_radius=30.0, neck_radius=36.0, bottom_pole_radius=10.0)
+    spec = WindingSpec(pole_c_mm=(12.5, 29.0), angles=[{"z_mm": 80.0, "angle_deg": 15.0}])
+    wl = winding_line(m, 5.0, 0.3, spec)
+    nat = winding_line(m, 5.0, 0.3, WindingSpec(mode="piecewise-lambda", pole_c_mm=(12.5, 29.0),
+                                                 angles=[{"z_mm": 80.0, "angle_deg": 15.0}]))
+    assert nat.bridging  # the natural piecewise line bridges in the shoulder
+    pieces = wl.lambda_
+    assert isinstance(pieces, list)
+    # the first interval keeps its constant λ (it was feasible), the search runs on the second only
+    assert pieces[0]["z_from"] == pytest.approx(wl.z_turn[0]) and pieces[0]["z_to"] == pytest.approx(80.0)
+    assert pieces[0]["lambda"] == pytest.approx(nat.lambda_[0]["lambda"], rel=1e-9)
+    sel = outgoing(wl)
+    assert np.all(bracket6(m, wl.z[sel], wl.C[sel]) >= -1e-9) and not wl.bridging
+    i = int(np.argmin(np.abs(wl.z[sel] - 80.0)))
+    assert math.degrees(wl.beta[sel][i]) == pytest.approx(15.0, abs=1e-9)
