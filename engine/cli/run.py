@@ -1,0 +1,67 @@
+"""``winder run JOB.toml -o OUT [--post NAME] [--report REPORT.json] [--force]``: the whole pipeline."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from engine.errors import InfeasibleError, InputError
+
+NAME = "run"
+HELP = "Run the whole pipeline (mandrel -> line -> eye -> axes -> blocks -> NC) and write the NC program."
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("job", help="winding job (.toml)")
+    parser.add_argument("-o", "--output", required=True, metavar="OUT", help="NC program to write")
+    parser.add_argument("--post", metavar="NAME", help="post-processor (default: the job's [post].post)")
+    parser.add_argument("--report", metavar="REPORT.json", help="write the run report as JSON")
+    parser.add_argument("--force", action="store_true", help="write the NC file even when limits are violated")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar, no stage times")
+
+
+def run(args: argparse.Namespace) -> int:
+    t_start = time.perf_counter()
+    from engine.cli import dump_json
+    from engine.fileio import atomic_write_text
+    from engine.job import load_job
+    from engine.pipeline import run_pipeline, write_program
+    from engine.state import CliState
+
+    out = Path(args.output)
+    if not out.resolve().parent.is_dir():
+        raise InputError("the output folder does not exist", file=out)
+    job = load_job(args.job)
+    result = run_pipeline(job, args.job, post_name=args.post, state=CliState(quiet=args.quiet))
+    report = result.report()
+    report["output"] = str(out)
+    rc = 0
+    try:
+        write_program(result, out, force=args.force)
+        report["written"] = True
+    except InfeasibleError as exc:
+        report["written"] = False
+        print(f"winder run: {exc}", file=sys.stderr)
+        rc = 1
+    report["wall_time_s"] = time.perf_counter() - t_start
+    if args.report:
+        import io
+
+        buf = io.StringIO()
+        dump_json(report, buf)
+        atomic_write_text(args.report, buf.getvalue())
+    if not args.quiet:
+        stages = ", ".join(f"{k} {v:.3f}s" for k, v in result.stage_times.items())
+        print(f"stages: {stages}", file=sys.stderr)
+        if "program_time_s" in report:
+            print(
+                f"{report['blocks']} blocks, program time {report['program_time_s']:.2f} s "
+                f"(preliminary {report['program_time_t17_s']:.2f} s) on {report['machine']}"
+                + (f" -> {out}" if report["written"] else ""),
+                file=sys.stderr,
+            )
+        for w in report["warnings"][:10]:
+            print(f"warning: {w}", file=sys.stderr)
+    return rc
