@@ -1,0 +1,14 @@
+"""Entry script of the frozen ``winder`` executable (PyInstaller analyses this file).
+
+It is the ``winder`` console script: no arguments (or one ``JOB.toml``) opens the desktop
+application, anything else is a sub-command (``winder --help``).
+"""
+
+import multiprocessing
+import sys
+
+from engine.cli import main
+
+if __name__ == "__main__":
+    multiprocessing.freeze_support()  # no-op unless a library starts worker processes
+    sys.exit(main())
