@@ -472,38 +472,32 @@ def _hull_ccw(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     B, R0, _ = pts.shape
     # exact pre-filter: drop the points strictly inside the polygon of the extreme points in 16
     # directions (they cannot be hull vertices), then scan only the few that are left
-    th = np.linspace(0.0, 2.0 * np.pi, 9)[:-1]
+    D = 32
+    th = np.linspace(0.0, 2.0 * np.pi, D + 1)[:-1]
     px, py = pts[..., 0], pts[..., 1]
-    ext = np.argmax(px[..., None] * np.cos(th) + py[..., None] * np.sin(th), axis=1)     # (B, 8)
+    ext = np.argmax(px[..., None] * np.cos(th) + py[..., None] * np.sin(th), axis=1)     # (B, D) CCW
     vx = np.take_along_axis(px, ext, 1)
     vy = np.take_along_axis(py, ext, 1)
-    inside = np.ones(px.shape, bool)
-    for k in range(th.size):
-        k2 = (k + 1) % th.size
-        ex, ey = (vx[:, k2] - vx[:, k])[:, None], (vy[:, k2] - vy[:, k])[:, None]
-        dx, dy = px - vx[:, k, None], py - vy[:, k, None]
-        crs = ex * dy - ey * dx
-        e2 = ex * ex + ey * ey
-        inside &= (e2 == 0) | ((crs > 0) & (crs * crs > 1e-18 * e2 * (dx * dx + dy * dy)))
+    # each point is tested against the edge of conv(extreme points) whose wedge (seen from the
+    # origin, inside the hull) holds its polar angle
+    phi = np.arctan2(vy, vx)
+    phi = np.mod(phi - phi[:, :1], 2.0 * np.pi)
+    phi = np.maximum.accumulate(phi, axis=1)               # guard against round-off
+    psi = np.mod(np.arctan2(py, px) - np.arctan2(vy[:, :1], vx[:, :1]), 2.0 * np.pi)
+    off = 10.0 * np.arange(B)[:, None]
+    k = np.searchsorted((phi + off).ravel(), (psi + off).ravel(), side="right").reshape(B, R0) - 1
+    k = np.clip(k - np.arange(B)[:, None] * D, 0, D - 1)
+    k2 = (k + 1) % D
+    ax_, ay_ = np.take_along_axis(vx, k, 1), np.take_along_axis(vy, k, 1)
+    ex, ey = np.take_along_axis(vx, k2, 1) - ax_, np.take_along_axis(vy, k2, 1) - ay_
+    dx, dy = px - ax_, py - ay_
+    crs = ex * dy - ey * dx
+    e2 = ex * ex + ey * ey
+    inside = (e2 > 0) & (crs > 0) & (crs * crs > 1e-18 * e2 * (dx * dx + dy * dy))
     keep = ~inside
     kidx = np.argsort(~keep, axis=1, kind="stable")
     nk = keep.sum(axis=1)
-    # scan the rows in two groups (a few thin polygons keep many points)
-    Rs = int(np.percentile(nk, 97)) + 1
-    out_o = np.zeros((B, 1), np.int64)
-    out_m = np.zeros(B, np.int64)
-    parts = []
-    for sel in (nk <= Rs, nk > Rs):
-        rows_sel = np.flatnonzero(sel)
-        if rows_sel.size:
-            o, m = _monotone_chain(pts[rows_sel], kidx[rows_sel], nk[rows_sel])
-            parts.append((rows_sel, o, m))
-    V = max(o.shape[1] for _, o, _ in parts)
-    out_o = np.zeros((B, V), np.int64)
-    for rows_sel, o, m in parts:
-        out_o[rows_sel, :o.shape[1]] = o
-        out_m[rows_sel] = m
-    return out_o, out_m
+    return _monotone_chain(pts, kidx, nk)
 
 
 def _monotone_chain(pts: np.ndarray, kidx: np.ndarray, nk: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -523,21 +517,19 @@ def _monotone_chain(pts: np.ndarray, kidx: np.ndarray, nk: np.ndarray) -> tuple[
         st = np.zeros((B, R), np.int64)
         ln = np.zeros(B, np.int64)
         for q in seq:
-            px, py = X[:, q], Y[:, q]
-            while True:
-                m = ln >= 2
-                if not m.any():
-                    break
-                o = st[rows, np.maximum(ln - 2, 0)]
-                a_ = st[rows, np.maximum(ln - 1, 0)]
-                ox, oy, ax, ay = X[rows, o], Y[rows, o], X[rows, a_], Y[rows, a_]
+            act = rows[ln >= 2]                     # rows that may pop; shrinks as rows stop popping
+            while act.size:
+                la = ln[act]
+                o = st[act, la - 2]
+                a_ = st[act, la - 1]
+                ox, oy, ax, ay = X[act, o], Y[act, o], X[act, a_], Y[act, a_]
+                px, py = X[act, q], Y[act, q]
                 e1x, e1y, e2x, e2y = ax - ox, ay - oy, px - ax, py - ay
                 cr = e1x * e2y - e1y * e2x
-                tol = 1e-12 * np.sqrt((e1x * e1x + e1y * e1y) * (e2x * e2x + e2y * e2y))
-                pop = m & (cr <= tol)
-                if not pop.any():
-                    break
-                ln -= pop
+                pop = (cr <= 0) | (cr * cr <= 1e-24 * (e1x * e1x + e1y * e1y) * (e2x * e2x + e2y * e2y))
+                act = act[pop]
+                ln[act] -= 1
+                act = act[ln[act] >= 2]
             st[rows, ln] = q
             ln += 1
         return st, ln
