@@ -56,6 +56,8 @@ MIN_LENGTH_MM = 1e-3
 
 # Profile points handed to the spline by the DXF/STEP importers: about this many along the zone.
 _PROFILE_POINTS = 1200
+# Spline segments up to this many points are exported exactly; denser ones are re-fitted.
+_EXACT_SPLINE_POINTS = 400
 
 
 # ================================================================================================
@@ -594,7 +596,7 @@ def _resample_chain(z: FloatArray, r: FloatArray, n: int = _PROFILE_POINTS) -> t
 
     Long straight chords (lines, polyline segments) are subdivided so that no z gap exceeds
     ``length / n`` (points on a straight chord lie on the drawn line).  Very dense runs of points
-    are thinned to an arc-length spacing of ``length / (8 n)``, except where the curve turns by more
+    are thinned to an arc-length spacing of ``length / (2 n)``, except where the curve turns by more
     than 0.01 rad between kept points (tight bends keep their points).  Both ends are kept.
     """
     length = float(z[-1] - z[0])
@@ -614,11 +616,11 @@ def _resample_chain(z: FloatArray, r: FloatArray, n: int = _PROFILE_POINTS) -> t
     ang = np.arctan2(np.diff(rr), np.diff(zz))  # direction of each chord
     turn = np.concatenate([[0.0, 0.0], np.cumsum(np.abs(np.angle(np.exp(1j * np.diff(ang)))))])
     # keep the first point of every arc-length bucket of h/8 and of every 0.01 rad of turning
-    bucket_s = np.floor(s / (h / 8.0))
+    bucket_s = np.floor(s / (h / 2.0))
     bucket_t = np.floor(turn / 0.01)
     keep = np.flatnonzero(np.diff(bucket_s) != 0) + 1
     keep = np.union1d(keep, np.flatnonzero(np.diff(bucket_t) != 0) + 1)
-    keep = keep[(keep > 0) & (keep < len(zz) - 1) & (s[-1] - s[keep] >= 1e-3 * h / 8.0)]
+    keep = keep[(keep > 0) & (keep < len(zz) - 1) & (s[-1] - s[keep] >= 1e-3 * h)]
     keep = np.concatenate([[0], keep, [len(zz) - 1]])
     return zz[keep], rr[keep]
 
@@ -626,10 +628,13 @@ def _resample_chain(z: FloatArray, r: FloatArray, n: int = _PROFILE_POINTS) -> t
 # ================================================================================================
 # STEP / STL export
 # ================================================================================================
-def _bspline_graph_edge(seg: Segment, tol: float) -> Any:
-    """An exact-to-``tol`` cubic B-spline edge x = r(z), z = z in the XZ plane for any segment.
+def _bspline_graph_edge(seg: Segment, tol: float, tol_dense: float) -> Any:
+    """A cubic B-spline edge x = r(z), z = z in the XZ plane for any segment.
 
-    x(u) = u exactly: the z coordinates of the poles are the Greville abscissae of the knots.
+    Exact for spline segments of up to ``_EXACT_SPLINE_POINTS`` points; within ``tol_dense`` (mm)
+    for denser splines (imported profiles: fewer knots keep the STEP small and fast to mesh); within
+    ``tol`` (mm) for other segments.  x(u) = u exactly: the z coordinates of the poles are the
+    Greville abscissae of the knots.
     """
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
     from OCP.Geom import Geom_BSplineCurve
@@ -638,23 +643,35 @@ def _bspline_graph_edge(seg: Segment, tol: float) -> Any:
     from OCP.TColStd import TColStd_Array1OfInteger, TColStd_Array1OfReal
     from scipy.interpolate import make_interp_spline
 
-    if isinstance(seg, SplineSegment):
-        nodes = np.asarray(seg.z_pts, dtype=float)
-        exact = True
+    if isinstance(seg, SplineSegment) and len(seg.z_pts) <= _EXACT_SPLINE_POINTS:
+        # the same not-a-knot cubic as the segment: exact
+        pts = np.asarray(seg.z_pts, dtype=float)
+        bs = make_interp_spline(pts, np.asarray(seg.r_pts, dtype=float), k=3)
     else:
-        nodes = _initial_nodes(seg)
-        exact = False
-    for _ in range(12):
-        bs = make_interp_spline(nodes, seg.eval(nodes)[0], k=3)
-        if exact:
-            break
-        tt = np.linspace(0.0, 1.0, 5)[1:-1]
-        zm = (nodes[:-1, None] + np.diff(nodes)[:, None] * tt[None, :]).ravel()
-        err = np.abs(bs(zm) - seg.eval(zm)[0]).reshape(len(nodes) - 1, -1).max(axis=1)
-        if err.max() <= tol:
-            break
-        bad = np.flatnonzero(err > tol)
-        nodes = np.sort(np.concatenate([nodes, 0.5 * (nodes[bad] + nodes[bad + 1])]))
+        if isinstance(seg, SplineSegment):  # a dense imported profile: fewer knots, within tol_dense
+            pts = np.asarray(seg.z_pts, dtype=float)
+            nodes = np.unique(np.concatenate([pts[:: max(1, len(pts) // 128)], pts[-1:]]))
+            tt = np.linspace(0.0, 1.0, 4)[:-1]
+            zc = (pts[:-1, None] + np.diff(pts)[:, None] * tt[None, :]).ravel()
+            tol = max(tol, tol_dense)
+        else:
+            nodes = _initial_nodes(seg)
+            zc = None
+        r_check = None
+        for _ in range(24):
+            bs = make_interp_spline(nodes, seg.eval(nodes)[0], k=3)
+            tt = np.linspace(0.0, 1.0, 5)[1:-1]
+            zm = (nodes[:-1, None] + np.diff(nodes)[:, None] * tt[None, :]).ravel()
+            if zc is not None:
+                zm = np.concatenate([zm, zc])
+            if r_check is None or len(r_check) != len(zm):
+                r_check = seg.eval(zm)[0]
+            err = np.abs(bs(zm) - r_check)
+            idx = np.clip(np.searchsorted(nodes, zm, side="right") - 1, 0, len(nodes) - 2)
+            bad = np.unique(idx[err > tol])
+            if bad.size == 0:
+                break
+            nodes = np.sort(np.concatenate([nodes, 0.5 * (nodes[bad] + nodes[bad + 1])]))
     t, c = np.asarray(bs.t, dtype=float), np.asarray(bs.c, dtype=float)
     deg = 3
     greville = np.array([t[i + 1: i + deg + 1].mean() for i in range(len(c))])
@@ -685,7 +702,7 @@ def _initial_nodes(seg: Segment) -> FloatArray:
     return np.linspace(seg.z0, seg.z1, 33)
 
 
-def _segment_edge(seg: Segment, tol: float) -> Any:
+def _segment_edge(seg: Segment, tol: float, tol_dense: float) -> Any:
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
     from OCP.GC import GC_MakeArcOfCircle, GC_MakeArcOfEllipse, GC_MakeSegment
     from OCP.gp import gp_Ax2, gp_Dir, gp_Elips, gp_Pnt
@@ -713,15 +730,16 @@ def _segment_edge(seg: Segment, tol: float) -> Any:
             if mid.X() > 0:
                 return BRepBuilderAPI_MakeEdge(arc).Edge()
         raise RuntimeError("could not orient the ellipse arc")  # pragma: no cover
-    return _bspline_graph_edge(seg, tol)
+    return _bspline_graph_edge(seg, tol, tol_dense)
 
 
 def mandrel_solid(mandrel: Mandrel) -> Any:
     """The mandrel as an OCP ``TopoDS_Solid``: the closed profile revolved 360° about the Z axis.
 
     The generatrix uses exact lines, circle and ellipse arcs where the segments are analytic, and
-    cubic B-splines x = r(z) elsewhere (exact for spline segments, within 1e-9 of the radius scale
-    for isotensoid and smooth-step segments).  Coordinates in mm; the solid axis is Z.
+    cubic B-splines x = r(z) elsewhere: exact for spline segments of up to 400 points, within 1e-7
+    of the size for denser (imported) splines, within 1e-9 of the size for isotensoid and
+    smooth-step segments.  Coordinates in mm; the solid axis is Z.
     """
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeFace, BRepBuilderAPI_MakeWire
     from OCP.BRepCheck import BRepCheck_Analyzer
@@ -736,7 +754,7 @@ def mandrel_solid(mandrel: Mandrel) -> Any:
     tol = 1e-9 * scale
     wire = BRepBuilderAPI_MakeWire()
     for seg in mandrel.segments:
-        wire.Add(_segment_edge(seg, tol))
+        wire.Add(_segment_edge(seg, tol, 1e-7 * scale))
     r0, r1 = mandrel.pole_radii
     z0, z1 = mandrel.z_min, mandrel.z_max
     close_tol = 1e-9 * scale
@@ -782,31 +800,115 @@ def export_step(mandrel: Mandrel, path: str | Path) -> Path:
 
 def export_stl(mandrel: Mandrel, path: str | Path, tolerance_mm: float = 0.01, angular_tolerance_rad: float = 0.1,
                ascii: bool = False) -> Path:
-    """Write the mandrel as a closed triangle mesh (STL, mm), atomically; return the path.
+    """Write the mandrel as a closed triangle mesh (STL, mm, axis = Z), atomically; return the path.
+
+    The closed profile (generatrix, end faces, axis) is revolved about Z and tessellated directly:
+    the generatrix edges (the same exact curves as :func:`export_step`) are discretised with a
+    chordal deviation of ``tolerance_mm / 2`` and a turning angle of at most
+    ``angular_tolerance_rad``, and each profile point becomes a ring of ``n`` vertices, ``n`` chosen
+    so that the polygon deviates at most ``tolerance_mm / 2`` at the largest radius.  End faces
+    become triangle fans; a closed pole is one vertex.  The mesh is watertight and its facets face
+    outwards.  (cadquery's general mesher is 10-100x slower on B-spline surfaces of revolution.)
 
     Parameters
     ----------
     tolerance_mm:
         Largest distance between the mesh and the surface (chordal deviation), mm.
     angular_tolerance_rad:
-        Largest angle between neighbouring facets along a curve, rad.
+        Largest angle between neighbouring facets along the profile and around the axis, rad.
+    ascii:
+        Write ASCII STL instead of binary.
     """
-    import cadquery as cq
-
     if not (math.isfinite(tolerance_mm) and tolerance_mm > 0):
         raise InputError(f"STL tolerance must be > 0 mm, got {tolerance_mm}", field="tolerance_mm")
-    if not (math.isfinite(angular_tolerance_rad) and angular_tolerance_rad > 0):
-        raise InputError(f"STL angular tolerance must be > 0 rad, got {angular_tolerance_rad}",
+    if not (math.isfinite(angular_tolerance_rad) and 0 < angular_tolerance_rad <= 1.0):
+        raise InputError(f"STL angular tolerance must be in (0, 1] rad, got {angular_tolerance_rad}",
                          field="angular_tolerance_rad")
-    shape = cq.Shape.cast(mandrel_solid(mandrel))
+    z, r = _profile_polyline(mandrel, 0.5 * tolerance_mm, angular_tolerance_rad)
+    r_max = float(r.max())
+    half = min(0.5 * tolerance_mm / r_max, 1.0)
+    n = max(8, int(math.ceil(math.pi / math.acos(1.0 - half))), int(math.ceil(2 * math.pi / angular_tolerance_rad)))
+    if len(z) * n > 20_000_000:
+        raise InputError(f"STL tolerance {tolerance_mm} mm is too fine for this mandrel: it would need "
+                         f"{2 * len(z) * n} triangles", field="tolerance_mm")
+    tri = _revolve_mesh(z, r, n, closed_tol=1e-9 * max(r_max, float(z[-1] - z[0])))
+    data = _stl_bytes(tri, ascii=ascii, name=mandrel.name)
+    return atomic_write_with(path, lambda tmp: Path(tmp).write_bytes(data), suffix=".stl")
 
-    def write(tmp: str) -> None:
-        ok = shape.exportStl(tmp, tolerance=tolerance_mm, angularTolerance=angular_tolerance_rad, ascii=ascii,
-                             relative=False, parallel=False)
-        if not ok:
-            raise OSError("the STL writer failed")
 
-    return atomic_write_with(path, write, suffix=".stl")
+def _profile_polyline(mandrel: Mandrel, deflection: float, angle: float) -> tuple[FloatArray, FloatArray]:
+    """Points (z, r) along the generatrix with chordal deviation <= ``deflection`` (mm), z increasing."""
+    from OCP.BRepAdaptor import BRepAdaptor_Curve
+    from OCP.GCPnts import GCPnts_TangentialDeflection
+
+    scale = max(mandrel.r_max, mandrel.length)
+    zs: list[FloatArray] = []
+    rs: list[FloatArray] = []
+    for seg in mandrel.segments:
+        c = BRepAdaptor_Curve(_segment_edge(seg, 1e-9 * scale, 1e-7 * scale))
+        td = GCPnts_TangentialDeflection(c, angle, deflection, 2)
+        pts = np.array([[p.X(), p.Z()] for p in (td.Value(i) for i in range(1, td.NbPoints() + 1))])
+        if pts[0, 1] > pts[-1, 1]:
+            pts = pts[::-1]
+        # exact end points (shared with the neighbours)
+        pts[0] = (max(float(seg.eval(np.array([seg.z0]))[0][0]), 0.0), seg.z0)
+        pts[-1] = (max(float(seg.eval(np.array([seg.z1]))[0][0]), 0.0), seg.z1)
+        zs.append(pts[:-1, 1])
+        rs.append(pts[:-1, 0])
+    zs.append(np.array([mandrel.z_max]))
+    rs.append(np.array([max(mandrel.pole_radii[1], 0.0)]))
+    return np.concatenate(zs), np.concatenate(rs)
+
+
+def _revolve_mesh(z: FloatArray, r: FloatArray, n: int, closed_tol: float) -> FloatArray:
+    """Triangles (m, 3, 3) of the closed solid bounded by the profile revolved about Z, outward facing."""
+    th = 2.0 * math.pi * np.arange(n) / n
+    c, s = np.cos(th), np.sin(th)
+    point = r <= closed_tol  # rings that collapse onto the axis (closed poles)
+    tris: list[FloatArray] = []
+    j0 = np.arange(n)
+    j1 = (j0 + 1) % n
+
+    def ring(i: int) -> FloatArray:
+        if point[i]:
+            return np.tile([0.0, 0.0, z[i]], (n, 1))
+        return np.column_stack([r[i] * c, r[i] * s, np.full(n, z[i])])
+
+    prev = ring(0)
+    for i in range(len(z) - 1):
+        cur = ring(i + 1)
+        a, b, cc, d = prev[j0], prev[j1], cur[j1], cur[j0]
+        if not point[i]:
+            tris.append(np.stack([a, b, cc], axis=1))
+        if not point[i + 1]:
+            tris.append(np.stack([a, cc, d], axis=1))
+        prev = cur
+    for i, sign in ((0, -1.0), (len(z) - 1, 1.0)):  # end faces: fans around the axis
+        if point[i]:
+            continue
+        rg = ring(i)
+        o = np.tile([0.0, 0.0, z[i]], (n, 1))
+        tris.append(np.stack([o, rg[j1], rg[j0]] if sign < 0 else [o, rg[j0], rg[j1]], axis=1))
+    return np.concatenate(tris)
+
+
+def _stl_bytes(tri: FloatArray, ascii: bool, name: str) -> bytes:
+    """Binary (or ASCII) STL of triangles (m, 3, 3) with their unit normals."""
+    nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    ln = np.linalg.norm(nrm, axis=1, keepdims=True)
+    nrm = np.divide(nrm, ln, out=np.zeros_like(nrm), where=ln > 0)
+    if ascii:
+        safe = re.sub(r"\s+", "_", name) or "mandrel"
+        facet = ("  facet normal %.7e %.7e %.7e\n    outer loop\n" + "      vertex %.9e %.9e %.9e\n" * 3
+                 + "    endloop\n  endfacet\n")
+        values = np.hstack([nrm, tri.reshape(-1, 9)]).astype(np.float32).astype(float)
+        body = (facet * len(tri)) % tuple(values.ravel().tolist())
+        return f"solid {safe}\n{body}endsolid {safe}\n".encode("ascii")
+    rec = np.zeros(len(tri), dtype=[("n", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
+    rec["n"] = nrm
+    rec["v"] = tri
+    header = f"winder mandrel {name}"[:80].encode("ascii", "replace").ljust(80, b" ")
+    return header + np.uint32(len(tri)).tobytes() + rec.tobytes()
 
 
 # ================================================================================================

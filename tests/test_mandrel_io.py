@@ -574,16 +574,26 @@ def test_step_bad_files(tmp_path: Path) -> None:
 def test_stl_closed_mesh_and_volume(tmp_path: Path) -> None:
     import pyvista as pv
 
-    for m, tol in ((Mandrel.vessel(50.0, 80.0, "ellipse", pole_radii=(10.0, 15.0), dome_ratio=0.7), 0.01),
-                   (Mandrel.bottle(), 0.02)):
+    for m, tol, ascii in ((Mandrel.vessel(50.0, 80.0, "ellipse", pole_radii=(10.0, 15.0), dome_ratio=0.7), 0.01, False),
+                          (Mandrel.vessel(40.0, 60.0, "hemisphere", pole_radii=(0.0, 12.0)), 0.005, True),
+                          (Mandrel.vessel(40.0, 0.0, "isotensoid", pole_radii=(8.0, 20.0)), 0.01, False),
+                          (Mandrel.bottle(), 0.02, False),
+                          (Mandrel.from_points([0, 10, 20, 30, 40], [0.0, 12.0, 15.0, 14.0, 0.0]), 0.01, True)):
         p = tmp_path / "m.stl"
-        export_stl(m, p, tolerance_mm=tol)
+        export_stl(m, p, tolerance_mm=tol, ascii=ascii)
+        assert p.read_bytes()[:5] == b"solid" if ascii else p.read_bytes()[:6] == b"winder"
         mesh = pv.read(str(p)).clean()
         assert mesh.n_cells > 100
         assert mesh.n_open_edges == 0
         assert mesh.is_manifold
         # chordal deviation <= tol everywhere: the volume differs by at most area * tol
         assert abs(mesh.volume - m.volume_mm3) <= m.area_mm2 * tol
+        assert abs(mesh.volume - m.volume_mm3) >= 1e-3 * m.area_mm2 * tol  # not absurdly fine either
+        # facets face outwards: the signed volume is positive
+        tri = mesh.extract_surface(algorithm="dataset_surface").triangulate()
+        f = tri.faces.reshape(-1, 4)[:, 1:]
+        v = tri.points[f]
+        assert np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])).sum() / 6.0 > 0
         assert mesh.bounds[4] == pytest.approx(m.z_min, abs=tol) and mesh.bounds[5] == pytest.approx(m.z_max, abs=tol)
 
 
