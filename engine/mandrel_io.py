@@ -8,15 +8,16 @@ column, DXF entity or geometric place that is wrong.  Nothing else escapes for b
   cells, ``#`` comments.
 * :func:`load_dxf` -- a profile drawn in model space with LINE / ARC / LWPOLYLINE (bulges) /
   POLYLINE / SPLINE / ELLIPSE, x = axial z, y = radius.
-* :func:`load_step` -- a solid of revolution; the axis is detected and the body is checked by
-  sectioning it with half-planes through the axis.
+* :func:`load_step` -- a solid of revolution; the axis is detected, the body is cut by a plane
+  through the axis and probed in six more half-planes; the outer profile is the generatrix.
 * :func:`export_step`, :func:`export_stl` -- the solid obtained by revolving the closed profile
-  (generatrix, end faces, axis) 360° about the Z axis.
+  (generatrix, end faces, axis) 360° about the Z axis (:func:`mandrel_solid`).
 * :func:`load_mandrel_file` -- dispatch by suffix.
 
 CAD kernels are imported lazily, inside the functions (the GUI must start fast).  cadquery/OCP is
-not thread-safe: every OCP call happens inside the STEP/STL functions of this module, so callers can
-serialise them with one lock.
+not thread-safe: every OCP call happens inside :func:`load_step`, :func:`export_step`,
+:func:`export_stl` and :func:`mandrel_solid`, so callers can serialise them with one lock;
+:func:`load_csv` and :func:`load_dxf` never touch OCP.
 """
 
 from __future__ import annotations
@@ -244,11 +245,10 @@ def load_csv(path: str | Path) -> Mandrel:
                 and all(_UNITS_ROW_RE.fullmatch(c.strip().strip("\"'")) for c in cells)):
             continue  # a row of units under the header, e.g. "mm, mm"
         if names is None and not zs:
-            # first row: a header if any cell is not a number
-            if any(v is None for v in values) and not any(_NONFINITE_RE.fullmatch(c.strip()) for c in cells):
+            # first row: a header if no cell is a number (a row mixing numbers and text is bad data)
+            if all(v is None for v in values) and not any(_NONFINITE_RE.fullmatch(c.strip()) for c in cells):
                 roles = [_column_role(c) for c in cells]
-                if any(v is not None for v in values) or roles.count("z") != 1 or (
-                        roles.count("r") + roles.count("d")) != 1:
+                if roles.count("z") != 1 or (roles.count("r") + roles.count("d")) != 1:
                     raise InputError(
                         f"cannot read the header {body!r}: it must name one axial column (z, z_mm, x) and one "
                         "radius column (r, r_mm, radius, or d/diameter)", file=file, line=lineno)
@@ -298,7 +298,8 @@ def load_csv(path: str | Path) -> Mandrel:
         rs.append(0.5 * rv if diameter else rv)
         line_nos.append(lineno)
 
-    assert names is not None
+    if names is None:  # pragma: no cover - a non-empty file always sets it
+        raise InputError("no z, r rows found", file=file)
     z = np.asarray(zs, dtype=float)
     r = np.asarray(rs, dtype=float)
     if len(z) < 4:
@@ -1010,7 +1011,7 @@ def _revolution_axis(solid: Any) -> tuple[FloatArray, FloatArray, str]:
     centroid = vec(g.CentreOfMass())
     bb = _bbox(solid)
     size = float(np.max(bb[1] - bb[0]))
-    tol = 1e-6 * max(size, 1.0)
+    tol = 1e-5 * max(size, 1.0)  # axes of faces from other CAD systems agree to about this
     axes: list[tuple[float, FloatArray, FloatArray, str]] = []
     centres: list[FloatArray] = []
     exp = TopExp_Explorer(solid, TopAbs_FACE)
@@ -1043,7 +1044,7 @@ def _revolution_axis(solid: Any) -> tuple[FloatArray, FloatArray, str]:
         _, o, d, kind = axes[0]
         for _, o2, d2, k2 in axes[1:]:
             off = _dist_to_line(o2, o, d)
-            if np.linalg.norm(np.cross(d, d2)) > 1e-6 or off > tol:
+            if np.linalg.norm(np.cross(d, d2)) > 1e-5 or off > tol:
                 raise InputError(
                     f"not a solid of revolution: its {k2} face turns about an axis through "
                     f"{_fmt_pt(o2)} along {_fmt_pt(d2)}, but the main {kind} face about {_fmt_pt(o)} along "

@@ -111,6 +111,8 @@ GOOD = _rows()
         (_table(GOOD[:3] + ["35,35,9"] + GOOD[4:]), 5, "column 3", "expected 2"),
         (_table(GOOD[:3] + ["35,,35"] + GOOD[4:]), 5, "column 3", "expected 2"),
         (_table(GOOD[:3]), 4, None, "too few points"),
+        ("0,20\n10,x28\n20,33\n35,35\n", 2, "r (column 2)", "'x28' is not a number"),
+        ("0,2O\n10,28\n20,33\n35,35\n", 1, "r (column 2)", "'2O' is not a number"),
         (_table(GOOD[:3] + ["35,1e9"] + GOOD[4:]), 5, "r_mm (column 2)", "out of range"),
         (_table(GOOD[:3] + ["20.0000000000001,35"] + GOOD[4:]), 5, "z_mm (column 1)", "too close"),
         (_table(["0,10", "1,10", "2,10", "3,10", "3.1,0.5", "4,10", "5,10"]), 6, "r_mm (column 2)",
