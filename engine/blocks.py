@@ -359,7 +359,7 @@ def _pair_violation(v: np.ndarray, alpha: np.ndarray, p: np.ndarray, pi: np.ndar
 
 
 def optimise_block_times(blocks: Blocks, machine: MachineTemplate, max_sweeps: int = 1000,
-                         rtol: float = 1e-12, state: State | None = None) -> Blocks:
+                         rtol: float = 1e-12, method: str = "global", state: State | None = None) -> Blocks:
     """Minimise the program time pairwise, eq. (18), under the axes' speed-jump limits.
 
     Parameters
@@ -368,6 +368,11 @@ def optimise_block_times(blocks: Blocks, machine: MachineTemplate, max_sweeps: i
     machine: the template (``max_jump`` per axis, controller units/s).
     max_sweeps: cap on the sweeps of pairwise minimisations.
     rtol: a pair step counts as an improvement when it lowers the pair time by more than this.
+    method: ``"pairwise"`` - the paper's procedure: pair sweeps (18) from the feasible start;
+        ``"global"`` - first the optimum of the whole program (a convex problem: log-barrier
+        interior point, one banded Newton system per step), then the pair sweeps (18) from there.
+        Both give the same answer on programs without axis reversals; with reversals the pairwise
+        procedure alone can stop short of the optimum (docs/machines.md).
 
     Returns
     -------
@@ -381,9 +386,21 @@ def optimise_block_times(blocks: Blocks, machine: MachineTemplate, max_sweeps: i
         return blocks
     v = blocks.delta / t[:, None]
     cyclic = blocks.cyclic and nb > 2
+    if method not in ("pairwise", "global"):
+        raise InputError(f"method must be 'pairwise' or 'global', got {method!r}", field="method")
     alpha, exact = _feasible_start(v, p, cyclic)
     hist = [float((t / alpha).sum())]
     total_start = hist[0]
+    polish_all = False
+    pi0, pj0 = _pair_indices(nb, cyclic)
+    any_reversal = nb >= 2 and bool(((v[pi0] * v[pj0]) < 0).any())
+    # without reversals (and an exact start) the start is the greatest element: already optimal
+    if method == "global" and nb >= 2 and (any_reversal or not exact):
+        a_ip = _interior_point(v, p, t, cyclic, alpha, state)
+        if a_ip is not None and float((t / a_ip).sum()) < hist[-1]:
+            alpha = a_ip
+            hist.append(float((t / alpha).sum()))
+            polish_all = True
     if nb >= 2:
         pi, pj = _pair_indices(nb, cyclic)
         npair = pi.size
@@ -408,7 +425,7 @@ def optimise_block_times(blocks: Blocks, machine: MachineTemplate, max_sweeps: i
         rev_blk[pi[rev]] = True
         rev_blk[pj[rev]] = True
         dirty = rev_blk[pi] | rev_blk[pj] | rev_blk[h] | rev_blk[l_]
-        if not exact:
+        if not exact or polish_all:
             dirty[:] = True
         for _sweep in range(max_sweeps):
             check_cancel(state)
@@ -438,6 +455,106 @@ def optimise_block_times(blocks: Blocks, machine: MachineTemplate, max_sweeps: i
     alpha_ro, time_ro = _ro(alpha, time)
     out = replace(blocks, alpha=alpha_ro, time=time_ro, total_start=total_start, history=tuple(hist))
     return replace(out, violations=tuple(check_blocks(machine, out)))
+
+
+def _interior_point(v: np.ndarray, p: np.ndarray, t: np.ndarray, cyclic: bool, alpha0: np.ndarray,
+                    state: State | None, rgap: float = 1e-11) -> np.ndarray | None:
+    """Optimum of ``sum t/alpha`` over the whole program's polygon (18) by a log-barrier method.
+
+    The Hessian couples only neighbouring blocks: a (cyclic) tridiagonal SPD system per Newton step,
+    solved by banded Cholesky (Sherman-Morrison for the wrap-around pair).  Starts from half the
+    feasible start (strictly inside); every iterate stays strictly feasible.  Returns None if the
+    start is not usable.
+    """
+    from scipy.linalg import solveh_banded
+
+    nb, m = v.shape
+    if np.any(alpha0 <= 0):
+        return None
+    pi, pj = _pair_indices(nb, cyclic)
+    live = (np.abs(v[pi]) + np.abs(v[pj])) > p                  # (pairs, m) can bind at all
+    kk, ii = np.nonzero(live.T)
+    ci, cj = pi[ii], pj[ii]
+    gi = np.concatenate([v[ci, kk], -v[ci, kk]])                # constraint g_i a_i + g_j a_j <= h
+    gj = np.concatenate([-v[cj, kk], v[cj, kk]])
+    hh = np.concatenate([p[kk], p[kk]])
+    ci, cj = np.concatenate([ci, ci]), np.concatenate([cj, cj])
+    nc = hh.size + 2 * nb
+    a = 0.5 * alpha0
+
+    def slacks(x):
+        return hh - gi * x[ci] - gj * x[cj], 1.0 - x
+
+    def phi(x, mu):
+        sc, su = slacks(x)
+        return float(np.sum(t / x) - mu * (np.log(sc).sum() + np.log(su).sum() + np.log(x).sum()))
+
+    f0 = float(np.sum(t / a))
+    mu = f0 / nc
+    for _outer in range(60):
+        check_cancel(state)
+        for _newton in range(50):
+            sc, su = slacks(a)
+            w = mu / sc ** 2
+            ms = mu / sc
+            grad = (-t / a ** 2 + mu * (1.0 / su - 1.0 / a) + np.bincount(ci, ms * gi, nb)
+                    + np.bincount(cj, ms * gj, nb))
+            diag = (2 * t / a ** 3 + mu * (1.0 / su ** 2 + 1.0 / a ** 2) + np.bincount(ci, w * gi * gi, nb)
+                    + np.bincount(cj, w * gj * gj, nb))
+            off = np.bincount(ci, w * gi * gj, nb)                # H[i, i+1 mod nb] at index i
+            d = _solve_cyclic_tridiag(diag, off, -grad, cyclic, solveh_banded)
+            if d is None:
+                return None
+            # fraction to the boundary, then backtracking on the barrier function
+            sc_d = -(gi * d[ci] + gj * d[cj])
+            steps = [1.0]
+            for num, den in ((sc, sc_d), (su, -d), (a, d)):
+                neg = den < 0
+                if neg.any():
+                    steps.append(0.99 * float(np.min(-num[neg] / den[neg])))
+            tau = min(steps)
+            f_old = phi(a, mu)
+            dec = float(grad @ d)
+            while tau > 1e-16 and phi(a + tau * d, mu) > f_old + 1e-4 * tau * dec:
+                tau *= 0.5
+            a = a + tau * d
+            # Newton decrement small against the duality-gap bound of this barrier parameter
+            if -dec < 0.1 * mu * nc or -dec < 1e-14 * (1.0 + abs(f_old)):
+                break
+        if mu * nc < rgap * float(np.sum(t / a)):
+            break
+        mu *= 0.05
+    sc, su = slacks(a)
+    if np.any(sc <= 0) or np.any(su < 0) or np.any(a <= 0):
+        return None
+    return a
+
+
+def _solve_cyclic_tridiag(diag, off, rhs, cyclic, solveh_banded):
+    """Solve H x = rhs, H symmetric with ``diag``, ``off[i] = H[i, i+1]`` and, if cyclic,
+    ``off[-1] = H[n-1, 0]``."""
+    n = diag.size
+    ab = np.zeros((2, n))
+    ab[1] = diag
+    ab[0, 1:] = off[:-1]
+    try:
+        if not cyclic or n < 3:
+            if n == 2 and cyclic:
+                ab[0, 1] = off[0] + off[1]
+            return solveh_banded(ab, rhs)
+        c = off[-1]
+        gamma = -diag[0]
+        ab[1, 0] = diag[0] - gamma
+        ab[1, -1] = diag[-1] - c * c / gamma
+        u = np.zeros(n)
+        u[0], u[-1] = gamma, c
+        sol = solveh_banded(ab, np.stack([rhs, u], axis=1))
+        y, z = sol[:, 0], sol[:, 1]
+        vy = y[0] + c / gamma * y[-1]
+        vz = z[0] + c / gamma * z[-1]
+        return y - vy / (1.0 + vz) * z
+    except np.linalg.LinAlgError:
+        return None
 
 
 def _solve_with_neighbours(sel, pi, pj, h, l_, has_h, has_l, v, alpha, p, t):

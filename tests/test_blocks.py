@@ -187,8 +187,9 @@ def _scipy_program(v, t, p, cyclic, start=None):
     return best
 
 
+@pytest.mark.parametrize("method", ["pairwise", "global"])
 @pytest.mark.parametrize("reversals", [False, True])
-def test_program_optimum_vs_generic_nlp(reversals):
+def test_program_optimum_vs_generic_nlp(reversals, method):
     rng = np.random.default_rng(7 + reversals)
     gaps = []
     for _ in range(30):
@@ -199,7 +200,7 @@ def test_program_optimum_vs_generic_nlp(reversals):
         t17 = preliminary_times(delta, np.ones(m), 0.01)
         pj = float(rng.uniform(0.05, 0.5))
         mach = _synthetic_machine(m, pj)
-        b = optimise_block_times(_program_blocks(delta, t17), mach)
+        b = optimise_block_times(_program_blocks(delta, t17), mach, method=method)
         ref = _scipy_program(delta / t17[:, None], t17, np.full(m, pj), True, start=b.alpha)
         assert not check_blocks(mach, b)
         assert b.total >= b.total_t17 - 1e-12
@@ -208,8 +209,8 @@ def test_program_optimum_vs_generic_nlp(reversals):
         gaps.append((b.total - ref) / ref)
     gaps = np.array(gaps)
     assert gaps.min() > -1e-6            # never better than the global optimum (it is feasible)
-    if not reversals:
-        # the paper's class: pairwise minimisation is globally optimal
+    if not reversals or method == "global":
+        # the paper's class: pairwise minimisation is globally optimal; the global method always is
         assert gaps.max() < 1e-6
     else:
         # with axis reversals pairwise minimisation can stop short of the global optimum (a known
@@ -234,6 +235,19 @@ def test_optimised_program_respects_speed_and_jump_limits(name):
     assert all(x >= y * (1 - 1e-12) for x, y in zip(b.history, b.history[1:]))
     assert np.all((b.alpha > 0) & (b.alpha <= 1))
     assert np.allclose(b.time, b.t17 / b.alpha)
+
+
+@pytest.mark.parametrize("name", ["lathe2", "lathe4"])
+def test_global_method_reaches_the_nlp_optimum_on_machine_programs(name):
+    m, p, ap = _setup(name, n=3000, circuits=1)
+    b0 = make_blocks(m, ap, 0.3)
+    bp = optimise_block_times(b0, m, method="pairwise")
+    bg = optimise_block_times(b0, m, method="global")
+    t = np.asarray(b0.t17)
+    ref = _scipy_program(b0.delta / t[:, None], t, m.limits("max_jump"), True, start=bg.alpha)
+    assert bg.total == pytest.approx(ref, rel=1e-6)
+    assert bg.total <= bp.total * (1 + 1e-12) and bg.total <= bg.total_start
+    assert not bg.violations
 
 
 def test_turnaround_reversal_pairs_use_lagrange_edges():
@@ -275,6 +289,8 @@ def test_violations_located_by_axis_and_block():
 
 def test_bad_tolerance_and_mismatch():
     m, p, ap = _setup("lathe3", n=500, circuits=1)
+    with pytest.raises(InputError, match="method"):
+        optimise_block_times(make_blocks(m, ap, 0.1), m, method="simplex")
     with pytest.raises(InputError, match="tolerance"):
         make_blocks(m, ap, 0.0)
     with pytest.raises(InputError, match="axes"):
