@@ -22,6 +22,7 @@ not thread-safe: every OCP call happens inside :func:`load_step`, :func:`export_
 
 from __future__ import annotations
 
+import io
 import math
 import re
 from collections.abc import Iterable, Sequence
@@ -402,7 +403,7 @@ def load_dxf(path: str | Path) -> Mandrel:
         z, r = _profile_from_pieces(pieces, curves)
     except InputError as exc:
         raise exc.at(file=file) from None
-    meta = {"dxf_entities": [_entity_label(e) for e in curves][:50]}
+    meta = {"dxf_entities": [_entity_label(e) for e in curves][:50], "dxf_scale_to_mm": scale}
     return _mandrel_from_profile(z, r, path=p, source="dxf", meta=meta)
 
 
@@ -421,7 +422,7 @@ def _read_dxf_doc(p: Path, data: bytes) -> Any:
     logger.setLevel(logging.CRITICAL)  # recovery chatter is not for the user
     try:
         try:
-            doc, auditor = recover.readfile(str(p))
+            doc, auditor = recover.read(io.BytesIO(data))
         except ezdxf.DXFStructureError as exc:
             raise InputError(f"not a readable DXF drawing: {exc}", file=file) from None
         except (UnicodeError, ValueError, TypeError, IndexError, KeyError, AttributeError, EOFError, OSError,
