@@ -31,7 +31,12 @@ sweeping the pairs is globally optimal (the paper's "class of programs").
 
 Algorithm: (1) a feasible start - the greatest element of the constraints with each reversal pair
 ``|v_i| a_i + |v_j| a_j <= p`` replaced by the split ``a <= p / (|v_i| + |v_j|)``, found by a
-vectorised fixed-point iteration from ``alpha = 1`` (with a safe fallback); (2) sweeps of exact
+vectorised fixed-point iteration from ``alpha = 1`` (with a safe fallback); (1b) with
+``method="global"`` (default) and axis reversals present: the optimum of the whole program - a
+convex problem - by a log-barrier interior-point method whose Newton systems are (cyclic)
+tridiagonal, because (18) couples only neighbouring blocks; the pairwise sweeps alone can stop short
+of it where an axis reverses (a tight reversal pair cannot trade time without moving a third
+block); (2) sweeps of exact
 pairwise minimisations (18) (vertex enumeration + Lagrange points, neighbours held fixed, pairs that
 share neither a block nor a neighbour solved together, vectorised), only where a neighbour changed,
 until no pair improves.
@@ -517,6 +522,8 @@ def _interior_point(v: np.ndarray, p: np.ndarray, t: np.ndarray, cyclic: bool, a
             dec = float(grad @ d)
             while tau > 1e-16 and phi(a + tau * d, mu) > f_old + 1e-4 * tau * dec:
                 tau *= 0.5
+            if tau <= 1e-12:                 # no progress possible at this barrier parameter
+                break
             a = a + tau * d
             # Newton decrement small against the duality-gap bound of this barrier parameter
             if -dec < 0.1 * mu * nc or -dec < 1e-14 * (1.0 + abs(f_old)):
