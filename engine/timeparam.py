@@ -180,6 +180,7 @@ class IterationLog:
     upper: np.ndarray = field(repr=False)
     w_mask: np.ndarray = field(repr=False)
     o_mask: np.ndarray = field(repr=False)
+    note: str = ""
 
     def as_dict(self) -> dict[str, Any]:
         """The JSON-able summary (no arrays)."""
@@ -193,6 +194,7 @@ class IterationLog:
             "decrease_percent": self.decrease_percent,
             "halved": self.halved,
             "stop": self.stop,
+            "note": self.note,
         }
 
     def text(self) -> str:
@@ -206,6 +208,8 @@ class IterationLog:
                 lines.append("  > no touches")
         if self.decrease_percent is not None:
             lines.append(f"  >> decrease of specific time: {self.decrease_percent:.5f} %")
+        if self.note:
+            lines.append(f"  {self.note}")
         if self.stop:
             lines.append("  --- >>> done <<< ---")
         return "\n".join(lines)
@@ -1048,7 +1052,18 @@ def _tube(prob: _Problem, state: State | None) -> tuple[np.ndarray, list[Iterati
         lo[-1] = hi[-1] = lim.sdot_end
         lo = np.minimum(lo, hi)
         sh_used = sh
-        sdot_r, jidx = _dp(prob, lo, hi, M, state, cluster=lim.tube_cluster)
+        try:
+            sdot_r, jidx = _dp(prob, lo, hi, M, state, cluster=lim.tube_cluster)
+        except InfeasibleError as exc:
+            # the previous law is feasible but not on this tube's grid: keep it and stop
+            log = IterationLog(r, logs[-1].total_time_s, tsp_prev, sh, 0, 0, 0.0, False, True, s, sdot,
+                               lo, hi, np.zeros(s.size, bool), np.zeros(s.size, bool),
+                               note=f"no admissible law on this tube's grid ({exc.message}); "
+                                    f"the previous iteration's law is kept")
+            logs.append(log)
+            if state is not None:
+                state.partial(log)
+            break
         t_total = float(_times(s, sdot_r)[-1])
         tsp = t_total / sN
         w, o = _touches(jidx, lo, hi, prob, M)

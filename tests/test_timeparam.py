@@ -451,3 +451,23 @@ def test_threaded_chunk_building_gives_the_same_answer(example, monkeypatch) -> 
     monkeypatch.setattr(tp, "_THREADS", True)
     v1, j1 = _dp(prob, lo, hi, 300)
     assert np.array_equal(j0, j1) and np.array_equal(v0, v1)
+
+
+def test_tube_keeps_the_previous_law_if_a_tube_grid_is_infeasible(example, monkeypatch) -> None:
+    import engine.timeparam as tp
+
+    s, X, dX, ddX, lim = example
+    real = tp._dp
+    calls = []
+
+    def flaky(*args, **kw):
+        calls.append(1)
+        if len(calls) == 3:
+            raise InfeasibleError("synthetic")
+        return real(*args, **kw)
+
+    monkeypatch.setattr(tp, "_dp", flaky)
+    law = parametrize(s, X, dX, ddX, lim)
+    its = law.iterations
+    assert len(its) == 3 and its[-1].stop and "previous" in its[-1].note
+    assert np.array_equal(law.sdot, its[1].sdot) and law.max_accel_ratio <= 1 + 1e-9
