@@ -752,9 +752,12 @@ def _slide_to_radius(eye: np.ndarray, d: np.ndarray, c: np.ndarray, r0: float
     qq = -0.5 * (b + np.copysign(sq, b))
     r1 = np.where(qq != 0, cc / np.where(qq == 0, 1.0, qq), 0.0)
     r2 = qq / aa
-    s = np.where(np.abs(r1) < np.abs(r2), r1, r2)
-    s = np.where(bad, 0.0, s)
     l_free = np.einsum("ij,ij->i", eye - c, d)
+    # the root on the eye side of the contact point (free length > 0); nearest one if both are
+    front1, front2 = l_free + r1 > 0, l_free + r2 > 0
+    nearer1 = np.abs(r1) < np.abs(r2)
+    s = np.where(front1 & (~front2 | nearer1), r1, np.where(front2, r2, np.where(nearer1, r1, r2)))
+    s = np.where(bad, 0.0, s)
     viol = violations_from_mask("workspace", None, bad, np.sqrt(cc + r0 * r0), r0, " mm",
                                 what="the fibre line never reaches the eye radius; eye radius")
     behind = (~bad) & (l_free + s <= 0)

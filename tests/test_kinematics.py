@@ -303,3 +303,19 @@ def test_process_parameter_passes_through():
     assert inverse_kinematics(m, p.eye_xyz, p.fibre_dir, p.contact_xyz).x is None
     with pytest.raises(InputError, match="x must have shape"):
         inverse_kinematics(m, p.eye_xyz, p.fibre_dir, p.contact_xyz, x=p.x[:10])
+
+
+def test_fixed_radius_eye_slides_forward_not_behind_the_contact():
+    """Near a pole the fibre leaves the surface pointing inwards: the line crosses the eye radius
+    once behind the contact point (nearer to the given eye) and once in front - the front one is used."""
+    m = load_machine("lathe2")
+    d = np.array([[-0.5, 0.3, 0.8], [-0.5, 0.31, 0.8]])
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    c = np.array([[150.0, 0.0, 0.0], [150.0, 0.5, 0.2]])
+    eye = c + 20.0 * d               # crossings of r = 160 at free lengths ~ -20 (nearer) and ~ +456
+    ap = inverse_kinematics(m, eye, d, c)
+    assert ap.ok, ap.message()
+    rel = ap.eye_xyz - c
+    assert np.all(np.einsum("ij,ij->i", rel, d) > 0)
+    assert np.allclose(np.hypot(ap.eye_xyz[:, 0], ap.eye_xyz[:, 1]), m.eye_radius)
+    assert np.linalg.norm(np.cross(rel, d), axis=1).max() < 1e-9
