@@ -211,8 +211,12 @@ def _end_is_dome(mandrel: Any, side: int) -> bool:
     return bool(r1 > r0 + 1e-9 * max(1.0, r0))
 
 
-def _crossing(mandrel: Any, C: float, z_start: float, z_stop: float) -> float | None:
-    """First z from ``z_start`` towards ``z_stop`` where r(z) − C changes sign (mm), or None."""
+def _crossing(mandrel: Any, C: float, z_start: float, z_stop: float, from_inside: bool = False) -> float | None:
+    """First z from ``z_start`` towards ``z_stop`` where r(z) − C changes sign (mm), or None.
+
+    ``from_inside``: the search starts on the line (r >= C there, possibly a turnaround parallel)
+    and looks for the first parallel beyond the start where r <= C.
+    """
     z = np.linspace(z_start, z_stop, 2001)
     j = [x for x in wc.joints(mandrel) if min(z_start, z_stop) < x < max(z_start, z_stop)]
     if j:
@@ -220,22 +224,24 @@ def _crossing(mandrel: Any, C: float, z_start: float, z_stop: float) -> float | 
         if z_stop < z_start:
             z = z[::-1]
     f = mandrel.r(z) - C
-    # skip samples on the starting parallel itself (a turnaround the search starts from)
-    live = np.flatnonzero(np.abs(f) > 1e-12 * max(1.0, abs(C)))
-    if not live.size:
-        return None
-    i0 = int(live[0])
-    s0 = f[i0]
-    if i0 > 0 and abs(f[0]) > 0.0 and np.sign(f[0]) != np.sign(s0):
-        return float(z[0])
-    idx = np.flatnonzero(np.sign(f[i0:]) != np.sign(s0)) + i0
+    if from_inside:
+        i0, s0 = 1, 1.0
+        idx = np.flatnonzero(f[1:] <= 0.0) + 1
+    else:
+        # skip samples on the starting parallel itself
+        live = np.flatnonzero(np.abs(f) > 1e-12 * max(1.0, abs(C)))
+        if not live.size:
+            return None
+        i0 = int(live[0])
+        s0 = f[i0]
+        idx = np.flatnonzero(np.sign(f[i0:]) != np.sign(s0)) + i0
     if not idx.size:
         return None
     i = int(idx[0])
     a, b = float(z[i - 1]), float(z[i])
     zz = np.linspace(a, b, 2001)
     ff = mandrel.r(zz) - C
-    k = int(np.flatnonzero(np.sign(ff) != np.sign(s0))[0])
+    k = int(np.flatnonzero(np.sign(ff[1:]) != np.sign(s0))[0]) + 1
     if ff[k] == 0.0:
         return float(zz[k])
     # quadratic interpolation through three neighbouring samples (spacing ~1e-5 of a scan step)
@@ -321,11 +327,13 @@ def solve_pass(
     angles.sort(key=lambda c: c.z)
 
     mode = spec.mode
-    if c_override is not None or mode == "geodesic":
-        return _geodesic_pass(mandrel, pole_c, angles, n_out, refine, ctx, notes, pole_fld, c_override)
-
     user_poles = spec.pole_c_mm is not None
+    if c_override is not None or (mode == "geodesic" and angles):
+        return _geodesic_pass(mandrel, pole_c, angles, n_out, refine, ctx, notes, pole_fld, c_override)
     ends = [_end_condition(mandrel, i, pole_c[i], pole_fld, ctx, user_poles) for i in (0, 1)]
+    if mode == "geodesic":  # C from the poles the line can turn at (an open end's default is no condition)
+        live = [pole_c[i] if ends[i][2] is not None else None for i in (0, 1)]
+        return _geodesic_pass(mandrel, live, angles, n_out, refine, ctx, notes, pole_fld, c_override)
     conds: list[_Cond] = []
     if ends[0][2] is not None:
         conds.append(_Cond(ends[0][1], ends[0][2], ends[0][0], pole_fld))
@@ -352,11 +360,11 @@ def solve_pass(
     # free ends: geodesic continuation from the outermost condition
     left_kind, right_kind = ends[0][0], ends[1][0]
     if ends[0][2] is None:
-        zt = _crossing(mandrel, conds[0].C, conds[0].z, mandrel.z_min)
+        zt = _crossing(mandrel, conds[0].C, conds[0].z, mandrel.z_min, from_inside=True)
         if zt is not None:
             za, left_kind = zt, wc.TURN
     if ends[1][2] is None:
-        zt = _crossing(mandrel, conds[-1].C, conds[-1].z, mandrel.z_max)
+        zt = _crossing(mandrel, conds[-1].C, conds[-1].z, mandrel.z_max, from_inside=True)
         if zt is not None:
             zb, right_kind = zt, wc.TURN
     concave = [zn for zn in mandrel.concave_zones() if zn.z_to > za and zn.z_from < zb]
@@ -492,7 +500,7 @@ def _geodesic_pass(
     kinds = []
     zz = []
     for z_end in (mandrel.z_min, mandrel.z_max):
-        zt = _crossing(mandrel, C0, z_ref, z_end)
+        zt = _crossing(mandrel, C0, z_ref, z_end, from_inside=True)
         if zt is None:
             kinds.append(wc.OPEN)
             zz.append(z_end)
