@@ -21,9 +21,12 @@ Public API
     ``|axis acceleration| / A_c`` on a fine sub-grid inside every interval), ``max_speed_ratio``,
     ``energy`` (curvature energy of ``ṡ(t)``), ``compute_s``, ``method``.
 ``block_feeds(law, s_block_ends, decimals=None) -> (durations_s, inverse_time_feed_per_min)``
-    Per-NC-block durations and G93 inverse-time feed numbers (1/min).
-``curvature_energy(t, sdot)``
-    ``E = ∫ k² dt`` of the plane curve ``(t, ṡ(t))``.
+    Per-NC-block durations and G93 inverse-time feed numbers (1/min); block ends are s values or
+    node indices.  ``time_at(law, s)`` is the exact time at any s.
+``curvature_energy(t, sdot, speed_unit=1000)``
+    ``E = ∫ k² dt`` of the plane curve ``(t, ṡ(t))`` (ṡ in m/s by default; ``energy_mm`` in mm/s).
+``prepare(...)``, ``evaluate_limits(prob, sdot)``
+    The shared set-up and the limit ratios of any law (e.g. a law from elsewhere).
 
 The state protocol: ``parametrize`` reports ``state.progress``, polls cancellation between tube
 iterations (and inside long DP passes), and publishes every finished tube iteration as an
@@ -41,13 +44,21 @@ on the whole interval, not only at the arrival node (the paper's check, kept as
 ``accel_check="arrival"`` for comparison).  Axis speeds are bounded the same way (Bernstein bound of
 ``|X_c'|`` on both intervals adjacent to a node; ``ṡ`` is monotone inside an interval).
 
+Tube levels
+-----------
+The nominal run spaces its M levels uniformly in ``[0, ṡ_max]``; inside the tube they are clustered
+toward the centre (the previous law), ``TimeLimits.tube_cluster`` (0 = uniform).  See
+docs/timeparam.md for why and for the measured effect.
+
 Speed of the DP
 ---------------
 All constraints of one interval are half-planes in ``(ṡ_k², u)``; after normalising them to
-``n·z <= 1`` only the vertices of the convex hull of the normals matter (a few of ~72), found once,
-vectorised over intervals.  For a level ``ṡ_j`` the feasible ``ṡ_k`` then form one window
-``[k_lo, k_hi]`` in closed form; only those candidates are costed (flat, vectorised), and the
-sequential pass does one gather + ``minimum.reduceat`` per interval.
+``n·z <= 1`` only the vertices of the convex hull of the normals matter, found once, vectorised over
+intervals.  They bound the feasible polygon in ``(ṡ²_{i-1}, ṡ²_i)``; for a level ``ṡ_j`` the
+feasible ``ṡ_k`` form one window ``[k_lo, k_hi]`` read off the polygon's left/right chains (closed
+form, one ``np.interp``).  Only those candidates are costed (flat, vectorised, in chunks), and the
+sequential pass does one gather + one integer ``minimum.reduceat`` per interval (the window position
+rides in the low 12 bits of the float cost, giving min and argmin together).
 """
 
 from __future__ import annotations
@@ -931,15 +942,14 @@ def curvature_energy(t: np.ndarray, sdot: np.ndarray, speed_unit: float = 1000.0
     return float(np.sum(np.where(ok, k * k * (h0 + h1) / 2.0, 0.0)))
 
 
-def evaluate_limits(prob_or_law: Any, sdot: np.ndarray | None = None, n_sub: int = _N_SUB
-                    ) -> dict[str, float]:
+def evaluate_limits(prob: _Problem, sdot: np.ndarray, n_sub: int = _N_SUB) -> dict[str, float]:
     """Worst limit ratios of a speed law on a fine sub-grid inside every interval.
 
-    The path is the quintic Hermite interpolant of the nodes; ṡ² is linear in s inside an interval.
-    Returns ``accel`` (max |a_c|/A_c), ``speed`` (max |v_c|/V_c), ``sddot`` (max |s̈|/s̈_T), ``sdot``
-    (max ṡ/ṡ_T,max) and ``points`` (max ṡ/ṡ_TT at the technological points).
+    ``prob`` comes from :func:`prepare`.  The path is the quintic Hermite interpolant of the nodes;
+    ṡ² is linear in s inside an interval.  Returns ``accel`` (max |a_c|/A_c), ``speed``
+    (max |v_c|/V_c), ``sddot`` (max |s̈|/s̈_T), ``sdot`` (max ṡ/ṡ_T,max) and ``points``
+    (max ṡ/ṡ_TT at the technological points).
     """
-    prob: _Problem = prob_or_law
     lim = prob.limits
     v = np.asarray(sdot, float)
     tau = np.linspace(0.0, 1.0, n_sub + 1)
