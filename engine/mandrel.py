@@ -388,7 +388,7 @@ class Mandrel:
     @property
     def pole_radii(self) -> tuple[float, float]:
         """Polar-opening radii (r at z_min, r at z_max) in mm."""
-        r = self.r(np.array([self.z_min, self.z_max]))
+        r = np.maximum(self.r(np.array([self.z_min, self.z_max])), 0.0)  # closed poles: no -0 roundoff
         return float(r[0]), float(r[1])
 
     @cached_property
@@ -464,7 +464,8 @@ class Mandrel:
                 f"the generatrix meets the axis inside the winding zone at z = {zi:.6g} mm "
                 f"(r = {r[1:-1][inside <= 0][0]:.6g} mm); radii must be > 0 between the poles"
             )
-        if r[0] < 0 or r[-1] < 0:
+        neg_tol = 1e-12 * max(1.0, float(np.abs(r).max()))  # a spline closed at a pole evaluates to ±roundoff there
+        if r[0] < -neg_tol or r[-1] < -neg_tol:
             raise InputError(f"negative pole radius: r(z_min) = {r[0]:.6g}, r(z_max) = {r[-1]:.6g} mm")
 
     # -- constructors ----------------------------------------------------------------------------

@@ -325,3 +325,7 @@ def test_validate_points(z: list[float], r: list[float], words: str, line: int |
 def test_points_may_close_at_the_ends() -> None:
     m = Mandrel.from_points([0, 1, 2, 3, 4], [0.0, 2.0, 2.5, 2.0, 0.0])
     assert m.pole_radii == (0.0, 0.0)
+    # the cubic evaluates to -1.8e-15 at the right end here: roundoff, not a negative pole
+    z = [2.083, 3.046, 5.421, 6.292, 8.837, 9.306, 11.835, 12.579, 13.892]
+    r = [0.0, 9.751, 15.37, 7.679, 10.944, 5.087, 8.937, 11.318, 0.0]
+    assert Mandrel.from_points(z, r).pole_radii == (0.0, 0.0)
