@@ -503,6 +503,15 @@ def test_step_closed_hemisphere_and_sample(tmp_path: Path, examples_dir: Path) -
     np.testing.assert_allclose(sample.r(z), ref.r(z), rtol=1e-5)
 
 
+def test_step_roundtrip_closed_spline_and_cone(tmp_path: Path) -> None:
+    for m in (Mandrel.from_points([0, 10, 20, 30, 40], [0.0, 12.0, 15.0, 14.0, 0.0], name="closed_spline"),
+              Mandrel.cone(30.0, 10.0, 100.0)):
+        back = _roundtrip(m, tmp_path)
+        z = np.linspace(m.z_min + 1.0, m.z_max - 1.0, 500)
+        np.testing.assert_allclose(back.r(z), m.r(z), rtol=1e-6)
+        assert back.pole_radii == pytest.approx(m.pole_radii, abs=1e-6)
+
+
 def test_step_axis_detected_off_origin(tmp_path: Path) -> None:
     """A plain cylinder along a tilted axis away from the origin is a solid of revolution about that axis."""
     import cadquery as cq
