@@ -201,6 +201,8 @@ class MachineTemplate:
     min_block_time: tau of eq. (17), s.
     base: robot base transform (4x4, machine frame, at track position 0).
     dh: robot DH rows.  tool: fixed flange-to-eye transform (4x4).  home: robot joint seed, rad.
+    band_symmetric: the eye slot is symmetric, so the eye x axis may be +w or -w (the solver keeps
+        the one nearer the previous pose: no needless half turns of the wrist).
     source: file the template was read from.
     """
 
@@ -217,6 +219,7 @@ class MachineTemplate:
     dh: tuple[DH, ...] = ()
     tool: np.ndarray | None = None
     home: tuple[float, ...] = ()
+    band_symmetric: bool = True
     source: str = ""
 
     @property
@@ -404,7 +407,12 @@ def parse_machine(data: dict, file: str = "<machine>", name: str | None = None) 
         if len(home) != 6 or not all(isinstance(h, (int, float)) for h in home):
             raise InputError(f"'robot.home_deg' must be 6 numbers, got {home!r}", file=file,
                              field="robot.home_deg")
-        kw.update(base=_mat(_need(robot, "base", dict, file, "robot."), file, "robot.base"),
+        sym = robot.get("band_symmetric", True)
+        if not isinstance(sym, bool):
+            raise InputError(f"'robot.band_symmetric' must be true or false, got {sym!r}", file=file,
+                             field="robot.band_symmetric")
+        kw.update(band_symmetric=sym,
+                  base=_mat(_need(robot, "base", dict, file, "robot."), file, "robot.base"),
                   tool=_mat(_need(robot, "tool", dict, file, "robot."), file, "robot.tool"),
                   dh=tuple(dh), home=tuple(math.radians(h) for h in home))
         fibre_mode = "full"
@@ -833,6 +841,16 @@ def _pose_error(T: np.ndarray, p: np.ndarray, R: np.ndarray) -> np.ndarray:
     return e
 
 
+def _flip_to(Rc: np.ndarray, Rt: np.ndarray) -> np.ndarray:
+    """Targets with x and y negated (a half turn about the eye axis) where that is nearer ``Rc``."""
+    flip = np.einsum("ni,ni->n", Rc[:, :, 0], Rt[:, :, 0]) < 0
+    if not flip.any():
+        return Rt
+    Rt = Rt.copy()
+    Rt[flip, :, :2] *= -1.0
+    return Rt
+
+
 _W = np.array([1.0, 1.0, 1.0, 1000.0, 1000.0, 1000.0])   # error weights: 1 rad ~ 1000 mm
 
 
@@ -854,15 +872,18 @@ def _newton(machine: MachineTemplate, track: np.ndarray, p: np.ndarray, R: np.nd
     """Batched Newton / damped least squares on the 6 joints.
 
     Returns the joints, the final error norms (mm, rad x 1000) and, when asked, the inverse weighted
-    Jacobians at the solution (for chord iterations on a finer level).
+    Jacobians at the solution (for chord iterations on a finer level).  With a symmetric band the
+    target roll is chosen against the starting pose.
     """
     j = j0.copy()
     active = np.arange(j.shape[0])
     err = np.full(j.shape[0], np.inf)
-    for _ in range(iters):
+    for it in range(iters):
         if active.size == 0:
             break
         T, zs, os_ = _robot_frames(machine, track[active], j[active])
+        if it == 0 and machine.band_symmetric:
+            R = _flip_to(T[:, :3, :3], R)
         e = _pose_error(T, p[active], R[active])
         en = _err_norm(e)
         err[active] = en
@@ -900,8 +921,10 @@ def _chord(machine: MachineTemplate, track: np.ndarray, p: np.ndarray, R: np.nda
     active = np.arange(j.shape[0])
     err = np.full(j.shape[0], np.inf)
     ji = None
-    for _ in range(iters + 1):
+    for it in range(iters + 1):
         R_, pe, _, _ = _robot_chain(machine, track[active], j[active])
+        if it == 0 and machine.band_symmetric:
+            R = _flip_to(R_, R)
         T = np.empty((active.size, 4, 4))
         T[:, :3, :3] = R_
         T[:, :3, 3] = pe
