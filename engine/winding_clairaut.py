@@ -377,34 +377,68 @@ def step_lambda(grid: PassGrid, k: int, c: float, target: float, forward: bool, 
 
 
 def shoot(grid: PassGrid, i0: int, i1: int, c0: float, c1: float, lam0: float = 0.0) -> tuple[float, list[float]]:
-    """Constant λ carrying C from ``c0`` at node i0 to ``c1`` at node i1 (Newton on dC/dλ).
+    """Constant λ carrying C from ``c0`` at node i0 to ``c1`` at node i1.
 
-    Raises ``ValueError`` when no λ is found.
+    Newton on dC/dλ (the variational equation is integrated alongside); if Newton does not
+    converge, a scan for a sign change of the residual and Brent's method.  Raises ``ValueError``
+    when no λ is found.
     """
-    lam = lam0
-    cs, ss = integrate(grid, i0, i1, c0, lam, sens=True)
-    res = cs[-1] - c1
     tol = 1e-12 * max(1.0, abs(c1))
-    for _ in range(60):
-        if abs(res) < tol:
-            return lam, cs
-        d = ss[-1] if ss else 0.0  # type: ignore[index]
-        if d == 0.0 or not math.isfinite(d):
-            break
-        dl = -res / d
-        for _half in range(40):
-            cand = lam + dl
-            cs2, ss2 = integrate(grid, i0, i1, c0, cand, sens=True)
-            res2 = cs2[-1] - c1
-            if math.isfinite(res2) and abs(res2) < abs(res):
-                lam, cs, ss, res = cand, cs2, ss2, res2
+    for start in dict.fromkeys((lam0, 0.0)):
+        lam = start
+        cs, ss = integrate(grid, i0, i1, c0, lam, sens=True)
+        res = cs[-1] - c1
+        if not (math.isfinite(res) and abs(res) < 1e11):
+            continue
+        for _ in range(60):
+            if abs(res) < tol:
+                return lam, cs
+            d = ss[-1] if ss else 0.0  # type: ignore[index]
+            if d == 0.0 or not math.isfinite(d):
                 break
-            dl *= 0.5
-        else:
-            break
-    if abs(res) < 1e-9:
-        return lam, cs
-    raise ValueError(f"no constant λ found (residual {res:.3g} mm)")
+            dl = -res / d
+            for _half in range(40):
+                cand = lam + dl
+                cs2, ss2 = integrate(grid, i0, i1, c0, cand, sens=True)
+                res2 = cs2[-1] - c1
+                if math.isfinite(res2) and abs(res2) < abs(res):
+                    lam, cs, ss, res = cand, cs2, ss2, res2
+                    break
+                dl *= 0.5
+            else:
+                break
+        if abs(res) < 1e-9:
+            return lam, cs
+    return _shoot_bracket(grid, i0, i1, c0, c1)
+
+
+def _shoot_bracket(grid: PassGrid, i0: int, i1: int, c0: float, c1: float) -> tuple[float, list[float]]:
+    from scipy.optimize import brentq
+
+    def res(lam: float) -> float:
+        v = integrate(grid, i0, i1, c0, lam)[0][-1] - c1
+        return v if math.isfinite(v) else math.copysign(1e12, lam)
+
+    r0 = res(0.0)
+    if r0 == 0.0:
+        return 0.0, integrate(grid, i0, i1, c0, 0.0)[0]
+    for sign in (1.0, -1.0):
+        a, fa = 0.0, r0
+        mag = 1e-3
+        while mag <= 16.0:
+            b = sign * mag
+            fb = res(b)
+            if abs(fb) < 1e11 and fa * fb < 0:
+                lam = float(brentq(res, min(a, b), max(a, b), xtol=1e-15, rtol=1e-15, maxiter=200))
+                cs = integrate(grid, i0, i1, c0, lam)[0]
+                if abs(cs[-1] - c1) < 1e-9:
+                    return lam, cs
+                break
+            if abs(fb) >= 1e11:
+                break
+            a, fa = b, fb
+            mag *= 1.5
+    raise ValueError(f"no constant λ with |λ| <= 16 carries C from {c0:.6g} to {c1:.6g} mm")
 
 
 # ------------------------------------------------------------------------------------------------
