@@ -267,6 +267,11 @@ def test_bad_robot_template_and_unknown_machine(tmp_path):
     with pytest.raises(InputError, match="6 rows") as ei:
         parse_machine(data, "r.toml")
     assert ei.value.location.field == "robot.dh"
+    data = _template("robot_cell")
+    data["robot"]["band_symmetric"] = "yes"
+    with pytest.raises(InputError) as ei:
+        parse_machine(data, "r.toml")
+    assert ei.value.location.field == "robot.band_symmetric"
     f = tmp_path / "broken.toml"
     f.write_text("kind = [\n")
     with pytest.raises(InputError, match="TOML"):
