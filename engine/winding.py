@@ -62,7 +62,15 @@ class WindingLine:
     ``circuit`` and ``pass_id`` (int), ``dwell`` (bool: point on a dwell arc at a turnaround).
 
     Circuit k occupies ``circuit_slice(k)``: it starts where circuit k−1 ended (the shared point
-    belongs to circuit k), and the slice includes the closing point.
+    belongs to circuit k), and the slice includes the closing point.  Dwell points (extra mandrel
+    rotation at a turnaround, or the turn on pins at an open end) lie on the end parallel with
+    β = π/2, C = r, λ = 0 and τ along the parallel.
+
+    Metadata: ``lambda_`` (the constant λ, or a list of pieces {z_from, z_to, lambda}; key
+    ``lambda`` in :meth:`summary`), ``max_abs_lambda`` and ``z_at_max_lambda``, ``mu``, ``slips``
+    and ``bridging`` (z ranges, mm), pattern ``pattern_p``/``pattern_q``/``lead``,
+    ``twist_per_circuit_rad`` (Δv, unwrapped), ``dwell_rad`` (left, right, including the closure),
+    ``coverage``, ``circuit_order`` (pattern slot of circuit k), ``z_turn``/``end_kinds``.
     """
 
     z: FloatArray

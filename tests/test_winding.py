@@ -449,3 +449,14 @@ def test_minimax_solves_each_interval_between_conditions_on_its_own() -> None:
     assert np.all(bracket6(m, wl.z[sel], wl.C[sel]) >= -1e-9) and not wl.bridging
     i = int(np.argmin(np.abs(wl.z[sel] - 80.0)))
     assert math.degrees(wl.beta[sel][i]) == pytest.approx(15.0, abs=1e-9)
+
+
+def test_job_angle_error_names_field_and_line(tmp_path: Path) -> None:
+    text = (ROOT / "resources/examples/pipe.toml").read_text().replace("z_mm = 500.0", "z_mm = 1500.0")
+    p = tmp_path / "pipe.toml"
+    p.write_text(text)
+    with pytest.raises(InputError) as ei:
+        winding_line_for_job(load_job(p), p)
+    loc = ei.value.location
+    assert loc.field == "winding.angles[0].z_mm" and "1500" in ei.value.message
+    assert loc.line is not None and "z_mm = 1500.0" in text.splitlines()[loc.line - 1]
