@@ -201,8 +201,8 @@ class MachineTemplate:
     min_block_time: tau of eq. (17), s.
     base: robot base transform (4x4, machine frame, at track position 0).
     dh: robot DH rows.  tool: fixed flange-to-eye transform (4x4).  home: robot joint seed, rad.
-    band_symmetric: the eye slot is symmetric, so the eye x axis may be +w or -w (the solver keeps
-        the one nearer the previous pose: no needless half turns of the wrist).
+    band_symmetric: the eye slot is symmetric, so the eye x axis may be +w or -w (the solver takes
+        the face whose first pose is nearer ``home`` and keeps it continuous along the path).
     source: file the template was read from.
     """
 
@@ -841,16 +841,6 @@ def _pose_error(T: np.ndarray, p: np.ndarray, R: np.ndarray) -> np.ndarray:
     return e
 
 
-def _flip_to(Rc: np.ndarray, Rt: np.ndarray) -> np.ndarray:
-    """Targets with x and y negated (a half turn about the eye axis) where that is nearer ``Rc``."""
-    flip = np.einsum("ni,ni->n", Rc[:, :, 0], Rt[:, :, 0]) < 0
-    if not flip.any():
-        return Rt
-    Rt = Rt.copy()
-    Rt[flip, :, :2] *= -1.0
-    return Rt
-
-
 _W = np.array([1.0, 1.0, 1.0, 1000.0, 1000.0, 1000.0])   # error weights: 1 rad ~ 1000 mm
 
 
@@ -872,18 +862,15 @@ def _newton(machine: MachineTemplate, track: np.ndarray, p: np.ndarray, R: np.nd
     """Batched Newton / damped least squares on the 6 joints.
 
     Returns the joints, the final error norms (mm, rad x 1000) and, when asked, the inverse weighted
-    Jacobians at the solution (for chord iterations on a finer level).  With a symmetric band the
-    target roll is chosen against the starting pose.
+    Jacobians at the solution (for chord iterations on a finer level).
     """
     j = j0.copy()
     active = np.arange(j.shape[0])
     err = np.full(j.shape[0], np.inf)
-    for it in range(iters):
+    for _ in range(iters):
         if active.size == 0:
             break
         T, zs, os_ = _robot_frames(machine, track[active], j[active])
-        if it == 0 and machine.band_symmetric:
-            R = _flip_to(T[:, :3, :3], R)
         e = _pose_error(T, p[active], R[active])
         en = _err_norm(e)
         err[active] = en
@@ -921,10 +908,8 @@ def _chord(machine: MachineTemplate, track: np.ndarray, p: np.ndarray, R: np.nda
     active = np.arange(j.shape[0])
     err = np.full(j.shape[0], np.inf)
     ji = None
-    for it in range(iters + 1):
+    for _ in range(iters + 1):
         R_, pe, _, _ = _robot_chain(machine, track[active], j[active])
-        if it == 0 and machine.band_symmetric:
-            R = _flip_to(R_, R)
         T = np.empty((active.size, 4, 4))
         T[:, :3, :3] = R_
         T[:, :3, 3] = pe
@@ -970,8 +955,25 @@ def _ik_robot(machine: MachineTemplate, pw: np.ndarray, dw: np.ndarray, cw: np.n
     # level 0: sequential continuation on a coarse subset (keeps one continuous branch)
     idx = levels[0]
     i0 = idx[:1]
-    j0, _, _ = _newton(machine, track[i0], pw[i0], R[i0], home[None, :], iters=40, damping=50.0)
-    j0, e0, _ = _newton(machine, track[i0], pw[i0], R[i0], j0, iters=50)
+    # symmetric slot: the band-width axis is kept continuous along the path (+w or -w, no half turns
+    # of the wrist where w itself reverses) and the face whose first pose lies nearer home is used
+    sign = np.ones(n)
+    faces: tuple[float, ...] = (1.0,)
+    if machine.band_symmetric:
+        flips = np.concatenate(([False], np.einsum("ij,ij->i", R[1:, :, 0], R[:-1, :, 0]) < 0))
+        sign = np.where(np.cumsum(flips) % 2 == 1, -1.0, 1.0)
+        faces = (1.0, -1.0)
+    best = None
+    for face in faces:
+        Rf = R[i0].copy()
+        Rf[:, :, :2] *= face * sign[0]
+        j0, _, _ = _newton(machine, track[i0], pw[i0], Rf, home[None, :], iters=40, damping=50.0)
+        j0, e0, _ = _newton(machine, track[i0], pw[i0], Rf, j0, iters=50)
+        dist = float(np.abs(j0[0] - home).sum()) + (1e9 if e0[0] > 1e-6 else 0.0)
+        if best is None or dist < best[0]:
+            best = (dist, face, j0, e0)
+    _, face, j0, e0 = best
+    R[:, :, :2] *= (face * sign)[:, None, None]
     if e0[0] > 1e-6:
         raise InfeasibleError(f"robot cell {machine.name}: no joint solution for the first eye pose "
                               f"(pose error {e0[0]:.3g} mm) starting from home joints {machine.home}",
