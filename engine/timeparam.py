@@ -407,6 +407,7 @@ class _Problem:
     cap_v: np.ndarray        # (N,) physical speed cap from axis speeds
     cap_tech: np.ndarray     # (N,) min(sdot_T, sdot_TT)
     cap: np.ndarray          # (N,) combined
+    cap_dp: np.ndarray       # (N,) cap, tightened to the speeds reachable from the start and the end
     xn: np.ndarray           # (N-1,) normaliser of x_j at node i (box half-size)
     rq: np.ndarray           # right chains x_k = R(x_j), abscissa x_j/xn + 3i (flat)
     rk: np.ndarray
@@ -610,7 +611,32 @@ def _chains(rows: np.ndarray, h: np.ndarray, xn_prev: np.ndarray, xn_cur: np.nda
         "rq": (xj[br, ridx] / scale + off).ravel(), "rk": xk[br, ridx].ravel(),
         "lq": (xj[br, lidx] / scale + off).ravel(), "lk": xk[br, lidx].ravel(),
         "xjb": xj[np.arange(B), bot], "xjt": xj[np.arange(B), top],
+        "uhi": np.max(np.where(valid, zu, -np.inf), axis=1), "ulo": np.min(np.where(valid, zu, np.inf), axis=1),
+        "xkt": np.max(np.where(valid, xk, -np.inf), axis=1),
     }
+
+
+def _reachable(cap: np.ndarray, h: np.ndarray, ch: dict[str, np.ndarray], limits: TimeLimits) -> np.ndarray:
+    """``cap`` tightened to what any admissible law can reach (a valid bound, no law is excluded).
+
+    ``ṡ²`` grows by at most ``2h·max s̈`` over an interval (the largest ``s̈`` of its feasible polygon)
+    from the start speed, and falls by at most ``2h·max(-s̈)`` towards the end speed; the polygon
+    also bounds ``ṡ²`` at both of its nodes.  Without this, a node without a speed limit (no
+    ``sdot_max``, straight motion) would spread the nominal run's levels over unreachable speeds.
+    """
+    c = cap.astype(float) ** 2
+    c[:-1] = np.minimum(c[:-1], np.maximum(ch["xkt"], 0.0))
+    c[1:] = np.minimum(c[1:], np.maximum(ch["xjt"], 0.0))
+    c[0] = min(c[0], limits.sdot_start ** 2)
+    c[-1] = min(c[-1], limits.sdot_end ** 2)
+    up = 2.0 * h * np.maximum(ch["uhi"], 0.0)
+    D = np.concatenate([[0.0], np.cumsum(up)])
+    fwd = D + np.minimum.accumulate(c - D)
+    dn = 2.0 * h * np.maximum(-ch["ulo"], 0.0)
+    E = np.concatenate([[0.0], np.cumsum(dn[::-1])])            # from the end backwards
+    bwd = (E + np.minimum.accumulate(c[::-1] - E))[::-1]
+    out = np.sqrt(np.maximum(np.minimum(np.minimum(c, fwd), bwd), 0.0))
+    return np.minimum(out, cap)
 
 
 def _prepare(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, chains: bool = True) -> _Problem:
@@ -694,10 +720,13 @@ def _prepare(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, chains:
     xn = (1.5 * cap_box) ** 2 + 1.0
     if chains:
         ch = _chains(hull_rows, h, xn[:-1], xn[1:])
+        cap_dp = _reachable(cap_box, h, ch, limits)
     else:
         e = np.zeros(0)
         ch = {"rq": e, "rk": e, "lq": e, "lk": e, "xjb": e, "xjt": e}
-    return _Problem(s=s, h=h, p=p, d1=d1, d2=d2, cap_v=cap_v, cap_tech=cap_tech, cap=cap, xn=xn[1:],
+        cap_dp = cap
+    ch = {k: v for k, v in ch.items() if k not in ("uhi", "ulo", "xkt")}
+    return _Problem(s=s, h=h, p=p, d1=d1, d2=d2, cap_v=cap_v, cap_tech=cap_tech, cap=cap, cap_dp=cap_dp, xn=xn[1:],
                     rows=rows, limits=limits, point_nodes=point_nodes, **ch)
 
 
@@ -996,12 +1025,13 @@ def _bounds_check(prob: _Problem) -> tuple[np.ndarray, np.ndarray]:
     if lim.sdot_end > prob.cap[-1] * (1 + 1e-12):
         raise InfeasibleError(f"the end speed {lim.sdot_end:g} mm/s exceeds the speed limit "
                               f"{prob.cap[-1]:g} mm/s at s = {prob.s[-1]:.2f} mm", field="sdot_end")
-    if not np.all(np.isfinite(prob.cap)):
-        i = int(np.argmin(np.isfinite(prob.cap)))
+    bad = ~(prob.cap_dp < 1e8)
+    if bad.any():
+        i = int(np.argmax(bad))
         raise InputError(f"the path speed is unbounded at s = {prob.s[i]:.2f} mm (no axis moves there and "
                          f"no technological limit): give sdot_max", field="sdot_max")
     lo = np.zeros(n)
-    hi = prob.cap.copy()
+    hi = prob.cap_dp.copy()
     lo[0] = hi[0] = lim.sdot_start
     lo[-1] = hi[-1] = lim.sdot_end
     # an interval with zero speed at both ends is never traversed
@@ -1014,6 +1044,9 @@ def _bounds_check(prob: _Problem) -> tuple[np.ndarray, np.ndarray]:
                     f"{pt.describe()}: ṡ <= 0 between nodes s = {prob.s[i]:.2f} and {prob.s[i + 1]:.2f} mm "
                     f"-- the path cannot stop there (a stop is possible only at a node; put the point "
                     f"exactly on a node or give it a speed > 0)", field="points")
+        if n == 2:
+            raise InfeasibleError("a path of one interval cannot start and end at rest; give more nodes or "
+                                  "a non-zero start/end speed", field="s")
         raise InfeasibleError(f"the speed limit is zero on both ends of the interval s = {prob.s[i]:.2f}.."
                               f"{prob.s[i + 1]:.2f} mm; the path cannot be traversed", field="limits")
     return lo, hi

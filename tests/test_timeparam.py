@@ -471,3 +471,17 @@ def test_tube_keeps_the_previous_law_if_a_tube_grid_is_infeasible(example, monke
     its = law.iterations
     assert len(its) == 3 and its[-1].stop and "previous" in its[-1].note
     assert np.array_equal(law.sdot, its[1].sdot) and law.max_accel_ratio <= 1 + 1e-9
+
+
+@pytest.mark.parametrize("method", ["tube", "toppra"])
+def test_straight_line_bang_bang_closed_form(method) -> None:
+    """A straight move of L = 10 mm with |a| <= 100 mm/s², rest to rest: T = 2·sqrt(L/a)."""
+    s = np.linspace(0.0, 10.0, 21)
+    X = s[:, None] * 1.0
+    one = np.ones_like(X)
+    lim = TimeLimits(v_max=(1e6,), a_max=(100.0,), levels=50)
+    law = parametrize(s, X, one, 0 * one, lim, method=method)
+    T = 2.0 * math.sqrt(10.0 / 100.0)
+    assert law.total_time_s == pytest.approx(T, rel=5e-3)
+    assert law.total_time_s >= T * (1 - 1e-9) or method == "toppra"
+    assert np.max(law.sdot) == pytest.approx(math.sqrt(100.0 * 10.0), rel=5e-3)   # peak at the middle
