@@ -480,10 +480,28 @@ def _interior_point(v: np.ndarray, p: np.ndarray, t: np.ndarray, cyclic: bool, a
     live = (np.abs(v[pi]) + np.abs(v[pj])) > p                  # (pairs, m) can bind at all
     kk, ii = np.nonzero(live.T)
     ci, cj = pi[ii], pj[ii]
-    gi = np.concatenate([v[ci, kk], -v[ci, kk]])                # constraint g_i a_i + g_j a_j <= h
-    gj = np.concatenate([-v[cj, kk], v[cj, kk]])
-    hh = np.concatenate([p[kk], p[kk]])
-    ci, cj = np.concatenate([ci, ci]), np.concatenate([cj, cj])
+    GI = np.concatenate([v[ci, kk], -v[ci, kk]])                # constraint g_i a_i + g_j a_j <= h
+    GJ = np.concatenate([-v[cj, kk], v[cj, kk]])
+    HH = np.concatenate([p[kk], p[kk]])
+    CI, CJ = np.concatenate([ci, ci]), np.concatenate([cj, cj])
+    # constraint generation: start with the rows that are nearly active at the start, add any row
+    # the answer comes close to, re-solve (the start is strictly inside every row)
+    sel = (HH - GI * alpha0[CI] - GJ * alpha0[CJ]) <= 0.5 * HH
+    for _round in range(6):
+        a = _barrier_solve(t, CI[sel], CJ[sel], GI[sel], GJ[sel], HH[sel], nb, cyclic, alpha0, state, rgap,
+                           solveh_banded)
+        if a is None:
+            return None
+        slack = HH - GI * a[CI] - GJ * a[CJ]
+        near = (~sel) & (slack <= 0.1 * HH)
+        if not near.any():
+            return a if np.all(slack > 0) else None
+        sel |= near
+    return None
+
+
+def _barrier_solve(t, ci, cj, gi, gj, hh, nb, cyclic, alpha0, state, rgap, solveh_banded):
+    """Log-barrier interior point on the rows given (see :func:`_interior_point`)."""
     nc = hh.size + 2 * nb
     a = 0.5 * alpha0
 
