@@ -50,7 +50,7 @@ _MIN_STEPS = 1999  # RK4/Simpson steps per pass at least (the output keeps point
 # ------------------------------------------------------------------------------------------------
 # Result
 # ------------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class WindingLine:
     """A winding line over the whole pattern (all circuits concatenated in laying order).
 
