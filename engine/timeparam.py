@@ -486,12 +486,15 @@ def _hull_ccw(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     ``order[b, :m[b]]`` are the indices of the hull vertices of row b in CCW order.
     """
     B, R0, _ = pts.shape
+    # hull membership is invariant under a per-row axis scaling: make every cloud round-ish first
+    sc = np.max(np.abs(pts), axis=1, keepdims=True)
+    pts = pts / np.where(sc > 0, sc, 1.0)
     # exact pre-filter: drop the points strictly inside the polygon of the extreme points in 16
     # directions (they cannot be hull vertices), then scan only the few that are left
-    D = 32
+    D = 16
     th = np.linspace(0.0, 2.0 * np.pi, D + 1)[:-1]
     px, py = pts[..., 0], pts[..., 1]
-    ext = np.argmax(px[..., None] * np.cos(th) + py[..., None] * np.sin(th), axis=1)     # (B, D) CCW
+    ext = np.argmax(pts @ np.stack([np.cos(th), np.sin(th)]), axis=1)                    # (B, D) CCW
     vx = np.take_along_axis(px, ext, 1)
     vy = np.take_along_axis(py, ext, 1)
     # each point is tested against the edge of conv(extreme points) whose wedge (seen from the
@@ -527,31 +530,42 @@ def _monotone_chain(pts: np.ndarray, kidx: np.ndarray, nk: np.ndarray) -> tuple[
     X = np.take_along_axis(sub[..., 0], order, axis=1)
     Y = np.take_along_axis(sub[..., 1], order, axis=1)
     order = np.take_along_axis(kidx, order, 1)
-    rows = np.arange(B)
+    ar = np.arange(R)
 
-    def chain(seq: range) -> tuple[np.ndarray, np.ndarray]:
-        st = np.zeros((B, R), np.int64)
-        ln = np.zeros(B, np.int64)
-        for q in seq:
-            act = rows[ln >= 2]                     # rows that may pop; shrinks as rows stop popping
-            while act.size:
-                la = ln[act]
-                o = st[act, la - 2]
-                a_ = st[act, la - 1]
-                ox, oy, ax, ay = X[act, o], Y[act, o], X[act, a_], Y[act, a_]
-                px, py = X[act, q], Y[act, q]
-                e1x, e1y, e2x, e2y = ax - ox, ay - oy, px - ax, py - ay
-                cr = e1x * e2y - e1y * e2x
-                pop = (cr <= 0) | (cr * cr <= 1e-24 * (e1x * e1x + e1y * e1y) * (e2x * e2x + e2y * e2y))
-                act = act[pop]
-                ln[act] -= 1
-                act = act[ln[act] >= 2]
-            st[rows, ln] = q
-            ln += 1
-        return st, ln
+    def peel(Xs: np.ndarray, Ys: np.ndarray) -> np.ndarray:
+        """Alive mask of the lower chain of x-sorted points: reflex points are removed in
+        parallel passes (a chain vertex never turns right, so simultaneous removal is safe)."""
+        alive = np.ones((B, R), bool)
+        # duplicates would shield each other from the test: keep the first of each run
+        alive[:, 1:] = (np.abs(Xs[:, 1:] - Xs[:, :-1]) > 1e-15) | (np.abs(Ys[:, 1:] - Ys[:, :-1]) > 1e-15)
+        act = np.arange(B)
+        for _ in range(R):
+            al, Xa, Ya = alive[act], Xs[act], Ys[act]
+            prv = np.maximum.accumulate(np.where(al, ar, -1), axis=1)
+            prv = np.concatenate([np.full((act.size, 1), -1), prv[:, :-1]], axis=1)
+            nxt = np.minimum.accumulate(np.where(al, ar, R)[:, ::-1], axis=1)[:, ::-1]
+            nxt = np.concatenate([nxt[:, 1:], np.full((act.size, 1), R)], axis=1)
+            inner = al & (prv >= 0) & (nxt < R)
+            pa = np.clip(prv, 0, R - 1)
+            pc = np.clip(nxt, 0, R - 1)
+            ax_, ay_ = np.take_along_axis(Xa, pa, 1), np.take_along_axis(Ya, pa, 1)
+            cx_, cy_ = np.take_along_axis(Xa, pc, 1), np.take_along_axis(Ya, pc, 1)
+            e1x, e1y, e2x, e2y = Xa - ax_, Ya - ay_, cx_ - Xa, cy_ - Ya
+            cr = e1x * e2y - e1y * e2x
+            bad_ = inner & ((cr <= 0) | (cr * cr <= 1e-24 * (e1x * e1x + e1y * e1y) * (e2x * e2x + e2y * e2y)))
+            changed = bad_.any(axis=1)
+            if not changed.any():
+                break
+            alive[act] = al & ~bad_
+            act = act[changed]
+        return alive
 
-    lo_st, lo_n = chain(range(R))
-    up_st, up_n = chain(range(R - 1, -1, -1))
+    lo_alive = peel(X, Y)
+    up_alive = peel(X[:, ::-1], Y[:, ::-1])
+    lo_n = lo_alive.sum(axis=1)
+    up_n = up_alive.sum(axis=1)
+    lo_st = np.argsort(~lo_alive, axis=1, kind="stable")                 # positions, left to right
+    up_st = (R - 1) - np.argsort(~up_alive, axis=1, kind="stable")       # positions, right to left
     m = lo_n + up_n - 2
     tt = np.arange(int(m.max()))[None, :]
     in_lo = tt < (lo_n - 1)[:, None]
