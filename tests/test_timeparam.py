@@ -377,7 +377,7 @@ def test_bad_inputs_are_input_errors(example) -> None:
         limits_from_mapping({"v_max": [1.0], "a_max": [1.0], "levels": 1})
     flat = np.zeros_like(dX)
     with pytest.raises(InputError, match="unbounded"):
-        parametrize(s, flat, flat, flat, replace(lim, sdot_max=math.inf, points=()))
+        parametrize(s, flat, flat, flat, replace(lim, sdot_max=math.inf, sddot_max=math.inf, points=()))
 
 
 # --------------------------------------------------------------------------------------------------
