@@ -65,6 +65,7 @@ from __future__ import annotations
 
 import bisect
 import math
+import os
 import time
 import tomllib
 from collections.abc import Mapping, Sequence
@@ -494,7 +495,9 @@ def _hull_ccw(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     D = 16
     th = np.linspace(0.0, 2.0 * np.pi, D + 1)[:-1]
     px, py = pts[..., 0], pts[..., 1]
-    ext = np.argmax(pts @ np.stack([np.cos(th), np.sin(th)]), axis=1)                    # (B, D) CCW
+    proj = px[..., None] * np.cos(th)
+    proj += py[..., None] * np.sin(th)
+    ext = np.argmax(proj, axis=1)                                                         # (B, D) CCW
     vx = np.take_along_axis(px, ext, 1)
     vy = np.take_along_axis(py, ext, 1)
     # each point is tested against the edge of conv(extreme points) whose wedge (seen from the
@@ -760,8 +763,17 @@ def _infeasible(prob: _Problem, i: int, why: str) -> InfeasibleError:
                            f"and technological limits ({why})", field="limits")
 
 
-_CHUNK = 1 << 15
-_THREADS = False  # build the next chunk's candidates in a worker thread while the DP runs
+_CHUNK = 1 << 16
+_THREADS: bool | None = None  # build the next chunk in a worker thread: True, False, None = if a core is idle
+
+
+def _threads_wanted() -> bool:
+    if _THREADS is not None:
+        return bool(_THREADS)
+    try:
+        return (os.cpu_count() or 1) >= 2 and os.getloadavg()[0] < (os.cpu_count() or 1) - 0.75
+    except OSError:  # pragma: no cover - no load average on this platform
+        return False
 _POOL: list[ThreadPoolExecutor] = []
 
 
@@ -855,6 +867,7 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
     Jf[0] = 0.0
     Jraw = Jf.view(np.int64).reshape(n, M)
     two_h = 2.0 * h
+    uniform_h = bool(np.ptp(h) <= 1e-12 * h.max())
     kq_h = Kq / (h * h)
     ar_all = np.arange(_CHUNK + int(per_int.max()), dtype=np.int64)
     def build(i0: int, i1: int) -> tuple:
@@ -873,7 +886,7 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
         ssum = vk + vj
         vj -= vk
         diff = vj
-        if np.ptp(h[i0:i1]) <= 1e-12 * h[i0]:
+        if uniform_h:
             with np.errstate(divide="ignore"):
                 cost = np.divide(two_h[i0], ssum)
             if K > 0:
@@ -898,7 +911,7 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
         return G, glow, cost, segl, starts0, ends
 
     chunks = list(zip(bounds[:-1], bounds[1:]))
-    pool = _pool() if _THREADS and len(chunks) > 1 else None
+    pool = _pool() if len(chunks) > 1 and _threads_wanted() else None
     fut = pool.submit(build, *chunks[0]) if pool is not None else None
     for c, (i0, i1) in enumerate(chunks):
         if pool is not None:
