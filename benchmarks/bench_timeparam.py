@@ -12,10 +12,12 @@ Targets: tube within 0.5 % of TOPP-RA for M = 74..100; tube run <= 0.15 s; class
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import time
 from dataclasses import replace
 
+import engine.timeparam as tp
 from engine.timeparam import parametrize
 from engine.timeparam_example import example_limits, example_path
 
@@ -46,6 +48,9 @@ def main() -> None:
     T0 = ref.total_time_s
     print(f"paper setting: N = {s.size}, s_N = {s[-1]:.1f} mm, p = {X.shape[1]}, K = {lim.penalty:g}, "
           f"Δ_sh = {lim.tube_share}, Δ_p = {lim.stop_percent} %")
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    print(f"load average {load:.2f} on {os.cpu_count()} cores; chunk building in a worker thread: "
+          f"{'on' if tp._threads_wanted() else 'off'} (on only when a core is idle)")
     print(f"{'method':<22}{'time s':>9}{'/TOPP-RA':>10}{'wall s':>9}{'cpu s':>8}{'iters':>6}"
           f"{'max a/A':>9}{'E (SI)':>10}{'E (mm/s)':>12}")
 
