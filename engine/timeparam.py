@@ -70,7 +70,7 @@ import time
 import tomllib
 from collections.abc import Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -91,6 +91,8 @@ __all__ = [
     "limits_from_toml",
     "load_path_npz",
     "parametrize",
+    "prepare",
+    "time_at",
 ]
 
 METHODS = ("tube", "dp", "toppra")
@@ -763,28 +765,29 @@ def _infeasible(prob: _Problem, i: int, why: str) -> InfeasibleError:
                            f"and technological limits ({why})", field="limits")
 
 
-_CHUNK = 1 << 16
+_CHUNK = 1 << 16   # candidates costed at once (whole intervals)
 _THREADS: bool | None = None  # build the next chunk in a worker thread: True, False, None = if a core is idle
+_POOL: list[ThreadPoolExecutor] = []
+_STATS: dict[str, int] = {}  # size of the last DP pass (for the benchmark)
+_LOBITS = 12
+_LOMASK = np.int64((1 << _LOBITS) - 1)
+_HIMASK = np.int64(~((1 << _LOBITS) - 1))
 
 
 def _threads_wanted() -> bool:
+    """Overlap chunk building with the sequential pass only when a second core is idle."""
     if _THREADS is not None:
         return bool(_THREADS)
     try:
         return (os.cpu_count() or 1) >= 2 and os.getloadavg()[0] < (os.cpu_count() or 1) - 0.75
     except OSError:  # pragma: no cover - no load average on this platform
         return False
-_POOL: list[ThreadPoolExecutor] = []
 
 
 def _pool() -> ThreadPoolExecutor:
     if not _POOL:
         _POOL.append(ThreadPoolExecutor(max_workers=1, thread_name_prefix="timeparam"))
     return _POOL[0]
-_STATS: dict[str, int] = {}  # size of the last DP pass (for the benchmark)
-_LOBITS = 12
-_LOMASK = np.int64((1 << _LOBITS) - 1)
-_HIMASK = np.int64(~((1 << _LOBITS) - 1))
 
 
 def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | None = None,
@@ -1378,7 +1381,3 @@ def block_feeds(law: TimeLaw, s_block_ends: Sequence[float] | np.ndarray, decima
         dur = 60.0 / feed
     return dur, feed
 
-
-def with_levels(limits: TimeLimits, levels: int) -> TimeLimits:
-    """``limits`` with another number of speed levels M."""
-    return replace(limits, levels=int(levels))
