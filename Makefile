@@ -53,11 +53,15 @@ lint: venv
 bench: venv
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; QT_QPA_PLATFORM=offscreen $(VPY) $$b || exit 1; done
 
+# Frozen one-folder build: dist/winder/ + dist/winder-<version>-linux-x86_64.tar.gz (see installer/README.md).
 installer: sysdeps venv
 	$(VPY) -m pip install -q -e ".[installer]"
 	$(VPY) installer/build.py
 
-installer-test: installer
+# Rebuild only if the sources changed since the last build, then compare the build with the source install.
+installer-test: sysdeps venv
+	$(VPY) -m pip install -q -e ".[installer]"
+	$(VPY) installer/build.py --if-stale
 	$(VPY) installer/smoke_test.py
 
 clean:

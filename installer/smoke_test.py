@@ -41,7 +41,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "installer"))
-from build import archive_name, mib, platform_tag, tree_size, version  # noqa: E402
+from build import archive_name, mib, platform_tag, source_digest, tree_size, version  # noqa: E402
 
 SOURCE_CMD = [sys.executable, "-m", "engine"]
 CLEAN_PATH = "/usr/bin:/bin"
@@ -145,7 +145,12 @@ def run(cmd: Sequence[str], cwd: Path, env: dict[str, str] | None = None) -> Run
 
 
 def clean_env(**extra: str) -> dict[str, str]:
-    """What ``env -i PATH=/usr/bin:/bin HOME=$HOME`` leaves, plus ``extra``."""
+    """What ``env -i PATH=/usr/bin:/bin HOME=$HOME`` leaves, plus ``extra`` (Windows: the system folders)."""
+    if os.name == "nt":
+        sysroot = os.environ.get("SYSTEMROOT", r"C:\Windows")
+        base = {"SYSTEMROOT": sysroot, "PATH": rf"{sysroot}\System32;{sysroot}",
+                "USERPROFILE": os.environ.get("USERPROFILE", ""), "TEMP": tempfile.gettempdir()}
+        return {**base, **extra}
     return {"PATH": CLEAN_PATH, "HOME": os.environ.get("HOME", "/tmp"), **extra}
 
 
@@ -382,6 +387,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     size = f"{app.name}/ {mib(tree_size(app))}"
     size += f", {archive.name} {mib(archive.stat().st_size)}" if archive.is_file() else ", no archive"
     rep.info(f"size: {size}")
+    info_file = app / "BUILD-INFO.json"
+    if info_file.is_file():
+        info = json.loads(info_file.read_text(encoding="utf-8"))
+        fresh = info.get("source_digest") == source_digest()
+        rep.info(f"build: {info.get('built_at')} in {info.get('build_seconds')} s, commit "
+                 f"{str(info.get('git_commit'))[:10]}; "
+                 + ("source unchanged since" if fresh else "SOURCE CHANGED since the build: rebuild (make installer)"
+                    " before reading differences as packaging bugs"))
 
     scratch = Path(tempfile.mkdtemp(prefix="winder-smoke-"))
     try:

@@ -7,7 +7,8 @@ the pip ``cadquery-ocp`` wheels compile OCCT's resources in (nothing to ship, OC
 defaults apply); a conda OCCT ships ``share/opencascade/resources``, which ``winder.spec`` then
 bundles as ``opencascade/resources``.
 
-Fontconfig (Linux): the bundled library reads the host's ``/etc/fonts/fonts.conf``.
+Fontconfig and locale (Linux): the bundled library reads the host's ``/etc/fonts/fonts.conf``;
+with no locale set at all (``env -i``), ``C.UTF-8`` is used (Qt would otherwise warn on stderr).
 DLLs (Windows): casadi and OCP load companion DLLs from their own package folders.
 """
 
@@ -49,6 +50,8 @@ def _set_fontconfig() -> None:
         if os.path.isfile("/etc/fonts/fonts.conf"):
             os.environ["FONTCONFIG_FILE"] = "/etc/fonts/fonts.conf"
             os.environ.setdefault("FONTCONFIG_PATH", "/etc/fonts")
+    if sys.platform.startswith("linux") and not any(os.environ.get(v) for v in ("LC_ALL", "LC_CTYPE", "LANG")):
+        os.environ["LC_CTYPE"] = "C.UTF-8"
 
 
 def _add_dll_directories(bundle: str) -> None:
