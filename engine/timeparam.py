@@ -492,9 +492,9 @@ def _hull_ccw(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     # hull membership is invariant under a per-row axis scaling: make every cloud round-ish first
     sc = np.max(np.abs(pts), axis=1, keepdims=True)
     pts = pts / np.where(sc > 0, sc, 1.0)
-    # exact pre-filter: drop the points strictly inside the polygon of the extreme points in 16
+    # exact pre-filter: drop the points strictly inside the polygon of the extreme points in D
     # directions (they cannot be hull vertices), then scan only the few that are left
-    D = 16
+    D = 8
     th = np.linspace(0.0, 2.0 * np.pi, D + 1)[:-1]
     px, py = pts[..., 0], pts[..., 1]
     proj = px[..., None] * np.cos(th)
