@@ -67,7 +67,7 @@ def test_spec_files_exist() -> None:
     assert (ROOT / str(consts["ICON_PNG"])).is_file()
     text = SPEC.read_text(encoding="utf-8")
     for needed in ('collect_submodules("engine")', 'collect_submodules("winder_gui")', '"vtkmodules.all"',
-                   'collect_all("casadi")', 'name="winder"'):
+                   'CASADI_PLUGINS', 'HOST_LIBS', 'name="winder"'):
         assert needed in text
 
 
@@ -178,3 +178,33 @@ def test_resource_path_source_and_frozen(monkeypatch: pytest.MonkeyPatch, tmp_pa
     monkeypatch.setattr(sys, "frozen", True, raising=False)
     monkeypatch.setattr(sys, "_MEIPASS", str(tmp_path), raising=False)
     assert resource_path("controllers") == tmp_path / "resources" / "controllers"
+
+
+def test_source_digest_tells_stale_builds(tmp_path: Path) -> None:
+    build = _load("build")
+    for d in build.SOURCE_DIRS:
+        (tmp_path / d / "__pycache__").mkdir(parents=True)
+        (tmp_path / d / "a.py").write_text("x = 1\n")
+    before = build.source_digest(tmp_path)
+    (tmp_path / "engine" / "__pycache__" / "a.cpython-311.pyc").write_bytes(b"\0")  # byte code: not a source
+    assert build.source_digest(tmp_path) == before
+    (tmp_path / "engine" / "cli.py").write_text("NAME = 'run'\n")  # a new sub-command: stale
+    assert build.source_digest(tmp_path) != before
+
+
+def test_host_library_filter() -> None:
+    import re
+
+    tree = ast.parse(SPEC.read_text(encoding="utf-8"))
+    patterns = [n.args[0].value for n in ast.walk(tree) if isinstance(n, ast.Call)
+                and getattr(n.func, "attr", "") == "compile" and n.args and isinstance(n.args[0], ast.Constant)]
+    assert len(patterns) == 1
+    host = re.compile(patterns[0])
+    for name in ("libGL.so.1", "libEGL.so.1", "libX11.so.6", "libX11-xcb.so.1", "libxcb.so.1", "libXext.so.6",
+                 "libstdc++.so.6", "libgcc_s.so.1", "libglib-2.0.so.0", "libdbus-1.so.3", "libgtk-3.so.0",
+                 "libwayland-client.so.0"):
+        assert host.match(name), name
+    for name in ("libXau-154567c4.so.6.0.0", "libxcb-9065bb12.so.1.1.0", "libxcb-cursor.so.0", "libxkbcommon.so.0",
+                 "libfontconfig.so.1", "libpython3.11.so.1.0", "libvtkx11.so", "libQt6XcbQpa.so.6",
+                 "libgfortran-8f1e9814.so.5.0.0", "libcasadi.so.3.7"):
+        assert not host.match(name), name
