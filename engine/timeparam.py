@@ -831,8 +831,14 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
     sp_p = np.where(degenerate[:-1], 1.0, span[:-1])[:, None]
     ylo = (pk_lo - lo_p) / sp_p                               # fraction of the span
     yhi = (pk_hi - lo_p) / sp_p
-    klo = np.searchsorted(frac, ylo.ravel(), side="left").reshape(ylo.shape).astype(float)
-    khi = np.searchsorted(frac, yhi.ravel(), side="right").reshape(yhi.shape) - 1.0
+    # index of the first level >= / last level <= a fraction, through a lookup table whose bins
+    # hold at most one level each (the estimate is then exact or one off; corrected below)
+    nb = int(2.0 / max(float(np.min(np.diff(frac))), 1e-9)) + 2
+    edges = np.arange(nb + 1) / nb
+    t_lo = np.searchsorted(frac, edges[:-1], side="left").astype(float)
+    t_hi = np.searchsorted(frac, edges[1:], side="right") - 1.0
+    klo = t_lo[np.clip((ylo * nb).astype(np.int64), 0, nb - 1)]
+    khi = t_hi[np.clip((yhi * nb).astype(np.int64), 0, nb - 1)]
     # exact correction against the actual level values (the index maps are only rounded)
     rowp = (np.arange(n - 1) * M)[:, None]
     levp = lev.ravel() if not square else xall.ravel()
