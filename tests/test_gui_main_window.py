@@ -29,6 +29,13 @@ EXAMPLES = sorted(
 )  # every example job (files there without a [mandrel] table are inputs of other tools)
 
 
+@pytest.fixture(autouse=True)
+def _isolated(tmp_path, monkeypatch):
+    """Settings and autosave copies in the test's own folder, never the user's."""
+    monkeypatch.setenv("WINDER_SETTINGS", str(tmp_path / "settings.ini"))
+    monkeypatch.setenv("WINDER_AUTOSAVE_DIR", str(tmp_path / "autosave"))
+
+
 @pytest.fixture
 def window(qtbot):
     w = MainWindow()
@@ -68,7 +75,7 @@ def test_new_window_shows_default_job(window) -> None:
     dome = z < 0
     np.testing.assert_allclose(r[dome], np.sqrt(100.0**2 - z[dome] ** 2), rtol=1e-9)  # the hemisphere
     assert r[0] == pytest.approx(30.0) and r[-1] == pytest.approx(30.0)
-    assert w.steps.available() == ["mandrel"]
+    assert w.steps.available() == ["mandrel", "winding", "payout", "machine", "timelaw", "nc"]
     assert w.steps.current_step() == "mandrel"
     menus = {a.text().replace("&", "") for m in (w.menu_file, w.menu_tools, w.menu_help) for a in m.actions()}
     for name in ("New", "Open…", "Save", "Save As…", "Import generatrix…", "Export mandrel…", "Quit",

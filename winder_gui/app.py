@@ -3,14 +3,20 @@
 Start-up is kept fast: only PySide6, pyqtgraph and the light engine modules load before the
 window shows; VTK/pyvista load when the 3D view first appears, cadquery only for STEP work.
 
-``--selftest`` (or the environment variable ``WINDER_QUIT_WHEN_SHOWN``) makes the application quit
-on its own, printing start-up times to stderr::
+``--selftest`` runs the job given (default: the pipe example) end to end — mandrel, winding line,
+payout, axes, blocks, NC text — in the window's worker, prints what it got and exits 0, or 1 on any
+error (use ``-platform offscreen`` or ``QT_QPA_PLATFORM=offscreen`` without a display)::
 
     winder: window shown after 0.812 s
     winder: mandrel shown after 0.905 s
+    winder: pipeline done after 4.1 s: 612 blocks, program time 797.35 s, 18638 characters of linuxcnc NC
 
-``WINDER_QUIT_WHEN_SHOWN=shown`` quits as soon as the window is painted, ``ready`` (the default for
-``--selftest``) once the first mandrel is plotted too.  Times count from the process start (Linux),
+The environment variable ``WINDER_QUIT_WHEN_SHOWN`` makes the application quit on its own:
+``shown`` as soon as the window is painted, ``ready`` once the first mandrel is plotted too,
+``full`` (what ``--selftest`` does) after the whole pipeline.
+
+On a normal start, autosaved copies left by an earlier session (e.g. a killed process) are offered
+for restoring.  Times count from the process start (Linux),
 or from ``WINDER_T0`` (seconds since the epoch) if the launcher sets it.
 """
 
@@ -20,8 +26,11 @@ import os
 import sys
 import time
 from collections.abc import Sequence
+from pathlib import Path
 
 QUIT_ENV = "WINDER_QUIT_WHEN_SHOWN"
+EXAMPLE_JOB = Path(__file__).resolve().parents[1] / "resources" / "examples" / "pipe.toml"
+SELFTEST_TIMEOUT_S = 600
 
 
 def _process_start() -> float:
@@ -53,45 +62,81 @@ def main(argv: Sequence[str] | None = None) -> int:
     app = QApplication.instance() or QApplication([sys.argv[0], *[a for a in args if a.startswith("-platform")]])
     app.setApplicationName("winder")
     app.setOrganizationName("winder")
-    quit_when = os.environ.get(QUIT_ENV, "") or ("ready" if "--selftest" in args else "")
-    jobs = [a for a in args if not a.startswith("-")]
+    quit_when = os.environ.get(QUIT_ENV, "") or ("full" if "--selftest" in args else "")
+    skip = {i + 1 for i, a in enumerate(args) if a == "-platform"}
+    jobs = [a for i, a in enumerate(args) if not a.startswith("-") and i not in skip]
+    if quit_when == "full" and not jobs:
+        jobs = [str(EXAMPLE_JOB)]
     window = MainWindow(jobs[0] if jobs else None)
     if quit_when:
         window.confirm_discard = False
+        window.auto_run = False
         _arm_selftest(app, window, quit_when, QTimer)
     window.show()
+    if not quit_when:
+        QTimer.singleShot(0, window.offer_autosaves)
     return app.exec()
 
 
 def _arm_selftest(app, window, mode: str, timer_cls) -> None:  # noqa: ANN001 - Qt objects, imported lazily
-    """Quit once the window is painted (``shown``) or also the first mandrel plotted (``ready``)."""
+    """Quit once the window is painted (``shown``), the first mandrel plotted (``ready``) or the whole
+    pipeline ran and produced NC text (``full``); exit code 1 on any reported error."""
     start = _process_start()
-    seen = {"shown": False, "ready": False}
+    seen = {"shown": False, "ready": False, "done": False}
 
     def finish(code: int) -> None:
+        if seen["done"]:
+            return
+        seen["done"] = True
         window.close()
         app.exit(code)
+
+    def maybe_finish() -> None:
+        if mode == "shown" and seen["shown"]:
+            finish(0)
+        elif mode == "ready" and seen["shown"] and seen["ready"]:
+            finish(0)
 
     def shown() -> None:
         window.repaint()  # paint synchronously: the window is really on screen now
         print(f"winder: window shown after {time.time() - start:.3f} s", file=sys.stderr, flush=True)
         seen["shown"] = True
-        if mode == "shown" or seen["ready"]:
-            finish(0)
+        maybe_finish()
 
     def ready(_data: object = None) -> None:
         if seen["ready"]:
             return
         seen["ready"] = True
         print(f"winder: mandrel shown after {time.time() - start:.3f} s", file=sys.stderr, flush=True)
-        if seen["shown"]:
-            finish(0)
+        if mode == "full":
+            window.run_pipeline_now()
+        maybe_finish()
+
+    def pipeline_done(res: object) -> None:
+        if mode != "full":
+            return
+        text = getattr(res, "nc_text", None)
+        blocks = getattr(res, "blocks", None)
+        if not text or blocks is None or blocks.n == 0:
+            failed("the pipeline produced no NC program")
+            return
+        print(f"winder: pipeline done after {time.time() - start:.1f} s: {blocks.n} blocks, program time "
+              f"{blocks.total:.2f} s, {len(text)} characters of {res.post_name} NC", file=sys.stderr, flush=True)
+        for w in window.run_warnings:
+            print(f"winder: warning: {w[:300]}", file=sys.stderr, flush=True)
+        finish(0)
 
     def failed(msg: str) -> None:
         print(f"winder: selftest failed: {msg}", file=sys.stderr, flush=True)
         finish(1)
 
     window.mandrel_updated.connect(ready)
+    window.pipeline_done.connect(pipeline_done)
     window.error_reported.connect(failed)
     timer_cls.singleShot(0, shown)
-    timer_cls.singleShot(60_000, lambda: failed("timed out after 60 s"))
+    limit = SELFTEST_TIMEOUT_S if mode == "full" else 60
+    timer_cls.singleShot(limit * 1000, lambda: failed(f"timed out after {limit} s"))
+
+
+if __name__ == "__main__":  # python -m winder_gui.app [JOB.toml] [--selftest]
+    sys.exit(main())

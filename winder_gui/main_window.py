@@ -13,7 +13,19 @@ Layout (grown step by step by later issues)::
     └────────────────────────────────────────────────────────────────┘
 
 The window holds the :class:`engine.job.Job` (``job``), its path, the built mandrel and its view
-data.  Every edit makes a *candidate* job; the mandrel is built from it in a
+data, and the latest :class:`engine.pipeline.PipelineResult` (``result``).
+
+The workflow (issue 9): every step has a properties page (fields with units, validated by the job
+model; a bad value shows a message at the field and disables Run with the reason), the plot tabs
+show the engine's arrays, and Run (F5) calls :func:`engine.pipeline.run_pipeline` in a worker with
+``previous=result``, so only the stages downstream of an edit re-run; after the first run, edits
+re-run automatically (debounced, superseding the run in flight).  Cancel (Esc) drops the run at
+once; errors are shown as a readable dialog.  Edits of the job are undoable (a QUndoStack of job
+snapshots), settings and the window layout persist (QSettings), recent files are remembered, and a
+dirty job is autosaved atomically every :data:`AUTOSAVE_MS` to
+``AppDataLocation/autosave/<name>.toml``; a leftover autosave is offered on the next start.
+
+Every mandrel edit makes a *candidate* job; the mandrel is built from it in a
 :class:`~winder_gui.workers.JobRunner` worker (never on the GUI thread), and only a candidate that
 builds is committed to ``job``.  So a failed open, import or edit leaves the current job loaded and
 unchanged, and the error is shown at its place (a dialog naming file/line/field for files, a red
@@ -31,8 +43,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from PySide6.QtCore import QEventLoop, QPoint, QRect, Qt, QTimer, Signal
-from PySide6.QtGui import QAction, QCloseEvent, QImage, QKeySequence, QPainter
+from PySide6.QtCore import QByteArray, QEventLoop, QPoint, QRect, QSettings, QStandardPaths, Qt, QTimer, Signal
+from PySide6.QtGui import QAction, QCloseEvent, QImage, QKeySequence, QPainter, QUndoCommand, QUndoStack
 from PySide6.QtWidgets import (
     QApplication,
     QFileDialog,
@@ -40,29 +52,47 @@ from PySide6.QtWidgets import (
     QMainWindow,
     QMessageBox,
     QProgressBar,
+    QPushButton,
     QScrollArea,
     QSplitter,
     QStackedWidget,
     QTabWidget,
+    QToolBar,
     QWidget,
 )
 
 from engine import __version__
 from engine.errors import InputError
+from engine.fileio import atomic_write_text
 from engine.job import FileSpec, Job, PointsSpec, build_mandrel, default_job, load_job
 from engine.job import save_job as _write_job
 from engine.state import check_cancel
 from winder_gui.panels.mandrel_panel import MandrelPanel
-from winder_gui.panels.steps import StepBar
-from winder_gui.views.geometry import MandrelViewData, mandrel_view_data
+from winder_gui.panels.section_panel import SectionPanel, payout_panel, winding_panel
+from winder_gui.panels.steps import STEPS, StepBar
+from winder_gui.views.geometry import MandrelViewData, mandrel_view_data, paths_view_data
+from winder_gui.views.plots import AxesPlot, CoveragePlot, EyePlot, PullSpeedPlot, TimeLawPlot, WindingPlots
 from winder_gui.views.profile_plot import ProfilePlot
-from winder_gui.views.view3d import MandrelView3D
+from winder_gui.views.view3d import MAX_DISPLAY_POINTS, MAX_FRAMES, MandrelView3D
 from winder_gui.workers import JobRunner, cad_call
 
 if TYPE_CHECKING:  # engine.mandrel (scipy) is first imported by the build worker, off the start-up path
     from engine.mandrel import Mandrel
 
 EDIT_DEBOUNCE_MS = 150
+RUN_DEBOUNCE_MS = 300
+"""Quiet time after the last edit before the pipeline re-runs."""
+AUTOSAVE_MS = int(os.environ.get("WINDER_AUTOSAVE_MS", "30000") or 30000)
+"""How often a job with unsaved changes is written to the autosave folder."""
+MAX_RECENT = 8
+NC_FILTER = "NC programs (*.ngc *.nc *.gcode *.mpf *.csv *.txt);;All files (*)"
+SETTINGS_ENV = "WINDER_SETTINGS"
+"""An .ini file to keep the settings in instead of the user's (tests, portable use)."""
+AUTOSAVE_ENV = "WINDER_AUTOSAVE_DIR"
+"""A folder for autosave copies instead of AppDataLocation/autosave."""
+AUTOSAVE_HEADER = "# winder autosave of: "
+STEP_TABS = {"mandrel": "generatrix", "winding": "winding", "payout": "pull_speed", "machine": "axes",
+             "timelaw": "time_law", "nc": "axes"}
 JOB_FILTER = "Winding jobs (*.toml);;All files (*)"
 PROFILE_FILTER = "Generatrix profiles (*.csv *.txt *.dxf *.step *.stp);;All files (*)"
 EXPORT_FILTER = "STEP solid (*.step *.stp);;STL mesh (*.stl)"
@@ -156,6 +186,60 @@ def describe_error(exc: BaseException) -> str:
     return f"Internal error ({type(exc).__name__}): {exc}\n\nPlease report this; the details are on the console."
 
 
+def app_settings() -> QSettings:
+    """The persistent settings (``WINDER_SETTINGS``: an .ini file instead of the user's)."""
+    path = os.environ.get(SETTINGS_ENV, "")
+    if path:
+        return QSettings(path, QSettings.Format.IniFormat)
+    return QSettings("winder", "winder")
+
+
+def autosave_dir() -> Path:
+    """The folder of autosave copies (``WINDER_AUTOSAVE_DIR`` or AppDataLocation/autosave)."""
+    env = os.environ.get(AUTOSAVE_ENV, "")
+    if env:
+        return Path(env)
+    base = QStandardPaths.writableLocation(QStandardPaths.StandardLocation.AppDataLocation)
+    return Path(base or Path.home() / ".winder") / "autosave"
+
+
+def _slug(name: str) -> str:
+    keep = "".join(c if c.isalnum() or c in "-_." else "_" for c in name.strip())
+    return keep.strip("._") or "untitled"
+
+
+def autosave_origin(path: Path) -> Path | None:
+    """The job file an autosave copy was made of (from its first line), or ``None`` (never saved)."""
+    try:
+        first = path.read_text("utf-8").split("\n", 1)[0]
+    except OSError:
+        return None
+    if first.startswith(AUTOSAVE_HEADER):
+        rest = first[len(AUTOSAVE_HEADER):].strip()
+        return Path(rest) if rest and rest != "(not saved)" else None
+    return None
+
+
+class _JobSnapshot(QUndoCommand):
+    """One edit of the job: the job before and after (immutable pydantic models)."""
+
+    def __init__(self, window: MainWindow, before: Job, after: Job, text: str) -> None:
+        super().__init__(text)
+        self._w = window
+        self.before = before
+        self.after = after
+        self._first = True
+
+    def redo(self) -> None:  # noqa: D102 - Qt override
+        if self._first:  # the edit is already applied when the command is pushed
+            self._first = False
+            return
+        self._w._restore_job(self.after)
+
+    def undo(self) -> None:  # noqa: D102 - Qt override
+        self._w._restore_job(self.before)
+
+
 # ------------------------------------------------------------------------------------------------
 # Main window
 # ------------------------------------------------------------------------------------------------
@@ -180,6 +264,10 @@ class MainWindow(QMainWindow):
     job_loaded = Signal()
     mandrel_updated = Signal(object)
     error_reported = Signal(str)
+    pipeline_done = Signal(object)
+    laws_done = Signal(object)
+    timelaw_done = Signal(object)
+    nc_written = Signal(object)
 
     def __init__(self, job_path: str | Path | None = None) -> None:
         super().__init__()
@@ -210,10 +298,66 @@ class MainWindow(QMainWindow):
         self._edit_timer.setInterval(EDIT_DEBOUNCE_MS)
         self._edit_timer.timeout.connect(self._submit_pending)
 
+        # the pipeline and its companions
+        self.result: Any = None
+        """Latest :class:`engine.pipeline.PipelineResult` (possibly partial, after a cancel or error)."""
+        self.laws: dict[str, Any] | None = None
+        self.timelaw: Any = None
+        self.auto_run = True
+        """Re-run the pipeline after every edit once it has run for this job."""
+        self._partial: Any = None
+        self.run_warnings: list[str] = []
+        self.run_violations: list[Any] = []
+        self._checked: Any = None
+        self._run_job: Job | None = None
+        self._run_after_build = False
+        self._explicit_run = False
+        self._superseding = False
+        self._run_t0 = 0.0
+        self._shown: dict[str, str] = {}
+        self._laws_key = ""
+        self._autosaved: Path | None = None
+        self.undo_stack = QUndoStack(self)
+        self.pipe_runner = JobRunner(self)
+        self.pipe_runner.finished.connect(self._on_pipe_done)
+        self.pipe_runner.failed.connect(self._on_pipe_failed)
+        self.pipe_runner.cancelled.connect(self._on_pipe_cancelled)
+        self.pipe_runner.partial.connect(self._on_pipe_partial)
+        self.pipe_runner.progress.connect(self._on_pipe_progress)
+        self.pipe_runner.busy.connect(self._on_busy)
+        self.laws_runner = JobRunner(self)
+        self.laws_runner.finished.connect(self._on_laws_done)
+        self.laws_runner.failed.connect(lambda exc, tb: self._report_dialog("Payout law comparison failed", exc, tb))
+        self.laws_runner.busy.connect(self._on_busy)
+        self.tl_runner = JobRunner(self)
+        self.tl_runner.finished.connect(self._on_timelaw_done)
+        self.tl_runner.failed.connect(self._on_timelaw_failed)
+        self.tl_runner.progress.connect(self._on_pipe_progress)
+        self.tl_runner.busy.connect(self._on_busy)
+        self.nc_runner = JobRunner(self)
+        self.nc_runner.finished.connect(self._on_nc_written)
+        self.nc_runner.failed.connect(lambda exc, tb: self._report_dialog("NC program not written", exc, tb))
+        self.nc_runner.busy.connect(self._on_busy)
+        self._run_timer = QTimer(self)
+        self._run_timer.setSingleShot(True)
+        self._run_timer.setInterval(RUN_DEBOUNCE_MS)
+        self._run_timer.timeout.connect(lambda: self.run_pipeline_now(explicit=False))
+        self._autosave_timer = QTimer(self)
+        self._autosave_timer.setInterval(AUTOSAVE_MS)
+        self._autosave_timer.timeout.connect(self.autosave_now)
+        self._autosave_timer.start()
+        self._view_queue: list[Any] = []
+        self._view_timer = QTimer(self)
+        self._view_timer.setInterval(0)
+        self._view_timer.timeout.connect(self._next_view_update)
+
         self._build_ui()
         self._build_menus()
+        self._build_toolbar()
         self.resize(1400, 880)
+        self._restore_settings()
         self._update_title()
+        self._update_run_state()
         if job_path is not None:
             self.open_job(job_path)
         else:
@@ -227,6 +371,21 @@ class MainWindow(QMainWindow):
         self.plot_tabs = QTabWidget()
         self.plot_tabs.setDocumentMode(True)
         self.plot_tabs.addTab(self.plot, "Generatrix r(z)")
+        self.winding_plots = WindingPlots()
+        self.eye_plot = EyePlot()
+        self.pull_plot = PullSpeedPlot()
+        self.axes_plot = AxesPlot()
+        self.timelaw_plot = TimeLawPlot()
+        self.coverage_plot = CoveragePlot()
+        self.tabs: dict[str, QWidget] = {"generatrix": self.plot}
+        for key, w, title in (("winding", self.winding_plots, "Winding β, C, λ (z)"),
+                              ("eye", self.eye_plot, "Eye path Z–R"),
+                              ("pull_speed", self.pull_plot, "Pull speed u(x)"),
+                              ("axes", self.axes_plot, "Axes q(t), v(t)"),
+                              ("time_law", self.timelaw_plot, "Time law ṡ"),
+                              ("coverage", self.coverage_plot, "Coverage v(z)")):
+            self.plot_tabs.addTab(w, title)
+            self.tabs[key] = w
 
         center = QSplitter(Qt.Orientation.Vertical)
         center.addWidget(self.view3d)
@@ -243,7 +402,32 @@ class MainWindow(QMainWindow):
         scroll.setWidgetResizable(True)
         scroll.setWidget(self.mandrel_panel)
         self.step_pages["mandrel"] = self.properties.addWidget(scroll)
-        self.properties.setMinimumWidth(300)
+        from winder_gui.panels.machine_panel import MachinePanel
+        from winder_gui.panels.nc_panel import NCPanel, TimeLawPanel
+
+        self.winding_panel = winding_panel()
+        self.payout_panel = payout_panel()
+        self.machine_panel = MachinePanel()
+        self.timelaw_panel = TimeLawPanel()
+        self.nc_panel = NCPanel()
+        self.section_panels: dict[str, SectionPanel] = {
+            "winding": self.winding_panel, "payout": self.payout_panel, "machine": self.machine_panel,
+            "timelaw": self.timelaw_panel,
+        }
+        for key, panel in (*self.section_panels.items(), ("nc", self.nc_panel)):
+            sc = QScrollArea()
+            sc.setWidgetResizable(True)
+            sc.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+            sc.setWidget(panel)
+            self.step_pages[key] = self.properties.addWidget(sc)
+        for key, panel in self.section_panels.items():
+            panel.job_edited.connect(lambda job, k=key: self._on_job_edited(job, k))
+            panel.validity_changed.connect(lambda _m: self._update_run_state())
+        self.timelaw_panel.compute_requested.connect(self.compute_timelaw)
+        self.nc_panel.run_requested.connect(self.run_pipeline_now)
+        self.nc_panel.cancel_requested.connect(self.cancel_run)
+        self.nc_panel.export_requested.connect(self._action_export_nc)
+        self.properties.setMinimumWidth(330)
 
         main = QSplitter(Qt.Orientation.Horizontal)
         main.addWidget(self.steps)
@@ -261,13 +445,28 @@ class MainWindow(QMainWindow):
         self.busy_bar.setMaximumWidth(140)
         self.busy_bar.setTextVisible(False)
         self.busy_bar.hide()
+        self.progress_bar = QProgressBar()
+        self.progress_bar.setObjectName("pipelineProgress")
+        self.progress_bar.setRange(0, 1000)
+        self.progress_bar.setMaximumWidth(220)
+        self.progress_bar.setFormat("%p%")
+        self.progress_bar.hide()
+        self.cancel_button = QPushButton("Cancel")
+        self.cancel_button.setObjectName("cancelRun")
+        self.cancel_button.setToolTip("Stop the computation (Esc)")
+        self.cancel_button.clicked.connect(self.cancel_run)
+        self.cancel_button.hide()
         sb = self.statusBar()
         sb.addWidget(self.status_msg, 1)
         sb.addPermanentWidget(self.summary_label)
+        sb.addPermanentWidget(self.progress_bar)
+        sb.addPermanentWidget(self.cancel_button)
         sb.addPermanentWidget(self.busy_bar)
+        self.steps.set_available({k for k, _ in STEPS})
 
         self.steps.step_selected.connect(self._on_step)
         self.mandrel_panel.spec_edited.connect(self._on_spec_edited)
+        self.mandrel_panel.checked.connect(self._update_run_state)
         self.mandrel_panel.points_requested.connect(self._convert_to_points)
         self.mandrel_panel.import_requested.connect(self._action_import)
         self.plot.points_edited.connect(self._on_points_edited)
@@ -289,13 +488,40 @@ class MainWindow(QMainWindow):
 
         add(self.menu_file, "new", "&New", self._action_new, QKeySequence.StandardKey.New)
         add(self.menu_file, "open", "&Open…", self._action_open, QKeySequence.StandardKey.Open)
+        self.menu_recent = self.menu_file.addMenu("Open &Recent")
         add(self.menu_file, "save", "&Save", lambda: self.save_job(), QKeySequence.StandardKey.Save)
         add(self.menu_file, "save_as", "Save &As…", self._action_save_as, QKeySequence.StandardKey.SaveAs)
         self.menu_file.addSeparator()
         add(self.menu_file, "import", "&Import generatrix…", self._action_import, "Ctrl+I")
         add(self.menu_file, "export", "&Export mandrel…", self._action_export, "Ctrl+E")
+        add(self.menu_file, "export_nc", "Export &NC program…", self._action_export_nc, "Ctrl+Shift+E")
+        add(self.menu_file, "export_plot", "Export current &plot…", self._action_export_plot, "Ctrl+Shift+P")
         self.menu_file.addSeparator()
         add(self.menu_file, "quit", "&Quit", self.close, QKeySequence.StandardKey.Quit)
+
+        self.menu_edit = mb.addMenu("&Edit")
+        undo = self.undo_stack.createUndoAction(self, "&Undo")
+        undo.setShortcut(QKeySequence.StandardKey.Undo)
+        redo = self.undo_stack.createRedoAction(self, "&Redo")
+        redo.setShortcuts([QKeySequence.StandardKey.Redo, QKeySequence("Ctrl+Shift+Z")])
+        self.menu_edit.addAction(undo)
+        self.menu_edit.addAction(redo)
+        self.actions["undo"], self.actions["redo"] = undo, redo
+
+        self.menu_run = mb.addMenu("&Run")
+        add(self.menu_run, "run", "&Run pipeline", lambda: self.run_pipeline_now(), "F5")
+        add(self.menu_run, "cancel", "&Cancel", self.cancel_run, "Esc")
+        add(self.menu_run, "timelaw", "Compute &time law", self.compute_timelaw, "F6")
+        auto = add(self.menu_run, "auto_run", "Re-run &automatically after edits", self._toggle_auto_run)
+        auto.setCheckable(True)
+        auto.setChecked(True)
+
+        self.menu_view = mb.addMenu("&View")
+        for i, (key, title) in enumerate(STEPS):
+            add(self.menu_view, f"step_{key}", f"&{i + 1} {title}", lambda _c=False, k=key: self.go_to_step(k),
+                f"Ctrl+{i + 1}")
+        self.menu_view.addSeparator()
+        add(self.menu_view, "play", "&Play / pause the winding", self._toggle_play, "Space")
 
         self.menu_tools = mb.addMenu("&Tools")
         add(self.menu_tools, "turning", "&Turning optimiser…",
@@ -305,6 +531,19 @@ class MainWindow(QMainWindow):
 
         self.menu_help = mb.addMenu("&Help")
         add(self.menu_help, "about", "&About winder", self._action_about)
+
+    def _build_toolbar(self) -> None:
+        tb = QToolBar("Main")
+        tb.setObjectName("mainToolbar")
+        tb.setMovable(False)
+        for key in ("new", "open", "save", None, "undo", "redo", None, "run", "cancel", "export_nc"):
+            if key is None:
+                tb.addSeparator()
+            else:
+                tb.addAction(self.actions[key])
+        self.toolbar = tb
+        self.addToolBar(tb)
+        self._rebuild_recent_menu()
 
     # -- document --------------------------------------------------------------------------------
     def open_job(self, path: str | Path) -> None:
@@ -329,7 +568,7 @@ class MainWindow(QMainWindow):
 
         Pending edits are applied first.  Returns True when the file was written.
         """
-        self.wait_idle()
+        self.wait_idle(pipeline=False)
         if path is None:
             if self.job_path is None:
                 return self._action_save_as()
@@ -351,7 +590,10 @@ class MainWindow(QMainWindow):
             return False
         self.job = job
         self.job_path = target
+        self._sync_panels(None)
         self.set_dirty(False)
+        self.drop_autosave()
+        self.add_recent(target)
         self._status(f"Saved {target}")
         return True
 
@@ -404,18 +646,34 @@ class MainWindow(QMainWindow):
         self._status(f"Exporting {p.name}…")
         self.io_runner.submit(export_task, self.mandrel, p)
 
-    def wait_idle(self, timeout_ms: int = 30000) -> bool:
-        """Apply a debounced edit now and wait for the workers (saving, tests, shutdown)."""
+    def wait_idle(self, timeout_ms: int = 30000, pipeline: bool = True) -> bool:
+        """Apply a debounced edit now and wait for the workers (saving, tests, shutdown).
+
+        ``pipeline=False`` waits for the mandrel build and file writes only (not for computations).
+        """
         if self._edit_timer.isActive():
             self._edit_timer.stop()
             self._submit_pending()
         deadline = time.monotonic() + timeout_ms / 1000.0
-        while self.runner.is_busy() or self.io_runner.is_busy():
+        while True:
+            if self._edit_timer.isActive():
+                self._edit_timer.stop()
+                self._submit_pending()
+            if pipeline and self._run_timer.isActive():
+                self._run_timer.stop()
+                self.run_pipeline_now(explicit=False)
+            if not (self.busy() or self._view_queue if pipeline
+                    else (self.runner.is_busy() or self.io_runner.is_busy())):
+                return True
             if time.monotonic() > deadline:
                 return False
             QApplication.processEvents(QEventLoop.ProcessEventsFlag.AllEvents, 20)
             time.sleep(0.002)
-        return True
+
+    def busy(self) -> bool:
+        """True while any worker of the window computes or writes."""
+        return any(r.is_busy() for r in (self.runner, self.io_runner, self.pipe_runner, self.laws_runner,
+                                         self.tl_runner, self.nc_runner))
 
     # -- runner plumbing -------------------------------------------------------------------------
     def _submit(self, purpose: str, fn: Any, *args: Any) -> None:
@@ -436,15 +694,24 @@ class MainWindow(QMainWindow):
     def _on_built(self, res: BuildResult) -> None:
         purpose = self._purpose
         old_kind = self.job.mandrel.kind
+        before = self.job
         self.job = res.job
         self.mandrel = res.mandrel
         self.view_data = res.data
-        reset = purpose in ("open", "new", "import")
-        if purpose in ("open", "new"):
+        reset = purpose in ("open", "new", "import", "restore")
+        fresh = purpose in ("open", "new", "restore")
+        if fresh:
             self.job_path = res.path
-            self.dirty = False
+            self.dirty = purpose == "restore"
+            self.undo_stack.clear()
+            self._clear_results()
+            if purpose == "open" and res.path is not None:
+                self.add_recent(res.path)
         else:
             self.dirty = True
+            if purpose != "undo" and before != res.job:
+                self.undo_stack.push(_JobSnapshot(self, before, res.job, f"Edit mandrel ({purpose})"))
+        self._sync_panels(None)
         if purpose != "edit":  # the panel already shows what the user typed
             self.mandrel_panel.set_spec(res.job.mandrel)
         else:
@@ -475,16 +742,27 @@ class MainWindow(QMainWindow):
             )
         else:
             self._status("Mandrel updated")
-        if purpose in ("open", "new"):
+        if purpose == "restore":
+            self._status(f"Restored the autosaved copy of {res.job.name} (not saved yet)")
+        if fresh:
             self.job_loaded.emit()
         self.mandrel_updated.emit(res.data)
+        self._update_run_state()
+        if self._run_after_build:
+            self._run_after_build = False
+            self.run_pipeline_now(explicit=self._explicit_run)
+        elif not fresh:
+            self._after_edit()
 
     def _on_failed(self, exc: BaseException, tb: str) -> None:
         purpose = self._purpose
         if not isinstance(exc, InputError):
             print(tb, file=sys.stderr)
+        self._run_after_build = False
+        self._update_run_state()
         if purpose == "edit" and isinstance(exc, InputError):
             self.mandrel_panel.show_error(exc.location.field, exc.message)
+            self._update_run_state()
             self._status(f"Not applied: {exc.message}", error=True)
             self.error_reported.emit(exc.message)
         elif purpose == "points" and isinstance(exc, InputError):
@@ -494,7 +772,8 @@ class MainWindow(QMainWindow):
             self.error_reported.emit(exc.message)
         else:
             titles = {"open": "Could not open the job", "import": "Could not import the generatrix",
-                      "new": "Could not create a job"}
+                      "new": "Could not create a job", "restore": "Could not restore the autosaved job",
+                      "undo": "Could not undo"}
             self._report_dialog(titles.get(purpose, "Error"), exc)
             if self.mandrel is not None:
                 self.mandrel_panel.set_spec(self.job.mandrel)
@@ -502,14 +781,483 @@ class MainWindow(QMainWindow):
     def _on_exported(self, path: Path) -> None:
         self._status(f"Exported the mandrel to {path}")
 
-    def _on_busy(self, busy: bool) -> None:
-        any_busy = self.runner.is_busy() or self.io_runner.is_busy() or busy
-        self.busy_bar.setRange(0, 0 if any_busy else 1)
-        self.busy_bar.setVisible(any_busy)
+    def _on_busy(self, _busy: bool = False) -> None:
+        io_busy = self.runner.is_busy() or self.io_runner.is_busy() or self.nc_runner.is_busy()
+        self.busy_bar.setRange(0, 0 if io_busy else 1)
+        self.busy_bar.setVisible(io_busy)
+        computing = self.pipe_runner.is_busy() or self.tl_runner.is_busy() or self.laws_runner.is_busy()
+        self.progress_bar.setVisible(computing)
+        self.cancel_button.setVisible(computing)
+        self.actions["cancel"].setEnabled(computing)
+        self._update_run_state()
 
     def _on_progress(self, fraction: float, message: str) -> None:
         if message:
             self.busy_bar.setToolTip(message)
+
+    # -- job edits, undo -------------------------------------------------------------------------
+    def _sync_panels(self, source: str | None) -> None:
+        """Show the job in every section panel (the ``source`` panel keeps what the user typed)."""
+        for key, panel in self.section_panels.items():
+            if key == source:
+                panel.job = self.job
+            else:
+                panel.set_job(self.job)
+
+    def _on_job_edited(self, job: Job, source: str) -> None:
+        if job == self.job:
+            return
+        before = self.job
+        self.job = job
+        self.undo_stack.push(_JobSnapshot(self, before, job, f"Edit {source}"))
+        self._sync_panels(source)
+        self.set_dirty(True)
+        self._after_edit()
+
+    def _restore_job(self, job: Job) -> None:
+        """Make ``job`` current again (undo/redo); the mandrel is rebuilt in the worker if it differs."""
+        if job.mandrel != self.job.mandrel:
+            self._edit_timer.stop()
+            self._pending = None
+            self._submit("undo", build_task, job, self.job_path)
+            return
+        self.job = job
+        self._sync_panels(None)
+        self.set_dirty(True)
+        self._after_edit()
+
+    def _after_edit(self) -> None:
+        self._update_run_state()
+        if self.auto_run and self.result is not None and not self.run_block_reason():
+            self._run_timer.start()
+
+    def _toggle_auto_run(self, on: bool) -> None:
+        self.auto_run = bool(on)
+
+    # -- run state ---------------------------------------------------------------------------------
+    def mandrel_problem(self) -> str:
+        """The first message shown at a mandrel field ('' when none)."""
+        for (kind, key), row in self.mandrel_panel.rows.items():
+            if kind == self.mandrel_panel.current_kind() and not row.error.isHidden() and row.error.text():
+                return f"mandrel {key}: {row.error.text()}"
+        return self.mandrel_panel.status.text()
+
+    def run_block_reason(self) -> str:
+        """Why Run is disabled ('' when it may run): the first bad field of any step."""
+        reason = self.mandrel_problem()
+        if reason:
+            return reason
+        for key, panel in self.section_panels.items():
+            if panel.errors():
+                return f"{key} {panel.errors()}"
+        return ""
+
+    def _update_run_state(self) -> None:
+        if not hasattr(self, "nc_panel"):
+            return
+        reason = self.run_block_reason()
+        running = self.pipe_runner.is_busy()
+        self.actions["run"].setEnabled(not reason)
+        self.actions["run"].setToolTip(f"Run disabled: {reason}" if reason else "Run the pipeline (F5)")
+        self.nc_panel.set_run_state(not reason, reason, running)
+        self.timelaw_panel.compute_button.setEnabled(not self.timelaw_panel.errors())
+        if "export_nc" in self.actions:
+            ok = self.result is not None and self.result.nc_text is not None
+            self.actions["export_nc"].setEnabled(ok)
+
+    # -- pipeline ----------------------------------------------------------------------------------
+    def run_pipeline_now(self, upto: str = "nc", explicit: bool = True) -> bool:
+        """Run the pipeline on the current job in the worker, re-using the last result's valid stages.
+
+        Returns False (and says why in the status bar) when a field is bad.  A mandrel edit still
+        being applied runs first.
+        """
+        reason = self.run_block_reason()
+        if reason:
+            self._status(f"Run disabled: {reason}", error=True)
+            return False
+        self._run_timer.stop()
+        if self._edit_timer.isActive() or self.runner.is_busy():
+            self._run_after_build = True
+            self._explicit_run = explicit
+            return True
+        self._explicit_run = explicit
+        self._run_job = self.job
+        self._run_t0 = time.monotonic()
+        self._partial = None
+        self.progress_bar.setValue(0)
+        self._superseding = True
+        try:
+            from winder_gui.tasks import pipeline_task
+
+            self.pipe_runner.submit(pipeline_task, self.job, self.job_path, self.result, upto)
+        finally:
+            self._superseding = False
+        self._status("Running the pipeline…")
+        self._update_run_state()
+        return True
+
+    def cancel_run(self) -> None:
+        """Stop every computation in flight (pipeline, law comparison, time law); results are dropped."""
+        self._run_timer.stop()
+        self._run_after_build = False
+        for r in (self.pipe_runner, self.laws_runner, self.tl_runner):
+            if r.is_busy():
+                r.cancel()
+        self._on_busy()
+
+    def _on_pipe_progress(self, fraction: float, message: str) -> None:
+        self.progress_bar.setValue(int(round(1000 * min(max(fraction, 0.0), 1.0))))
+        if message:
+            self.progress_bar.setToolTip(message)
+            self.progress_bar.setFormat(f"{message} %p%")
+
+    def _on_pipe_partial(self, res: Any) -> None:
+        from engine.pipeline import PipelineResult
+
+        if isinstance(res, PipelineResult):
+            self._partial = res
+            self._show_result(res)
+
+    def _on_pipe_done(self, out: Any) -> None:
+        res = out.result
+        self.result = res
+        self.run_warnings = list(out.warnings)
+        self.run_violations = list(out.violations)
+        self._checked = res
+        self._partial = None
+        self._show_result(res)
+        self._view_queue.append(lambda: self.nc_panel.set_result(res, self.run_warnings))
+        self._view_timer.start()
+        took = time.monotonic() - self._run_t0
+        reused = f" (re-used: {', '.join(res.reused)})" if res.reused else ""
+        warn = len(self.run_warnings)
+        program = f"; program time {res.blocks.total:.2f} s" if res.blocks is not None else ""
+        self._status(f"Pipeline done in {took:.1f} s{reused}{program}"
+                     + (f"; {warn} warning{'s' if warn != 1 else ''} (NC step)" if warn else ""))
+        eye_key = res.keys.get("payout", "")
+        if eye_key != self._laws_key and res.eye_circuit is not None:
+            self._laws_key = eye_key
+            from winder_gui.tasks import laws_task
+
+            self.laws_runner.submit(laws_task, res)
+        self._update_run_state()
+        self.pipeline_done.emit(res)
+
+    def _keep_partial(self) -> None:
+        if self._partial is not None:
+            self.result = self._partial
+            self._partial = None
+
+    def _on_pipe_failed(self, exc: BaseException, tb: str) -> None:
+        self._keep_partial()
+        shown = False
+        if isinstance(exc, InputError) and exc.location.field:
+            fld = exc.location.field
+            for panel in self.section_panels.values():
+                shown = panel.show_error(fld, exc.message) or shown
+            if fld.startswith("mandrel"):
+                self.mandrel_panel.show_error(fld, exc.message)
+                shown = True
+        self.nc_panel.summary.setText(f"<span style='color:#c01010'>Not computed: "
+                                      f"{exc.message if isinstance(exc, InputError) else exc}</span>")
+        if self._explicit_run or not shown:
+            self._report_dialog("The pipeline stopped", exc, tb)
+        else:
+            msg = exc.message if isinstance(exc, InputError) else str(exc)
+            self._status(f"Pipeline stopped: {msg}", error=True)
+            self.error_reported.emit(msg)
+        self._update_run_state()
+
+    def _on_pipe_cancelled(self) -> None:
+        if self._superseding:
+            return
+        self._keep_partial()
+        self._status("Cancelled; the results of the finished stages are kept.")
+        self._update_run_state()
+
+    def _clear_results(self) -> None:
+        self.cancel_run()
+        self.result = None
+        self._partial = None
+        self.laws = None
+        self._laws_key = ""
+        self._shown.clear()
+        self._view_queue.clear()
+        for page in (self.winding_plots, self.eye_plot, self.axes_plot, self.coverage_plot):
+            page.clear_data("No data yet: run the pipeline (F5).")
+        self.pull_plot.set_laws({}, "", "s")
+        self.pull_plot.set_message("No data yet: run the pipeline (F5).")
+        self.nc_panel.set_result(None)
+        self.view3d.set_paths(None)
+
+    def _show_result(self, res: Any) -> None:
+        """Update the views of every stage of ``res`` that changed since they were last drawn.
+
+        The updates are queued and run one per event-loop turn, so the window stays responsive.
+        """
+        keys = res.keys
+        todo: list[Any] = []
+
+        def fresh(stage: str, have: Any) -> bool:
+            if have is None or stage not in keys or self._shown.get(stage) == keys[stage]:
+                return False
+            self._shown[stage] = keys[stage]
+            return True
+
+        if fresh("winding", res.line):
+            todo += [lambda: self.winding_plots.set_line(res.line), lambda: self.coverage_plot.set_line(res.line)]
+            if res.eye is None:
+                todo.append(lambda: self.view3d.set_paths(
+                    paths_view_data(res.line, None, MAX_DISPLAY_POINTS, MAX_FRAMES)))
+        if fresh("payout", res.eye):
+            todo += [lambda: self.eye_plot.set_eye(res.eye_circuit, res.mandrel),
+                     lambda: self.view3d.set_paths(paths_view_data(res.line, res.eye, MAX_DISPLAY_POINTS, MAX_FRAMES))]
+        if fresh("blocks", res.blocks):
+            todo += self.axes_plot.plan(res.machine)
+            todo.append(lambda: self.axes_plot.set_blocks(res.blocks, res.machine))
+        if todo:
+            self._view_queue.extend(todo)
+            self._view_timer.start()
+
+    def _next_view_update(self) -> None:
+        if self._view_queue:
+            self._view_queue.pop(0)()
+        if not self._view_queue:
+            self._view_timer.stop()
+
+    def views_pending(self) -> bool:
+        """True while queued view updates are still to be drawn."""
+        return bool(self._view_queue)
+
+    def _on_laws_done(self, laws: dict[str, Any]) -> None:
+        self.laws = laws
+        res = self.result
+        job_law = res.eye_circuit.law if res is not None and res.eye_circuit is not None else ""
+        param = res.job.payout.parameter if res is not None else "s"
+        self._view_queue.extend([*self.pull_plot.plan(list(laws)),
+                                 lambda: self.pull_plot.set_laws(laws, job_law, param),
+                                 lambda: self.laws_done.emit(laws)])
+        self._view_timer.start()
+
+    # -- time law ------------------------------------------------------------------------------------
+    def compute_timelaw(self) -> None:
+        """Run the time parametrization (tube, DP, TOPP-RA) on the paper example in the worker."""
+        if self.timelaw_panel.errors():
+            self._status(f"Time law: {self.timelaw_panel.errors()}", error=True)
+            return
+        from winder_gui.tasks import timelaw_task
+
+        self.timelaw_panel.summary.setText("computing…")
+        self.tl_runner.submit(timelaw_task, self.job.timelaw)
+        self._status("Computing the time law…")
+
+    def _on_timelaw_done(self, r: Any) -> None:
+        self.timelaw = r
+        self.timelaw_plot.set_laws(r.tube, r.dp, r.toppra, r.source)
+        self.timelaw_panel.summary.setText(
+            f"{r.source}: tube {r.tube.total_time_s:.3f} s in {len(r.tube.iterations)} iterations; "
+            f"single DP {r.dp.total_time_s:.3f} s; TOPP-RA bound {r.toppra.total_time_s:.3f} s")
+        self._status("Time law computed")
+        self.timelaw_done.emit(r)
+
+    def _on_timelaw_failed(self, exc: BaseException, tb: str) -> None:
+        self.timelaw_panel.summary.setText("")
+        self._report_dialog("Time law failed", exc, tb)
+
+    # -- NC export -----------------------------------------------------------------------------------
+    def export_nc(self, path: str | Path, force: bool | None = None) -> bool:
+        """Write the NC program of the last run to ``path`` (in a worker, atomically).
+
+        When the program violates a limit, ``force=None`` asks "write anyway?"; ``True`` writes,
+        ``False`` does not.  Returns True when the write was started.
+        """
+        res = self.result
+        if res is None or res.nc_text is None:
+            self._report_dialog("Export NC program", InputError("there is no NC program yet: run the pipeline (F5)"))
+            return False
+        p = Path(path)
+        if not p.suffix:
+            p = p.with_suffix(res.extension)
+        viol = self.run_violations if self._checked is res else list(res.violations)
+        if viol and force is None:
+            ans = QMessageBox.question(
+                self, "Write anyway?",
+                f"The program violates {len(viol)} limit(s), e.g.\n{getattr(viol[0], 'message', viol[0])}\n\n"
+                "Write it anyway?",
+                QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.No, QMessageBox.StandardButton.No)
+            force = ans == QMessageBox.StandardButton.Yes
+            if not force:
+                self._status("NC program not written (it violates limits)")
+                return False
+        from winder_gui.tasks import write_task
+
+        self.nc_runner.submit(write_task, res, p, bool(force))
+        return True
+
+    def _on_nc_written(self, path: Path) -> None:
+        self._status(f"Wrote the NC program to {path}")
+        self.nc_written.emit(path)
+
+    def _action_export_nc(self) -> None:
+        res = self.result
+        if res is None or res.nc_text is None:
+            self.export_nc("")
+            return
+        stem = self.job_path.stem if self.job_path else _slug(self.job.name)
+        path, _ = QFileDialog.getSaveFileName(self, "Export NC program",
+                                              str(Path(self._start_dir()) / f"{stem}{res.extension}"), NC_FILTER)
+        if path:
+            self.export_nc(path)
+
+    def _action_export_plot(self) -> None:
+        page = self.plot_tabs.currentWidget()
+        if hasattr(page, "_ask_export"):
+            page._ask_export()
+
+    # -- steps, view -------------------------------------------------------------------------------
+    def go_to_step(self, key: str) -> None:
+        """Select step ``key`` in the step bar (its page and plot tab are shown)."""
+        for i in range(self.steps.count()):
+            if self.steps.item(i).data(Qt.ItemDataRole.UserRole) == key:
+                self.steps.setCurrentRow(i)
+        self._on_step(key)
+
+    def _toggle_play(self) -> None:
+        if self.view3d.is_playing():
+            self.view3d.pause()
+        else:
+            self.view3d.play()
+
+    # -- recent files, settings, autosave ------------------------------------------------------------
+    def recent_files(self) -> list[str]:
+        val = app_settings().value("recent", [])
+        if isinstance(val, str):
+            val = [val]
+        return [str(v) for v in (val or [])]
+
+    def add_recent(self, path: Path) -> None:
+        p = str(Path(path).resolve())
+        rec = [p, *[r for r in self.recent_files() if r != p]][:MAX_RECENT]
+        app_settings().setValue("recent", rec)
+        self._rebuild_recent_menu()
+
+    def _rebuild_recent_menu(self) -> None:
+        self.menu_recent.clear()
+        rec = self.recent_files()
+        for i, p in enumerate(rec):
+            act = self.menu_recent.addAction(f"&{i + 1} {Path(p).name}")
+            act.setToolTip(p)
+            act.triggered.connect(lambda _c=False, path=p: self._open_recent(path))
+        self.menu_recent.setEnabled(bool(rec))
+
+    def _open_recent(self, path: str) -> None:
+        if self._may_discard():
+            self.open_job(path)
+
+    def _restore_settings(self) -> None:
+        st = app_settings()
+        geo = st.value("window/geometry")
+        if isinstance(geo, QByteArray | bytes):
+            self.restoreGeometry(QByteArray(geo))
+        state = st.value("window/state")
+        if isinstance(state, QByteArray | bytes):
+            self.restoreState(QByteArray(state))
+        for name, spl in (("main", self.centralWidget()), ("center", self.center_splitter)):
+            val = st.value(f"window/splitter_{name}")
+            if isinstance(val, QByteArray | bytes) and isinstance(spl, QSplitter):
+                spl.restoreState(QByteArray(val))
+        auto = st.value("run/auto", True)
+        self.auto_run = str(auto).lower() not in ("false", "0")
+        self.actions["auto_run"].setChecked(self.auto_run)
+        colour = st.value("view/colour_by", "")
+        if colour:
+            try:
+                self.view3d.set_colour_by(str(colour))
+            except ValueError:
+                pass
+        tab = st.value("window/plot_tab", 0)
+        try:
+            self.plot_tabs.setCurrentIndex(int(tab))
+        except (TypeError, ValueError):
+            pass
+
+    def save_settings(self) -> None:
+        """Write the window layout and options to the settings."""
+        st = app_settings()
+        st.setValue("window/geometry", self.saveGeometry())
+        st.setValue("window/state", self.saveState())
+        st.setValue("window/splitter_main", self.centralWidget().saveState())
+        st.setValue("window/splitter_center", self.center_splitter.saveState())
+        st.setValue("window/plot_tab", self.plot_tabs.currentIndex())
+        st.setValue("run/auto", self.auto_run)
+        st.setValue("view/colour_by", self.view3d.colour_by)
+        st.sync()
+
+    def autosave_path(self) -> Path:
+        """Where this job's autosave copy goes."""
+        name = self.job_path.stem if self.job_path is not None else self.job.name
+        return autosave_dir() / f"{_slug(name)}.toml"
+
+    def autosave_now(self) -> Path | None:
+        """Write the job to the autosave folder (atomically) if it has unsaved changes."""
+        if not self.dirty:
+            return None
+        p = self.autosave_path()
+        try:
+            p.parent.mkdir(parents=True, exist_ok=True)
+            origin = str(self.job_path.resolve()) if self.job_path is not None else "(not saved)"
+            atomic_write_text(p, f"{AUTOSAVE_HEADER}{origin}\n{self.job.to_toml()}")
+        except OSError as exc:
+            self._status(f"Autosave failed: {exc}", error=True)
+            return None
+        if self._autosaved is not None and self._autosaved != p:
+            self._autosaved.unlink(missing_ok=True)
+        self._autosaved = p
+        return p
+
+    def drop_autosave(self) -> None:
+        """Remove this job's autosave copy (after a save or a deliberate close)."""
+        for p in {self._autosaved, self.autosave_path()}:
+            if p is not None:
+                try:
+                    p.unlink(missing_ok=True)
+                except OSError:
+                    pass
+        self._autosaved = None
+
+    @staticmethod
+    def pending_autosaves() -> list[Path]:
+        """Autosave copies left by an earlier session (e.g. a killed process)."""
+        d = autosave_dir()
+        return sorted(d.glob("*.toml")) if d.is_dir() else []
+
+    def restore_autosave(self, path: str | Path) -> None:
+        """Load an autosave copy as the current job (unsaved; its file is the job it was made of)."""
+        p = Path(path)
+        try:
+            job = load_job(p)
+        except (InputError, OSError) as exc:
+            self._report_dialog("Could not restore the autosaved job", exc)
+            return
+        self._autosaved = p
+        self._submit("restore", build_task, job, autosave_origin(p))
+
+    def offer_autosaves(self) -> None:
+        """Ask, for each leftover autosave copy, whether to restore it (the first accepted is loaded)."""
+        for p in self.pending_autosaves():
+            origin = autosave_origin(p)
+            ans = QMessageBox.question(
+                self, "Restore autosaved job?",
+                f"winder found unsaved changes from an earlier session:\n{p.name}"
+                + (f" (job {origin})" if origin else " (never saved)") + "\n\nRestore them?",
+                QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.Discard | QMessageBox.StandardButton.Ignore,
+                QMessageBox.StandardButton.Yes)
+            if ans == QMessageBox.StandardButton.Yes:
+                self.restore_autosave(p)
+                return
+            if ans == QMessageBox.StandardButton.Discard:
+                p.unlink(missing_ok=True)
 
     # -- edits -----------------------------------------------------------------------------------
     def _on_spec_edited(self, spec: Any) -> None:
@@ -635,6 +1383,9 @@ class MainWindow(QMainWindow):
     def _on_step(self, key: str) -> None:
         if key in self.step_pages:
             self.properties.setCurrentIndex(self.step_pages[key])
+        tab = self.tabs.get(STEP_TABS.get(key, ""))
+        if tab is not None:
+            self.plot_tabs.setCurrentWidget(tab)
 
     def screenshot(self) -> QImage:
         """The window as an image, with the GL-drawn 3D view composed in (for docs and tests)."""
@@ -654,9 +1405,18 @@ class MainWindow(QMainWindow):
             event.ignore()
             return
         self._edit_timer.stop()
+        self._run_timer.stop()
+        self._autosave_timer.stop()
+        self.save_settings()
+        self.drop_autosave()
         self.runner.cancel()
+        for r in (self.pipe_runner, self.laws_runner, self.tl_runner):
+            r.cancel()
         self.io_runner.wait(30000)  # never leave a half-written export behind
+        self.nc_runner.wait(30000)
         self.runner.wait(5000)
+        for r in (self.pipe_runner, self.laws_runner, self.tl_runner):
+            r.wait(30000)
         self.view3d.close_backend()
         for dlg in list(self.dialogs.values()):
             try:

@@ -108,6 +108,8 @@ class MandrelPanel(QWidget):
     """
 
     spec_edited = Signal(object)
+    checked = Signal()
+    """Emitted after every check of the fields (valid or not): the window re-evaluates Run."""
     points_requested = Signal()
     import_requested = Signal()
 
@@ -342,6 +344,12 @@ class MandrelPanel(QWidget):
     def _on_edited(self, kind: str) -> None:
         if self._loading:
             return
+        try:
+            self._check(kind)
+        finally:
+            self.checked.emit()
+
+    def _check(self, kind: str) -> None:
         self._show_page(kind)
         self.clear_errors()
         vals, errs = self._read(kind)

@@ -119,3 +119,79 @@ def check_points(z: FloatArray, r: FloatArray) -> tuple[int, str] | None:
         if r[i] < 0 or (r[i] <= 0 and not end):
             return i, f"radius must be > 0: point {i + 1} has r = {r[i]:.4g} mm"
     return None
+
+
+# ------------------------------------------------------------------------------------------------
+# Winding paths, eye and fibre (after a pipeline run)
+# ------------------------------------------------------------------------------------------------
+def to_view(xyz: FloatArray) -> FloatArray:
+    """Mandrel-frame points (x, y, z; axis = z) in the view frame (axis = x), shape (n, 3)."""
+    xyz = np.asarray(xyz, dtype=float)
+    return np.column_stack([xyz[:, 2], xyz[:, 0], xyz[:, 1]])
+
+
+@dataclass(frozen=True)
+class PathsViewData:
+    """The winding line, eye trajectory and fibre of one pipeline result, thinned for display.
+
+    Attributes
+    ----------
+    line_index:
+        Indices of the shown points into the engine's winding line (stride ``line_stride``).
+    line_xyz:
+        Shown path points in the view frame (mm), lifted off the surface by ``lift`` mm so they are
+        not hidden in it.
+    scalars:
+        Colour arrays per shown point: ``circuit``, ``beta_deg``, ``lam``, ``u`` (pull speed, the
+        interval value after each point).
+    frame_index:
+        Indices of the animation frames into the eye path (= the winding line's points).
+    eye_xyz, contact_xyz:
+        Eye and contact point at each frame, view frame (mm).
+    """
+
+    line_index: NDArray[np.int64]
+    line_stride: int
+    line_xyz: FloatArray
+    scalars: dict[str, FloatArray]
+    lift: float
+    frame_index: NDArray[np.int64]
+    eye_xyz: FloatArray
+    contact_xyz: FloatArray
+    n_line: int
+
+
+def paths_view_data(line: object, eye: object, max_points: int = 200_000, max_frames: int = 1500,
+                    lift: float | None = None) -> PathsViewData:
+    """Thin the engine's winding ``line`` and full-line ``eye`` path for the 3D view (no new maths)."""
+    z = np.asarray(line.z)  # type: ignore[attr-defined]
+    n = z.size
+    stride = max(1, int(np.ceil(n / max_points)))
+    idx = np.arange(0, n, stride, dtype=np.int64)
+    if idx[-1] != n - 1:
+        idx = np.append(idx, n - 1)
+    r = np.asarray(line.r)[idx]  # type: ignore[attr-defined]
+    rmax = float(np.max(np.asarray(line.r)))  # type: ignore[attr-defined]
+    lift = 0.004 * rmax if lift is None else lift
+    xyz = np.asarray(line.xyz)[idx].copy()  # type: ignore[attr-defined]
+    scale = np.where(r > 1e-9, (r + lift) / np.maximum(r, 1e-9), 1.0)
+    xyz[:, 0] *= scale
+    xyz[:, 1] *= scale
+    u_full = np.asarray(getattr(eye, "u", np.zeros(0)), dtype=float) if eye is not None else np.zeros(0)
+    u_pt = np.append(u_full, u_full[-1]) if u_full.size == n - 1 else np.zeros(n)
+    scalars = {
+        "circuit": np.asarray(line.circuit, dtype=float)[idx],  # type: ignore[attr-defined]
+        "beta_deg": np.degrees(np.asarray(line.beta))[idx],  # type: ignore[attr-defined]
+        "lam": np.asarray(line.lam, dtype=float)[idx],  # type: ignore[attr-defined]
+        "u": u_pt[idx],
+    }
+    if eye is not None:
+        ne = np.asarray(eye.eye_xyz).shape[0]  # type: ignore[attr-defined]
+        fstride = max(1, int(np.ceil(ne / max_frames)))
+        fidx = np.arange(0, ne, fstride, dtype=np.int64)
+        exyz = to_view(np.asarray(eye.eye_xyz)[fidx])  # type: ignore[attr-defined]
+        cxyz = to_view(np.asarray(eye.contact_xyz)[fidx])  # type: ignore[attr-defined]
+    else:
+        fidx = np.zeros(0, dtype=np.int64)
+        exyz = cxyz = np.zeros((0, 3))
+    return PathsViewData(idx, stride, to_view(xyz), scalars, float(lift), fidx, exyz, cxyz, n)

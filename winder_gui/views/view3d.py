@@ -1,4 +1,4 @@
-"""3D view of the revolved mandrel.
+"""3D view: the revolved mandrel, the winding paths, the eye trajectory and the free fibre, animated.
 
 The pyvista/pyvistaqt backend is heavy (VTK) and is created lazily: only when the view is first
 shown, and one event-loop turn later, so the main window paints before VTK loads.  pyvistaqt's
@@ -6,6 +6,12 @@ shown, and one event-loop turn later, so the main window paints before VTK loads
 or with ``WINDER_NO_3D=1``, or when VTK cannot start — the view is a placeholder label.  The real
 view is tested under ``xvfb-run`` (pytest marker ``gl``).  Rendering happens on the GUI thread only;
 the surface arrays come ready-made from a worker (:mod:`winder_gui.views.geometry`).
+
+After a pipeline run, :meth:`MandrelView3D.set_paths` adds the winding line (coloured by circuit,
+winding angle, λ or pull speed), the eye trajectory and the free fibre from the eye to the contact
+point.  Paths are thinned to :data:`MAX_DISPLAY_POINTS` for display, so a million path points stay
+interactive.  The animation (play / pause / scrub) moves the eye along its trajectory; the frame
+logic also runs with the placeholder, so it is tested offscreen.
 """
 
 from __future__ import annotations
@@ -17,12 +23,18 @@ from typing import Any
 import numpy as np
 from PySide6.QtCore import Qt, QTimer
 from PySide6.QtGui import QGuiApplication, QImage
-from PySide6.QtWidgets import QLabel, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QPushButton, QSlider, QVBoxLayout, QWidget
 
-from winder_gui.views.geometry import MandrelViewData
+from winder_gui.views.geometry import MandrelViewData, PathsViewData
 from winder_gui.workers import JobRunner
 
 HEADLESS_PLATFORMS = {"offscreen", "minimal", "vnc"}
+MAX_DISPLAY_POINTS = 200_000
+"""Largest number of winding-path points drawn (the path is thinned by a stride above it)."""
+MAX_FRAMES = 1500
+"""Animation frames over the eye path (thinned by a stride above it)."""
+COLOUR_BY = ("circuit", "winding angle β [deg]", "λ [–]", "pull speed u")
+FRAME_MS = 33
 
 
 def gl_available() -> bool:
@@ -54,10 +66,50 @@ class MandrelView3D(QWidget):
         self._scheduled = False
         self._loader: JobRunner | None = None
         self._reset_camera = True
+        self.paths: PathsViewData | None = None
+        self.colour_by = COLOUR_BY[0]
+        self.frame = 0
+        self._anim = QTimer(self)
+        self._anim.setInterval(FRAME_MS)
+        self._anim.timeout.connect(self._tick)
+        self._build_controls()
         self._label = QLabel("3D view: loading…")
         self._label.setAlignment(Qt.AlignmentFlag.AlignCenter)
         self._label.setStyleSheet("color: #555; background: #eef0f4;")
-        self._layout.addWidget(self._label)
+        self._layout.addWidget(self._label, 1)
+
+    def _build_controls(self) -> None:
+        bar = QWidget()
+        h = QHBoxLayout(bar)
+        h.setContentsMargins(4, 2, 4, 2)
+        self.play_button = QPushButton("▶ Play")
+        self.play_button.setObjectName("view3d.play")
+        self.play_button.setCheckable(True)
+        self.play_button.setToolTip("Animate the winding: the eye moves along its path (Space)")
+        self.play_button.toggled.connect(self._on_play)
+        self.slider = QSlider(Qt.Orientation.Horizontal)
+        self.slider.setObjectName("view3d.scrub")
+        self.slider.setToolTip("Scrub through the winding")
+        self.slider.valueChanged.connect(self.set_frame)
+        self.colour_combo = QComboBox()
+        self.colour_combo.setObjectName("view3d.colour")
+        self.colour_combo.addItems(list(COLOUR_BY))
+        self.colour_combo.setToolTip("Colour the winding paths by")
+        self.colour_combo.currentTextChanged.connect(self.set_colour_by)
+        self.frame_label = QLabel("")
+        self.frame_label.setMinimumWidth(120)
+        h.addWidget(self.play_button)
+        h.addWidget(self.slider, 1)
+        h.addWidget(self.frame_label)
+        h.addWidget(QLabel("colour:"))
+        h.addWidget(self.colour_combo)
+        self.controls = bar
+        self._layout.addWidget(bar)
+        self._set_controls_enabled(False)
+
+    def _set_controls_enabled(self, on: bool) -> None:
+        for w in (self.play_button, self.slider, self.colour_combo):
+            w.setEnabled(on)
 
     # -- lifecycle -------------------------------------------------------------------------------
     def showEvent(self, event) -> None:  # noqa: N802 - Qt override
@@ -98,10 +150,12 @@ class MandrelView3D(QWidget):
         self.plotter = plotter
         self._layout.removeWidget(self._label)
         self._label.hide()
-        self._layout.addWidget(plotter.interactor if hasattr(plotter, "interactor") else plotter)
+        self._layout.addWidget(plotter.interactor if hasattr(plotter, "interactor") else plotter, 1)
         self.backend = "vtk"
         if self.data is not None:
             self._render()
+        if self.paths is not None:
+            self._render_paths()
         return self.backend
 
     def _use_placeholder(self, why: str) -> None:
@@ -111,6 +165,7 @@ class MandrelView3D(QWidget):
 
     def close_backend(self) -> None:
         """Release VTK resources (call before the window closes)."""
+        self._anim.stop()
         if self._loader is not None:
             self._loader.wait(30000)
         if self.plotter is not None:
@@ -139,7 +194,142 @@ class MandrelView3D(QWidget):
                 f"\n\nmandrel: z {d.z[0]:.1f} … {d.z[-1]:.1f} mm, r max {float(np.max(d.r)):.1f} mm,"
                 f" surface grid {d.surface_x.shape[0]} × {d.surface_x.shape[1]}"
             )
+        if self.paths is not None:
+            p = self.paths
+            text += (f"\nwinding paths: {p.n_line} points ({p.line_xyz.shape[0]} shown), coloured by {self.colour_by}"
+                     f"\n{self._frame_text()}")
         self._label.setText(text)
+
+    # -- winding paths and animation -------------------------------------------------------------
+    def set_paths(self, paths: PathsViewData | None) -> None:
+        """Show the winding paths, eye trajectory and fibre of a pipeline result (``None``: remove them)."""
+        self.paths = paths
+        n = 0 if paths is None else paths.frame_index.size
+        self._set_controls_enabled(n > 0)
+        self.slider.blockSignals(True)
+        self.slider.setRange(0, max(n - 1, 0))
+        self.slider.setValue(min(self.frame, max(n - 1, 0)))
+        self.slider.blockSignals(False)
+        self.frame = self.slider.value()
+        if n == 0:
+            self.pause()
+        if self.backend == "vtk":
+            self._render_paths()
+        elif self.backend == "placeholder":
+            self._update_label()
+        self.frame_label.setText(self._frame_text(short=True))
+
+    def colour_scalars(self) -> np.ndarray | None:
+        """The colour values of the shown path points for the current :attr:`colour_by`."""
+        if self.paths is None:
+            return None
+        key = {"circuit": "circuit", "winding angle β [deg]": "beta_deg", "λ [–]": "lam", "pull speed u": "u"}
+        return self.paths.scalars[key[self.colour_by]]
+
+    def set_colour_by(self, name: str) -> None:
+        """Colour the paths by ``name`` (one of :data:`COLOUR_BY`)."""
+        if name not in COLOUR_BY:
+            raise ValueError(f"colour by one of {COLOUR_BY}, not {name!r}")
+        self.colour_by = name
+        if self.colour_combo.currentText() != name:
+            self.colour_combo.setCurrentText(name)
+        if self.backend == "vtk" and self.paths is not None:
+            self._render_paths()
+        elif self.backend == "placeholder":
+            self._update_label()
+
+    def eye_at_frame(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(eye, contact) positions of the current frame in the view frame (mm)."""
+        if self.paths is None or self.paths.frame_index.size == 0:
+            return None
+        return self.paths.eye_xyz[self.frame], self.paths.contact_xyz[self.frame]
+
+    def set_frame(self, i: int) -> None:
+        """Move the animation to frame ``i`` (the eye and the free fibre follow)."""
+        if self.paths is None or self.paths.frame_index.size == 0:
+            return
+        i = int(np.clip(i, 0, self.paths.frame_index.size - 1))
+        self.frame = i
+        if self.slider.value() != i:
+            self.slider.blockSignals(True)
+            self.slider.setValue(i)
+            self.slider.blockSignals(False)
+        self.frame_label.setText(self._frame_text(short=True))
+        if self.backend == "vtk":
+            self._update_eye()
+
+    def play(self) -> None:
+        """Start the animation."""
+        if self.paths is not None and self.paths.frame_index.size:
+            self.play_button.setChecked(True)
+
+    def pause(self) -> None:
+        """Stop the animation (at the current frame)."""
+        self.play_button.setChecked(False)
+
+    def is_playing(self) -> bool:
+        return self._anim.isActive()
+
+    def _on_play(self, on: bool) -> None:
+        self.play_button.setText("⏸ Pause" if on else "▶ Play")
+        if on:
+            self._anim.start()
+        else:
+            self._anim.stop()
+
+    def _tick(self) -> None:
+        if self.paths is None or self.paths.frame_index.size == 0:
+            self.pause()
+            return
+        self.set_frame((self.frame + 1) % self.paths.frame_index.size)
+
+    def _frame_text(self, short: bool = False) -> str:
+        if self.paths is None or self.paths.frame_index.size == 0:
+            return ""
+        n = self.paths.frame_index.size
+        point = int(self.paths.frame_index[self.frame])
+        return f"frame {self.frame + 1}/{n}" + ("" if short else f" (path point {point})")
+
+    def _render_paths(self) -> None:
+        import pyvista as pv
+
+        assert self.plotter is not None
+        for name in ("paths", "eye_path", "eye", "fibre"):
+            self.plotter.remove_actor(name, render=False)
+        p = self.paths
+        if p is None or p.line_xyz.shape[0] < 2:
+            self.plotter.render()
+            return
+        line = pv.lines_from_points(p.line_xyz)
+        line.point_data["c"] = np.asarray(self.colour_scalars(), dtype=float)
+        cmap = "tab20" if self.colour_by == "circuit" else "viridis"
+        self.plotter.add_mesh(line, name="paths", scalars="c", cmap=cmap, line_width=2, show_scalar_bar=True,
+                              scalar_bar_args={"title": self.colour_by, "vertical": True}, reset_camera=False)
+        if p.eye_xyz.shape[0] >= 2:
+            self.plotter.add_mesh(pv.lines_from_points(p.eye_xyz), name="eye_path", color="#e07b00", line_width=1.5,
+                                  reset_camera=False)
+        self._update_eye()
+
+    def _update_eye(self) -> None:
+        import pyvista as pv
+
+        at = self.eye_at_frame()
+        if at is None or self.plotter is None:
+            return
+        eye, contact = at
+        size = 0.03 * float(np.max(np.abs(self.paths.line_xyz[:, 1:]))) if self.paths is not None else 3.0
+        self.plotter.add_mesh(pv.Sphere(radius=size, center=eye), name="eye", color="#e0201a", reset_camera=False)
+        self.plotter.add_mesh(pv.Line(contact, eye), name="fibre", color="#202020", line_width=3, reset_camera=False)
+        self.plotter.render()
+
+    def actor_points(self, name: str) -> np.ndarray | None:
+        """Points of a VTK actor (``paths``, ``eye_path``, ``eye``, ``fibre``), or ``None``."""
+        if self.plotter is None:
+            return None
+        actor = self.plotter.actors.get(name)
+        if actor is None:
+            return None
+        return np.asarray(actor.mapper.dataset.points)
 
     def _render(self) -> None:
         import pyvista as pv

@@ -1,0 +1,399 @@
+"""The plot tabs of the workflow (pyqtgraph): winding line, eye path, pull speed, axes, time law, coverage.
+
+Every page shows engine arrays as they are (no mathematics here): the curves keep the engine's
+arrays in ``xData``/``yData`` and pyqtgraph thins them for display (``autoDownsample`` +
+``clipToView``), so a million points stay interactive.  Each page can be exported as PNG, SVG or
+CSV (:meth:`PlotPage.export`); the CSV holds every curve of the page, one pair of columns each.
+Units are in the axis labels (mm, deg, s).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6.QtCore import Qt
+from PySide6.QtWidgets import QFileDialog, QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget
+
+from engine.fileio import atomic_write_text
+
+EXPORT_FILTER = "PNG image (*.png);;SVG drawing (*.svg);;CSV table (*.csv)"
+LAW_COLOURS = {"parallel": "#1f77b4", "equidistant": "#2ca02c", "equal-tangent": "#9467bd", "curve": "#8c564b",
+               "min-range": "#d62728"}
+AXIS_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
+MAX_ITERATION_CURVES = 40
+
+
+def _pen(colour: str, width: float = 1.5, dash: bool = False) -> Any:
+    return pg.mkPen(colour, width=width, style=Qt.PenStyle.DashLine if dash else Qt.PenStyle.SolidLine)
+
+
+class PlotPage(QWidget):
+    """A tab with one or more plots, a message line and an Export button.
+
+    ``curves`` maps a name to each data item shown (for export and tests); ``plots`` maps a name to
+    each :class:`pyqtgraph.PlotItem`.
+    """
+
+    title = "plot"
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.glw = pg.GraphicsLayoutWidget()
+        self.glw.setBackground("w")
+        self.plots: dict[str, pg.PlotItem] = {}
+        self.curves: dict[str, pg.PlotDataItem] = {}
+        self.message = QLabel("")
+        self.message.setWordWrap(True)
+        self.message.setStyleSheet("color: #555; padding: 2px 6px;")
+        self.export_button = QPushButton("Export…")
+        self.export_button.setToolTip("Save this plot as PNG, SVG or CSV")
+        self.export_button.clicked.connect(self._ask_export)
+        self.export_button.setEnabled(False)
+        top = QHBoxLayout()
+        top.setContentsMargins(0, 0, 4, 0)
+        top.addWidget(self.message, 1)
+        top.addWidget(self.export_button)
+        lay = QVBoxLayout(self)
+        lay.setContentsMargins(0, 0, 0, 0)
+        lay.setSpacing(0)
+        lay.addLayout(top)
+        lay.addWidget(self.glw, 1)
+        self.set_message("No data yet: run the pipeline (F5).")
+
+    # -- building blocks -------------------------------------------------------------------------
+    def add_plot(self, name: str, row: int, col: int, left: str, bottom: str, **kw: Any) -> pg.PlotItem:
+        """A plot with axis labels (units in the labels) at ``row``, ``col`` of the layout."""
+        p = self.glw.addPlot(row=row, col=col, **kw)
+        p.showGrid(x=True, y=True, alpha=0.25)
+        p.setLabel("left", left)
+        p.setLabel("bottom", bottom)
+        p.setClipToView(True)
+        p.setDownsampling(auto=True, mode="peak")
+        self.plots[name] = p
+        return p
+
+    def set_curve(self, plot: str, name: str, x: Any, y: Any, colour: str = "#1f77b4", width: float = 1.5,
+                  dash: bool = False, **kw: Any) -> pg.PlotDataItem:
+        """Show ``(x, y)`` as curve ``name`` on ``plot`` (replacing a curve of that name)."""
+        old = self.curves.pop(name, None)
+        if old is not None:
+            for p in self.plots.values():
+                if old in p.items:
+                    p.removeItem(old)
+        item = pg.PlotDataItem(np.asarray(x, dtype=float), np.asarray(y, dtype=float), pen=_pen(colour, width, dash),
+                               name=kw.pop("legend", None), **kw)
+        self.plots[plot].addItem(item)
+        self.curves[name] = item
+        return item
+
+    def clear_data(self, message: str = "") -> None:
+        """Remove every curve; show ``message``."""
+        for p in self.plots.values():
+            p.clear()
+            if p.legend is not None:
+                p.legend.clear()
+        self.curves.clear()
+        self.set_message(message)
+        self.export_button.setEnabled(False)
+
+    def set_message(self, text: str) -> None:
+        self.message.setText(text)
+
+    def has_data(self) -> bool:
+        return bool(self.curves)
+
+    def curve_data(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """The full arrays of curve ``name`` (as given; not the thinned display copy)."""
+        c = self.curves[name]
+        return np.asarray(c.xData), np.asarray(c.yData)
+
+    # -- export ----------------------------------------------------------------------------------
+    def export(self, path: str | Path) -> Path:
+        """Write the page as PNG/SVG (the drawing) or CSV (every curve's data), by suffix."""
+        p = Path(path)
+        suffix = p.suffix.lower()
+        if suffix == ".csv":
+            atomic_write_text(p, self.csv_text())
+            return p
+        import pyqtgraph.exporters as ex
+
+        scene = self.glw.scene()
+        if suffix == ".svg":
+            try:
+                ex.SVGExporter(scene).export(str(p))
+            except ValueError:  # pyqtgraph's SVG path rewriting fails on some curves: draw the scene as SVG
+                self._svg_by_qt(p)
+        else:
+            if suffix != ".png":
+                p = p.with_suffix(".png")
+            exp = ex.ImageExporter(scene)
+            exp.export(str(p))
+        return p
+
+    def _svg_by_qt(self, p: Path) -> None:
+        from PySide6.QtCore import QRectF, QSize
+        from PySide6.QtGui import QPainter
+        from PySide6.QtSvg import QSvgGenerator
+
+        scene = self.glw.scene()
+        rect = scene.sceneRect()
+        gen = QSvgGenerator()
+        gen.setFileName(str(p))
+        gen.setSize(QSize(int(rect.width()), int(rect.height())))
+        gen.setViewBox(QRectF(0, 0, rect.width(), rect.height()))
+        gen.setTitle(self.title)
+        painter = QPainter(gen)
+        scene.render(painter, QRectF(0, 0, rect.width(), rect.height()), rect)
+        painter.end()
+
+    def csv_text(self) -> str:
+        """Every curve as two columns ``<name> x``, ``<name> y``; shorter columns padded with blanks."""
+        cols: list[tuple[str, np.ndarray]] = []
+        for name, item in self.curves.items():
+            x, y = np.asarray(item.xData, dtype=float), np.asarray(item.yData, dtype=float)
+            cols.append((f"{name} x", x))
+            cols.append((f"{name} y", y))
+        n = max((len(c) for _, c in cols), default=0)
+        lines = [",".join(f'"{h}"' for h, _ in cols)]
+        for i in range(n):
+            lines.append(",".join(repr(float(c[i])) if i < len(c) else "" for _, c in cols))
+        return "\n".join(lines) + "\n"
+
+    def _ask_export(self) -> None:
+        path, _ = QFileDialog.getSaveFileName(self, f"Export {self.title}", f"{self.title}.png", EXPORT_FILTER)
+        if path:
+            self.export(path)
+
+    def _done(self, message: str = "") -> None:
+        self.set_message(message)
+        self.export_button.setEnabled(bool(self.curves))
+
+
+# ------------------------------------------------------------------------------------------------
+class WindingPlots(PlotPage):
+    """β(z) [deg], C(z) [mm] and λ(z) [–] of the first circuit of the winding line."""
+
+    title = "winding"
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.add_plot("beta", 0, 0, "winding angle β [deg]", "z [mm]")
+        self.add_plot("C", 1, 0, "Clairaut C = r·sin β [mm]", "z [mm]")
+        self.add_plot("lam", 2, 0, "slip tendency λ [–]", "z [mm]")
+        self.plots["C"].setXLink(self.plots["beta"])
+        self.plots["lam"].setXLink(self.plots["beta"])
+
+    def set_line(self, line: Any) -> None:
+        """Show ``line`` (engine.winding.WindingLine): its first circuit, and the friction limit ±μ."""
+        self.clear_data()
+        sl = line.circuit_slice(0)
+        z = line.z[sl]
+        self.set_curve("beta", "beta", z, np.degrees(line.beta[sl]), "#1f77b4")
+        self.set_curve("C", "C", z, line.C[sl], "#2ca02c")
+        self.set_curve("lam", "lam", z, line.lam[sl], "#d62728")
+        for sign in (1.0, -1.0):
+            self.plots["lam"].addItem(pg.InfiniteLine(sign * line.mu, angle=0, pen=_pen("#888", 1, True)))
+        self._done(f"{line.mode} line · {line.circuits} circuits · pattern {line.pattern_p}/{line.pattern_q} · "
+                   f"max |λ| {line.max_abs_lambda:.3g} (μ = {line.mu:g})")
+
+
+class EyePlot(PlotPage):
+    """The payout-eye path Z–R of one circuit over the mandrel generatrix (mm)."""
+
+    title = "eye_path"
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        p = self.add_plot("zr", 0, 0, "R, r [mm]", "Z, z [mm]")
+        p.setAspectLocked(True)
+        p.addLegend(offset=(10, 10))
+
+    def set_eye(self, eye: Any, mandrel: Any) -> None:
+        """Show ``eye`` (engine.payout.EyePath of one circuit) and the generatrix of ``mandrel``."""
+        self.clear_data()
+        z = np.linspace(mandrel.z_min, mandrel.z_max, 400)
+        self.set_curve("zr", "mandrel", z, mandrel.r(z), "#555555", 2.0, legend="mandrel r(z)")
+        self.set_curve("zr", "eye", eye.Z, eye.R, LAW_COLOURS.get(eye.law, "#d62728"), 2.0,
+                       legend=f"eye ({eye.law})")
+        rep = eye.report
+        self._done(f"law {eye.law} · free length {float(np.min(eye.l)):.1f}…{float(np.max(eye.l)):.1f} mm"
+                   + ("" if rep.get("feasible", True) else " · violates a constraint (see NC warnings)"))
+
+
+class PullSpeedPlot(PlotPage):
+    """Relative pull speed u(x) of each payout law side by side (one plot per law, same scales)."""
+
+    title = "pull_speed"
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.laws: dict[str, Any] = {}
+
+    def plan(self, laws: list[str]) -> list[Any]:
+        """Steps that lay out one plot per law (none when laid out already); see :meth:`AxesPlot.plan`."""
+        if laws == list(self.plots):
+            return []
+
+        def start() -> None:
+            self.glw.clear()
+            self.plots.clear()
+            self.curves.clear()
+
+        def col(c: int, law: str) -> None:
+            p = self.add_plot(law, 0, c, "", "")
+            if c:
+                p.setYLink(next(iter(self.plots.values())))
+
+        return [start, *[lambda c=c, law=law: col(c, law) for c, law in enumerate(laws)]]
+
+    def set_laws(self, laws: dict[str, Any], job_law: str, parameter: str) -> None:
+        """Show ``laws`` (law name -> EyePath or an error message)."""
+        unit_x = "s [mm]" if parameter == "s" else "v [rad]"
+        unit_u = "u = dλ/ds [–]" if parameter == "s" else "u = dλ/dv [mm/rad]"
+        for step in self.plan(list(laws)):
+            step()
+        for p in self.plots.values():
+            p.clear()
+        self.curves.clear()
+        self.laws = dict(laws)
+        notes = []
+        for col, (law, eye) in enumerate(laws.items()):
+            p = self.plots[law]
+            p.setTitle(f"{law}{' (job)' if law == job_law else ''}")
+            p.setLabel("left", unit_u if col == 0 else "")
+            p.setLabel("bottom", unit_x)
+            if isinstance(eye, str):
+                p.addItem(pg.TextItem(eye[:160], color="#c01010"))
+                notes.append(f"{law}: not available")
+                continue
+            self.set_curve(law, law, eye.x_mid, eye.u, LAW_COLOURS.get(law, "#333"), 2.0 if law == job_law else 1.5)
+            notes.append(f"{law}: u {eye.u_min:.3g}…{eye.u_max:.3g}")
+        self._done(" · ".join(notes))
+
+
+class AxesPlot(PlotPage):
+    """Axis positions and speeds against the program time (cumulative block times), with their limits."""
+
+    title = "axes"
+
+    def plan(self, machine: Any) -> list[Any]:
+        """Steps that lay out one row of plots per axis of ``machine`` (none when laid out already).
+
+        The window runs them one per event-loop turn before :meth:`set_blocks`.
+        """
+        names = [f"{ax.name}.{w}" for ax in machine.axes for w in ("q", "v")]
+        if names == list(self.plots):
+            return []
+
+        def start() -> None:
+            self.glw.clear()
+            self.plots.clear()
+            self.curves.clear()
+
+        def row(k: int, ax: Any) -> None:
+            pp = self.add_plot(f"{ax.name}.q", k, 0, f"{ax.name} [{ax.units}]", "t [s]")
+            pv = self.add_plot(f"{ax.name}.v", k, 1, f"{ax.name} speed [{ax.units}/s]", "t [s]")
+            first = next(iter(self.plots.values()))
+            if pp is not first:
+                pp.setXLink(first)
+            pv.setXLink(first)
+
+        return [start, *[lambda k=k, ax=ax: row(k, ax) for k, ax in enumerate(machine.axes)]]
+
+    def set_blocks(self, blocks: Any, machine: Any) -> None:
+        """Show every axis of ``blocks`` (engine.blocks.Blocks) with the limits of ``machine``."""
+        for step in self.plan(machine):
+            step()
+        for p in self.plots.values():
+            p.clear()
+        self.curves.clear()
+        t = np.concatenate([[0.0], np.cumsum(blocks.time)])
+        speed = blocks.speed
+        for k, ax in enumerate(machine.axes):
+            c = AXIS_COLOURS[k % len(AXIS_COLOURS)]
+            pp, pv = self.plots[f"{ax.name}.q"], self.plots[f"{ax.name}.v"]
+            self.set_curve(f"{ax.name}.q", f"{ax.name} position", t, blocks.q[:, k], c)
+            # each block's constant speed drawn over its time span: (t_i, v_i), (t_i+1, v_i)
+            self.set_curve(f"{ax.name}.v", f"{ax.name} speed", np.repeat(t, 2)[1:-1], np.repeat(speed[:, k], 2), c)
+            for lim in (ax.min, ax.max):
+                if math.isfinite(lim) and abs(lim) < 1e11:  # templates write "unlimited" as ±1e12
+                    pp.addItem(pg.InfiniteLine(lim, angle=0, pen=_pen("#c01010", 1, True)))
+            for lim in (-ax.max_speed, ax.max_speed):
+                pv.addItem(pg.InfiniteLine(lim, angle=0, pen=_pen("#c01010", 1, True)))
+        self._done(f"{blocks.n} blocks · program time {blocks.total:.2f} s · dashed red: limits")
+
+
+class TimeLawPlot(PlotPage):
+    """The DP tube iterations ṡ(s) with tube bounds and W/O touches; final ṡ(t) vs DP and TOPP-RA."""
+
+    title = "time_law"
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        it = self.add_plot("iterations", 0, 0, "ṡ [mm/s]", "s [mm]", title="tube iterations ṡ(s)")
+        it.addLegend(offset=(10, 10))
+        fin = self.add_plot("final", 1, 0, "ṡ [mm/s]", "t [s]", title="final ṡ(t)")
+        fin.addLegend(offset=(10, 10))
+
+    def set_laws(self, tube: Any, dp: Any, toppra: Any, source: str) -> None:
+        """Show the tube law's iterations and the three final laws (engine.timeparam.TimeLaw)."""
+        self.clear_data()
+        its = tube.iterations
+        n = len(its)
+        shown = its if n <= MAX_ITERATION_CURVES else its[:: math.ceil(n / MAX_ITERATION_CURVES)] + [its[-1]]
+        for j, log in enumerate(shown):
+            col = pg.intColor(j, hues=max(len(shown), 2), values=1, maxValue=200)
+            item = self.set_curve("iterations", f"iteration {log.r}", log.s, log.sdot, "#000", 1.2,
+                                  legend=f"r = {log.r}" if j in (0, len(shown) - 1) else None)
+            item.setPen(pg.mkPen(col, width=1.2))
+        last = its[-1] if its else None
+        if last is not None:
+            self.set_curve("iterations", "tube lower", last.s, last.lower, "#888", 1.0, True, legend="tube bounds")
+            self.set_curve("iterations", "tube upper", last.s, last.upper, "#888", 1.0, True)
+            for key, mask, sym, col in (("W touches", last.w_mask, "t", "#d62728"),
+                                        ("O touches", last.o_mask, "o", "#1f77b4")):
+                m = np.asarray(mask, dtype=bool)
+                sc = pg.PlotDataItem(last.s[m], last.sdot[m], pen=None, symbol=sym, symbolSize=7,
+                                     symbolBrush=col, symbolPen=None, name=key)
+                self.plots["iterations"].addItem(sc)
+                self.curves[key] = sc
+        for name, law, col in (("tube", tube, "#d62728"), ("DP", dp, "#1f77b4"), ("TOPP-RA", toppra, "#2ca02c")):
+            self.set_curve("final", f"final {name}", law.t, law.sdot, col, 2.0,
+                           legend=f"{name}: {law.total_time_s:.3f} s")
+        self._done(f"{source} · {n} tube iterations · T tube {tube.total_time_s:.3f} s, DP {dp.total_time_s:.3f} s, "
+                   f"TOPP-RA {toppra.total_time_s:.3f} s")
+
+
+class CoveragePlot(PlotPage):
+    """The unwrapped coverage map: twist v (deg, modulo one turn) against z (mm) for every circuit.
+
+    The band centre lines are drawn as lines, broken (NaN) where v wraps past 360°; the line is
+    thinned by a stride to at most :attr:`MAX_POINTS` points.
+    """
+
+    title = "coverage"
+    MAX_POINTS = 300_000
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        p = self.add_plot("map", 0, 0, "v mod 360 [deg]", "z [mm]")
+        p.setYRange(0, 360)
+        self.stride = 1
+
+    def set_line(self, line: Any) -> None:
+        """Show every circuit of ``line`` as (z, v mod 360°)."""
+        self.clear_data()
+        step = max(1, math.ceil(line.z.size / self.MAX_POINTS))
+        z = np.asarray(line.z[::step], dtype=float)
+        v = np.mod(np.degrees(line.v[::step]), 360.0)
+        wrap = np.flatnonzero(np.abs(np.diff(v)) > 180.0) + 1
+        zs = np.insert(z, wrap, np.nan)
+        vs = np.insert(v, wrap, np.nan)
+        self.stride = step
+        self.set_curve("map", "coverage", zs, vs, "#1e5ab4", 1.0, connect="finite")
+        self._done(f"{line.circuits} circuits · {line.z.size} points"
+                   + (f" (every {step}th shown)" if step > 1 else ""))
