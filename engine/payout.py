@@ -1,0 +1,1231 @@
+"""Payout-eye trajectory and the minimal-range pull-speed law (MATH.md §A3, equations (7)–(15)).
+
+Every point of the winding line (contact point ``r`` on the mandrel, unit tangent ``τ`` in the
+sense of travel) maps to the fibre exit point (the payout eye) at the free-fibre length ``l``::
+
+    R = r + l·τ                                                                  (7)
+    τ = dir·(cos β / sqrt(1 + r'²))·(r'·e_ρ + k) + sin β·e_v                     (9)
+
+with ``dir = ±1`` the sense of travel along z (the seed writes the ``dir = +1`` pass).  In the
+plane normal to the axis the eye sits at ``d·e_ρ + l·sin β·e_v``, so (10) becomes::
+
+    Z = z + l·b,   d = r + l·a,   R = sqrt(d² + l² sin² β),   V = v + atan2(l sin β, d)
+    a = dir·r'·cos β / sqrt(1 + r'²),   b = dir·cos β / sqrt(1 + r'²)
+
+(``atan2`` equals the seed's ``arccos(d/R)`` for sin β > 0 and stays valid at every β).
+
+A *law* fixes ``l(x)`` over the process parameter ``x`` (laid length ``s`` by default, or the
+twist ``v``).  Geometric laws (11) solve ``f(Z(l), R(l)) = 0`` point by point (``parallel``,
+``equidistant``, ``equal-tangent``, ``curve``).  The technological law ``min-range`` solves (13)–(15)
+in sequence on a grid of ``x``: maximise the smallest pull speed ``u = dλ/dx`` with
+``λ = s + l − k·R`` (12), then minimise the largest subject to that floor, then minimise the jerk
+functional ``∫(u − U)² dx`` inside the band, always subject to cyclicity ``l(x_n) = l(x_k)``, no sag
+``d(s + l)/dx >= 0``, no reverse rotation ``dV/dx >= 0`` and the envelope ``l_min(x) <= l <= l_max(x)``
+(clearance from the mandrel, reachable workspace, ``free_length_max``).
+
+The pull speed is made exactly linear by optimising over ``μ = l − k·R(l)`` instead of ``l``:
+``μ(l)`` is strictly increasing (``dμ/dl = 1 − k·dR/dl >= 1 − |τ_⊥| > 0``) with a closed-form
+inverse, so the bounds map exactly and ``u`` is a linear function of ``μ``.  The two constraints
+that are then nonlinear (no sag for k = 1, no reverse rotation) are handled by a cutting-plane
+loop: rows are added where the exact constraint is violated or nearly active, re-linearised at
+each solution, until the exact (nonlinear) check passes.  LPs: ``scipy.optimize.linprog`` (HiGHS);
+QP: HiGHS through ``highspy`` or, if that is not installed, the HiGHS build vendored in SciPy
+(``scipy.optimize._highspy``); ``trust-constr`` only as a last resort.  See docs/payout.md.
+
+Units: mm, rad.  ``u`` is dimensionless for ``x = s`` and mm/rad for ``x = v``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from engine.errors import InfeasibleError, InputError
+from engine.state import State, check_cancel
+
+FloatArray = NDArray[np.float64]
+
+GEOMETRIC_LAWS = ("parallel", "equidistant", "equal-tangent", "curve")
+LAWS = (*GEOMETRIC_LAWS, "min-range")
+
+_SCAN = 97  # samples of l when bracketing roots / envelope edges
+_BISECT = 36  # bisection steps after bracketing (interval / 2**36)
+CHECK_TOL = 1e-6  # tolerance of the exact constraint check (mm, rad, or speed units)
+_QP_LOG = False
+_LP_METHOD = "highs"
+_QP_TIME_LIMIT = 120.0  # s; beyond it the jerk stage keeps the (14) answer and says so
+
+
+# ------------------------------------------------------------------------------------------------
+# Input: the winding line (duck-typed)
+# ------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class ContactLine:
+    """The minimal winding-line data the payout stage needs (per point, in travel order).
+
+    Attributes
+    ----------
+    z, r, dr : mm, mm, -
+        Axial position, radius and generatrix slope r'(z) at the contact point.
+    v : rad
+        Twist angle, non-decreasing.
+    beta : rad
+        Winding angle to the meridian, in [0, π/2].
+    direction : -
+        Sense of travel along z (+1 or -1) per point.
+    s : mm
+        Laid length, increasing.
+    circuit : -
+        Circuit number per point (optional; all zeros if absent).
+    """
+
+    z: FloatArray
+    r: FloatArray
+    dr: FloatArray
+    v: FloatArray
+    beta: FloatArray
+    direction: FloatArray
+    s: FloatArray
+    circuit: NDArray[np.int64] | None = None
+
+    @classmethod
+    def from_line(cls, line: Any) -> ContactLine:
+        """Take the fields from any object with ``z, r, dr, v, beta, direction, s`` (e.g. WindingLine)."""
+        if isinstance(line, ContactLine):
+            return line
+        try:
+            z = np.asarray(line.z, dtype=float).ravel()
+            arrs = {k: np.asarray(getattr(line, k), dtype=float) for k in ("r", "dr", "v", "beta", "s")}
+            direction = np.asarray(line.direction, dtype=float)
+        except AttributeError as exc:
+            raise InputError(f"the winding line lacks a field the payout stage needs: {exc}") from None
+        n = z.size
+        out: dict[str, Any] = {"z": z}
+        for k, a in arrs.items():
+            out[k] = np.broadcast_to(a, (n,)).astype(float).copy()
+        out["direction"] = np.broadcast_to(np.sign(direction), (n,)).astype(float).copy()
+        circ = getattr(line, "circuit", None)
+        out["circuit"] = None if circ is None else np.broadcast_to(np.asarray(circ), (n,)).astype(np.int64).copy()
+        cl = cls(**out)
+        cl.validate()
+        return cl
+
+    def validate(self) -> None:
+        """Check shapes and ranges; raise InputError naming the offending point."""
+        n = self.z.size
+        if n < 3:
+            raise InputError(f"the winding line has {n} points; the payout stage needs at least 3")
+        for name in ("z", "r", "dr", "v", "beta", "direction", "s"):
+            a = getattr(self, name)
+            if a.shape != (n,):
+                raise InputError(f"winding line field '{name}' has shape {a.shape}, expected ({n},)")
+            bad = np.flatnonzero(~np.isfinite(a))
+            if bad.size:
+                raise InputError(f"winding line field '{name}' is not finite at point {int(bad[0])}")
+        if (self.r <= 0).any():
+            i = int(np.flatnonzero(self.r <= 0)[0])
+            raise InputError(f"contact radius r = {self.r[i]:g} mm <= 0 at point {i} (z = {self.z[i]:g} mm)")
+        if (np.diff(self.s) < 0).any():
+            i = int(np.flatnonzero(np.diff(self.s) < 0)[0]) + 1
+            raise InputError(f"laid length s decreases at point {i} (s = {self.s[i]:g} mm)")
+        if (np.diff(self.v) < -1e-12).any():
+            i = int(np.flatnonzero(np.diff(self.v) < -1e-12)[0]) + 1
+            raise InputError(f"twist angle v decreases at point {i} (v = {self.v[i]:g} rad)")
+        if ((self.beta < -1e-12) | (self.beta > math.pi / 2 + 1e-12)).any():
+            i = int(np.flatnonzero((self.beta < -1e-12) | (self.beta > math.pi / 2 + 1e-12))[0])
+            raise InputError(f"winding angle β = {self.beta[i]:g} rad outside [0, π/2] at point {i}")
+
+    def take(self, idx: ArrayLike) -> ContactLine:
+        """The sub-line at point indices ``idx``."""
+        i = np.asarray(idx)
+        return ContactLine(
+            self.z[i], self.r[i], self.dr[i], self.v[i], self.beta[i], self.direction[i], self.s[i],
+            None if self.circuit is None else self.circuit[i],
+        )
+
+    def first_circuit(self) -> ContactLine:
+        """The points of the first circuit (the whole line if there is no ``circuit`` field)."""
+        if self.circuit is None:
+            return self
+        return self.take(np.flatnonzero(self.circuit == self.circuit[0]))
+
+
+def tangent_components(r: FloatArray, dr: FloatArray, beta: FloatArray, direction: FloatArray
+                       ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Components (a, b, c) of τ (9) on (e_ρ, k, e_v): radial, axial, circumferential (-)."""
+    cb = np.cos(beta) / np.sqrt(1.0 + dr * dr)
+    return direction * dr * cb, direction * cb, np.sin(beta)
+
+
+@dataclass(frozen=True)
+class _Geo:
+    """Per-grid-point geometry."""
+
+    line: ContactLine
+    x: FloatArray
+    a: FloatArray
+    b: FloatArray
+    c: FloatArray
+    index: NDArray[np.int64]
+
+    @property
+    def n(self) -> int:
+        return self.x.size
+
+    def eye(self, l: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Z, R, V, d of the eye at free length l (broadcasts over trailing axes)."""
+        L = self.line
+        sh = (-1,) + (1,) * (np.ndim(l) - 1)
+        z, r, v = L.z.reshape(sh), L.r.reshape(sh), L.v.reshape(sh)
+        a, b, c = self.a.reshape(sh), self.b.reshape(sh), self.c.reshape(sh)
+        d = r + a * l
+        q = c * l
+        return z + b * l, np.hypot(d, q), v + np.arctan2(q, d), d
+
+    def mu(self, l: FloatArray, k: int) -> FloatArray:
+        """μ = l − k·R(l) (mm)."""
+        return l - k * self.eye(l)[1] if k else np.asarray(l, dtype=float).copy()
+
+    def l_of_mu(self, mu: FloatArray, k: int) -> FloatArray:
+        """Inverse of :meth:`mu` in closed form: b²l² − 2(μ + r·a)l + μ² − r² = 0."""
+        if not k:
+            return np.asarray(mu, dtype=float).copy()
+        r, a, b = self.line.r, self.a, self.b
+        B = mu + r * a
+        b2 = b * b
+        disc = np.sqrt(np.maximum(B * B - b2 * (mu * mu - r * r), 0.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            neg = (mu * mu - r * r) / (B - disc)
+            pos = (B + disc) / b2
+        return np.where(B <= 0, neg, pos)
+
+    def dR_dl(self, l: FloatArray) -> FloatArray:
+        """dR/dl = (r·a + (1 − b²)·l)/R."""
+        _, R, _, _ = self.eye(l)
+        return (self.line.r * self.a + (1.0 - self.b**2) * l) / R
+
+    def dV_dl(self, l: FloatArray) -> FloatArray:
+        """dV/dl = c·r/R² (rad/mm)."""
+        _, R, _, _ = self.eye(l)
+        return self.c * self.line.r / (R * R)
+
+
+def _parameter(line: ContactLine, parameter: str) -> FloatArray:
+    if parameter == "s":
+        return line.s.copy()
+    if parameter == "v":
+        return line.v.copy()
+    raise InputError(f"process parameter must be 's' or 'v', got {parameter!r}", field="payout.parameter")
+
+
+def _grid(line: ContactLine, parameter: str, n: int | None) -> _Geo:
+    """Grid points: line points spread as evenly in x as the line allows (ends included)."""
+    x = _parameter(line, parameter)
+    keep = np.concatenate([[True], np.diff(x) > 1e-12 * max(1.0, abs(x[-1] - x[0]))])
+    idx = np.flatnonzero(keep)
+    if n is not None and n < idx.size:
+        targets = np.linspace(x[idx[0]], x[idx[-1]], n)
+        pos = np.clip(np.searchsorted(x[idx], targets), 0, idx.size - 1)
+        prev = np.clip(pos - 1, 0, idx.size - 1)
+        pick = np.where(np.abs(x[idx[prev]] - targets) < np.abs(x[idx[pos]] - targets), prev, pos)
+        idx = idx[np.unique(np.concatenate([[0], pick, [idx.size - 1]]))]
+    if idx.size < 3:
+        raise InputError(f"the process parameter '{parameter}' does not increase along the winding line")
+    sub = line.take(idx)
+    a, b, c = tangent_components(sub.r, sub.dr, sub.beta, sub.direction)
+    return _Geo(sub, x[idx], a, b, c, idx.astype(np.int64))
+
+
+# ------------------------------------------------------------------------------------------------
+# Envelope: clearance from the mandrel and the reachable workspace
+# ------------------------------------------------------------------------------------------------
+@runtime_checkable
+class Workspace(Protocol):
+    """Where the eye can go: ``contains(Z, R)`` (mm arrays) -> bool array; ``describe()`` for messages."""
+
+    def contains(self, Z: FloatArray, R: FloatArray) -> NDArray[np.bool_]: ...
+
+    def describe(self) -> str: ...
+
+
+@dataclass(frozen=True)
+class BoxWorkspace:
+    """Eye reach as a box in the Z–R plane (mm); ``None`` ends are unlimited."""
+
+    z_range: tuple[float, float] | None = None
+    r_range: tuple[float, float] | None = None
+
+    def contains(self, Z: FloatArray, R: FloatArray) -> NDArray[np.bool_]:
+        ok = np.ones(np.broadcast(Z, R).shape, dtype=bool)
+        if self.z_range is not None:
+            ok &= (Z >= self.z_range[0]) & (Z <= self.z_range[1])
+        if self.r_range is not None:
+            ok &= (R >= self.r_range[0]) & (R <= self.r_range[1])
+        return ok
+
+    def describe(self) -> str:
+        parts = []
+        if self.z_range is not None:
+            parts.append(f"Z in [{self.z_range[0]:g}, {self.z_range[1]:g}] mm")
+        if self.r_range is not None:
+            parts.append(f"R in [{self.r_range[0]:g}, {self.r_range[1]:g}] mm")
+        return "workspace " + (", ".join(parts) or "unlimited")
+
+
+class _Contour:
+    """Signed distance (mm) in the meridian plane from (Z, R) to the mandrel generatrix.
+
+    The generatrix is a dense polyline (chord error ~ h²κ/8, about 1e-4 mm here); the nearest
+    vertex comes from a KD-tree and the distance is refined on its two adjacent segments.
+    Negative inside the mandrel.
+    """
+
+    def __init__(self, mandrel: Any, n: int = 6000) -> None:
+        from scipy.spatial import cKDTree
+
+        z, r = mandrel.sample(n)
+        self.z, self.r = np.asarray(z, float), np.asarray(r, float)
+        self.tree = cKDTree(np.column_stack([self.z, self.r]))
+        self.z_min, self.z_max = float(self.z[0]), float(self.z[-1])
+
+    def distance(self, Z: FloatArray, R: FloatArray) -> FloatArray:
+        Zf, Rf = np.ravel(Z), np.ravel(R)
+        _, j = self.tree.query(np.column_stack([Zf, Rf]))
+        best = np.full(Zf.shape, np.inf)
+        m = self.z.size
+        for a in (j - 1, j):
+            a = np.clip(a, 0, m - 2)
+            z0, r0 = self.z[a], self.r[a]
+            ez, er = self.z[a + 1] - z0, self.r[a + 1] - r0
+            t = np.clip(((Zf - z0) * ez + (Rf - r0) * er) / (ez * ez + er * er), 0.0, 1.0)
+            best = np.minimum(best, np.hypot(Zf - z0 - t * ez, Rf - r0 - t * er))
+        inside = (Zf >= self.z_min) & (Zf <= self.z_max) & (Rf < np.interp(Zf, self.z, self.r))
+        return np.where(inside, -best, best).reshape(np.shape(Z))
+
+
+def _first_true_run(ok: NDArray[np.bool_]) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.bool_]]:
+    """Per row: first True column, last column of that run, and whether any True exists."""
+    has = ok.any(axis=1)
+    first = np.argmax(ok, axis=1)
+    m = ok.shape[1]
+    after = np.arange(m)[None, :] >= first[:, None]
+    stop = after & ~ok
+    last = np.where(stop.any(axis=1), np.argmax(stop, axis=1) - 1, m - 1)
+    return first, last, has
+
+
+@dataclass(frozen=True)
+class Envelope:
+    """Pointwise admissible free lengths l_min(x) <= l <= l_max(x) (mm) and why."""
+
+    l_min: FloatArray
+    l_max: FloatArray
+    clearance_mm: float
+    free_length_max_mm: float
+    workspace: str
+
+
+def envelope(geo: _Geo, contour: _Contour, clearance: float, l_cap: float,
+             workspace: Workspace | None = None) -> Envelope:
+    """The first admissible interval of l at each grid point (scan + vectorised bisection).
+
+    Admissible: the eye is at least ``clearance`` mm from the mandrel, inside ``workspace`` and
+    ``l <= l_cap``.  Raises InfeasibleError naming the first point with no admissible l.
+    """
+    ls = np.linspace(0.0, l_cap, _SCAN)
+
+    def ok_at(l: FloatArray) -> NDArray[np.bool_]:
+        Z, R, _, _ = geo.eye(l)
+        good = contour.distance(Z, R) >= clearance
+        if workspace is not None:
+            good &= workspace.contains(Z, R)
+        return good
+
+    L = np.broadcast_to(ls, (geo.n, _SCAN))
+    ok = ok_at(L)
+    first, last, has = _first_true_run(ok)
+    if not has.all():
+        i = int(np.flatnonzero(~has)[0])
+        Z, R, _, _ = geo.eye(L)
+        dist = contour.distance(Z, R)
+        clear_any = (dist[i] >= clearance).any()
+        z, x = geo.line.z[i], geo.x[i]
+        if not clear_any:
+            raise InfeasibleError(
+                f"clearance envelope too tight at x = {x:.6g} (z = {z:.6g} mm, grid point {i}): no free length "
+                f"up to free_length_max_mm = {l_cap:g} mm keeps the eye {clearance:g} mm from the mandrel "
+                f"(largest distance reached {dist[i].max():.4g} mm)", field="payout.clearance_mm")
+        desc = workspace.describe() if workspace is not None else "workspace"
+        zr = [(float(a), float(b)) for a, b in zip(Z[i][dist[i] >= clearance][:1], R[i][dist[i] >= clearance][:1])]
+        raise InfeasibleError(
+            f"{desc} too small at x = {x:.6g} (z = {z:.6g} mm, grid point {i}): the eye would need to be at "
+            f"(Z, R) = ({zr[0][0]:.5g}, {zr[0][1]:.5g}) mm or farther along the tangent to clear the mandrel by "
+            f"{clearance:g} mm", field="payout.workspace")
+    lo = ls[first].copy()
+    # refine the lower edge: (ls[first-1], ls[first]] where ok flips False -> True
+    needs = first > 0
+    a, b = np.where(needs, ls[np.maximum(first - 1, 0)], lo), lo.copy()
+    for _ in range(_BISECT):
+        mid = 0.5 * (a + b)
+        good = ok_at_rows(geo, contour, clearance, workspace, mid)
+        a, b = np.where(good, a, mid), np.where(good, mid, b)
+    lo = np.where(needs, b, lo)
+    hi = ls[last].copy()
+    needs = last < _SCAN - 1
+    a, b = hi.copy(), np.where(needs, ls[np.minimum(last + 1, _SCAN - 1)], hi)
+    for _ in range(_BISECT):
+        mid = 0.5 * (a + b)
+        good = ok_at_rows(geo, contour, clearance, workspace, mid)
+        a, b = np.where(good, mid, a), np.where(good, b, mid)
+    hi = np.where(needs, a, hi)
+    return Envelope(lo, hi, clearance, l_cap, workspace.describe() if workspace is not None else "unlimited")
+
+
+def ok_at_rows(geo: _Geo, contour: _Contour, clearance: float, workspace: Workspace | None,
+               l: FloatArray) -> NDArray[np.bool_]:
+    """Admissibility of one l per grid point."""
+    Z, R, _, _ = geo.eye(l)
+    good = contour.distance(Z, R) >= clearance
+    if workspace is not None:
+        good &= workspace.contains(Z, R)
+    return good
+
+
+# ------------------------------------------------------------------------------------------------
+# Result
+# ------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class EyePath:
+    """The payout-eye trajectory over the grid points of the winding line.
+
+    Attributes
+    ----------
+    x : mm or rad
+        Process parameter (``parameter``: laid length s or twist v) at the grid points.
+    index : -
+        Indices of the grid points in the input line.
+    l : mm
+        Free-fibre length.
+    Z, R, V : mm, mm, rad
+        Cylindrical eye coordinates (10).
+    eye_xyz, contact_xyz : mm, (N, 3)
+        Eye and contact point in the mandrel frame (axis = z).
+    fibre_dir : -, (N, 3)
+        Unit free-fibre direction contact → eye (= τ, (9)).
+    s : mm
+        Laid length at the grid points.
+    lam_pulled : mm
+        Pulled length λ = s + l − k·R (12).
+    u : mm/mm or mm/rad, (N − 1,)
+        Relative pull speed dλ/dx on each grid interval (at ``x_mid``).
+    law, k, parameter :
+        Law used, impregnation scheme (12), process parameter.
+    l_min, l_max : mm
+        Admissible free lengths (clearance / workspace / free_length_max envelope).
+    report : dict
+        u_min, u_max, u_range, U, jerk, l_min, l_max, feasible, constraints, active, solver.
+    """
+
+    x: FloatArray
+    index: NDArray[np.int64]
+    l: FloatArray
+    Z: FloatArray
+    R: FloatArray
+    V: FloatArray
+    eye_xyz: FloatArray
+    contact_xyz: FloatArray
+    fibre_dir: FloatArray
+    s: FloatArray
+    lam_pulled: FloatArray
+    u: FloatArray
+    x_mid: FloatArray
+    law: str
+    k: int
+    parameter: str
+    l_min: FloatArray | None = None
+    l_max: FloatArray | None = None
+    report: dict[str, Any] = field(default_factory=dict, compare=False)
+
+    @property
+    def u_min(self) -> float:
+        return float(self.u.min())
+
+    @property
+    def u_max(self) -> float:
+        return float(self.u.max())
+
+    @property
+    def u_range(self) -> float:
+        return self.u_max - self.u_min
+
+    @property
+    def feasible(self) -> bool:
+        return bool(self.report.get("feasible", True))
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-able summary (no per-point arrays)."""
+        return dict(self.report)
+
+
+def _build(geo: _Geo, l: FloatArray, k: int, parameter: str, law: str,
+           env: Envelope | None = None) -> EyePath:
+    L = geo.line
+    l = np.asarray(l, dtype=float)
+    Z, R, V, _ = geo.eye(l)
+    cv, sv = np.cos(L.v), np.sin(L.v)
+    contact = np.column_stack([L.r * cv, L.r * sv, L.z])
+    e_rho = np.column_stack([cv, sv, np.zeros_like(cv)])
+    e_v = np.column_stack([-sv, cv, np.zeros_like(cv)])
+    kk = np.array([0.0, 0.0, 1.0])
+    tau = geo.a[:, None] * e_rho + geo.b[:, None] * kk[None, :] + geo.c[:, None] * e_v
+    tau /= np.linalg.norm(tau, axis=1)[:, None]
+    eye = contact + l[:, None] * tau
+    lam = L.s + l - k * R
+    dx = np.diff(geo.x)
+    u = np.diff(lam) / dx
+    return EyePath(
+        x=geo.x, index=geo.index, l=l, Z=Z, R=R, V=V, eye_xyz=eye, contact_xyz=contact, fibre_dir=tau,
+        s=L.s, lam_pulled=lam, u=u, x_mid=0.5 * (geo.x[1:] + geo.x[:-1]), law=law, k=int(k), parameter=parameter,
+        l_min=None if env is None else env.l_min, l_max=None if env is None else env.l_max,
+    )
+
+
+def eye_path(line: Any, l: ArrayLike, *, k: int = 1, parameter: str = "s", law: str = "given") -> EyePath:
+    """The eye path for free lengths ``l`` (mm, one per line point or a scalar) — equations (7)–(10), (12)."""
+    cl = ContactLine.from_line(line)
+    geo = _grid(cl, parameter, None)
+    lv = np.broadcast_to(np.asarray(l, dtype=float), (cl.z.size,))[geo.index]
+    if (lv < 0).any():
+        raise InputError(f"free length must be >= 0, got {lv.min():g} mm")
+    return _build(geo, lv, k, parameter, law)
+
+
+# ------------------------------------------------------------------------------------------------
+# Constraint check and report
+# ------------------------------------------------------------------------------------------------
+def _runs(mask: NDArray[np.bool_], x: FloatArray, z: FloatArray, limit: int = 12) -> list[dict[str, float]]:
+    idx = np.flatnonzero(mask)
+    if not idx.size:
+        return []
+    breaks = np.flatnonzero(np.diff(idx) > 1)
+    starts = np.concatenate([[idx[0]], idx[breaks + 1]])
+    ends = np.concatenate([idx[breaks], [idx[-1]]])
+    out = []
+    for a, b in zip(starts[:limit], ends[:limit]):
+        out.append({"x_from": float(x[a]), "x_to": float(x[b]), "z_from": float(z[a]), "z_to": float(z[b]),
+                    "points": int(b - a + 1)})
+    return out
+
+
+def _report(geo: _Geo, eye: EyePath, env: Envelope | None, u_floor: float, tol: float = CHECK_TOL,
+            active_tol: float | None = None, extra: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Exact (nonlinear) check of every constraint; where each is violated and where active."""
+    L = geo.line
+    x, z = geo.x, L.z
+    xm = 0.5 * (x[1:] + x[:-1])
+    zm = 0.5 * (z[1:] + z[:-1])
+    dx = np.diff(x)
+    atol = active_tol if active_tol is not None else 1e-6
+    checks: dict[str, tuple[FloatArray, FloatArray, FloatArray]] = {}  # name -> (slack, x, z)
+    if env is not None:
+        checks["clearance"] = (eye.l - env.l_min, x, z)
+        checks["workspace"] = (env.l_max - eye.l, x, z)
+    sag = np.diff(L.s + eye.l) / dx
+    checks["no_sag"] = (sag, xm, zm)
+    checks["no_reverse_rotation"] = (np.diff(eye.V) / dx, xm, zm)
+    checks["u_floor"] = (eye.u - u_floor, xm, zm)
+    cyc = abs(float(eye.l[-1] - eye.l[0]))
+    constraints: dict[str, Any] = {}
+    feasible = cyc <= tol
+    for name, (slack, xs, zs) in checks.items():
+        viol = slack < -tol
+        feasible &= not viol.any()
+        worst = int(np.argmin(slack))
+        constraints[name] = {
+            "ok": not bool(viol.any()),
+            "min_slack": float(slack[worst]),
+            "at_x": float(xs[worst]),
+            "at_z": float(zs[worst]),
+            "violated": _runs(viol, xs, zs),
+        }
+    constraints["cyclicity"] = {"ok": cyc <= tol, "l_end_minus_l_start": float(eye.l[-1] - eye.l[0])}
+    u = eye.u
+    U = float((eye.lam_pulled[-1] - eye.lam_pulled[0]) / (x[-1] - x[0]))
+    active = {}
+    for name, (slack, xs, zs) in checks.items():
+        if name == "u_floor":
+            continue
+        runs = _runs(slack <= atol, xs, zs)
+        if runs:
+            active[name] = runs
+    umin, umax = float(u.min()), float(u.max())
+    scale = max(1.0, abs(umax), abs(umin))
+    active["u_at_min"] = _runs(u <= umin + 1e-6 * scale, xm, zm)
+    active["u_at_max"] = _runs(u >= umax - 1e-6 * scale, xm, zm)
+    rep = {
+        "law": eye.law,
+        "k": eye.k,
+        "parameter": eye.parameter,
+        "points": int(x.size),
+        "u_min": umin,
+        "u_max": umax,
+        "u_range": umax - umin,
+        "U": U,
+        "jerk": float(np.sum((u - U) ** 2 * dx)),
+        "l_min": float(eye.l.min()),
+        "l_max": float(eye.l.max()),
+        "R_min": float(eye.R.min()),
+        "R_max": float(eye.R.max()),
+        "Z_min": float(eye.Z.min()),
+        "Z_max": float(eye.Z.max()),
+        "feasible": bool(feasible),
+        "constraints": constraints,
+        "active": active,
+    }
+    if env is not None:
+        rep["envelope"] = {"clearance_mm": env.clearance_mm, "free_length_max_mm": env.free_length_max_mm,
+                           "workspace": env.workspace, "l_lower_max": float(env.l_min.max()),
+                           "l_upper_min": float(env.l_max.min())}
+    if extra:
+        rep.update(extra)
+    return rep
+
+
+# ------------------------------------------------------------------------------------------------
+# Geometric laws (11)
+# ------------------------------------------------------------------------------------------------
+def _first_root(geo: _Geo, f: Callable[[FloatArray, FloatArray], FloatArray], l_cap: float, law: str) -> FloatArray:
+    """Smallest l in (0, l_cap] with f(Z(l), R(l)) = 0 at every grid point (scan + bisection)."""
+    ls = np.linspace(0.0, l_cap, _SCAN)
+    L = np.broadcast_to(ls, (geo.n, _SCAN))
+    Z, R, _, _ = geo.eye(L)
+    F = np.asarray(f(Z, R), dtype=float)
+    sign = np.sign(F)
+    zero = sign == 0
+    zero[:, 0] = False
+    change = (sign[:, 1:] * sign[:, :-1] < 0) | zero[:, 1:]
+    has = change.any(axis=1)
+    if not has.all():
+        i = int(np.flatnonzero(~has)[0])
+        raise InfeasibleError(
+            f"the '{law}' eye path cannot be reached at x = {geo.x[i]:.6g} (z = {geo.line.z[i]:.6g} mm, grid point "
+            f"{i}): no free length in (0, {l_cap:g}] mm puts the eye on it (free_length_max_mm)",
+            field="payout.law")
+    j = np.argmax(change, axis=1)
+    a, b = ls[j], ls[j + 1]
+    rows = np.arange(geo.n)
+    fa = F[rows, j]
+    for _ in range(_BISECT):
+        mid = 0.5 * (a + b)
+        Zm, Rm, _, _ = geo.eye(mid)
+        fm = np.asarray(f(Zm, Rm), dtype=float)
+        left = np.sign(fm) == np.sign(fa)
+        a, b = np.where(left, mid, a), np.where(left, b, mid)
+        fa = np.where(left, fm, fa)
+    return 0.5 * (a + b)
+
+
+def parallel_free_length(geo: _Geo, R0: float, law: str = "parallel") -> FloatArray:
+    """Closed-form l with R(l) = R0: (1 − b²)l² + 2·r·a·l + r² − R0² = 0 (positive root)."""
+    r, a, b = geo.line.r, geo.a, geo.b
+    if (r >= R0).any():
+        i = int(np.argmax(r >= R0))
+        raise InputError(f"eye radius {R0:g} mm is not outside the mandrel (r = {r[i]:g} mm at z = "
+                         f"{geo.line.z[i]:g} mm)", field="payout.eye_radius_mm")
+    w = 1.0 - b * b
+    ra = r * a
+    den = ra + np.sqrt(ra * ra + w * (R0 * R0 - r * r))
+    bad = den <= 1e-12 * R0
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise InfeasibleError(
+            f"the '{law}' eye path R = {R0:g} mm cannot be reached at x = {geo.x[i]:.6g} (z = {geo.line.z[i]:.6g} mm): "
+            "the tangent there runs parallel to the axis", field="payout.law")
+    return (R0 * R0 - r * r) / den
+
+
+def _curve_function(points: Sequence[tuple[float, float]]) -> Callable[[FloatArray, FloatArray], FloatArray]:
+    pts = np.asarray(points, dtype=float)
+    if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 2:
+        raise InputError("curve_zr_mm needs at least two (Z, R) points", field="payout.curve_zr_mm")
+    if not np.isfinite(pts).all():
+        raise InputError("curve_zr_mm has a non-finite value", field="payout.curve_zr_mm")
+    Zc, Rc = pts[:, 0], pts[:, 1]
+    if not (np.diff(Zc) > 0).all():
+        i = int(np.flatnonzero(np.diff(Zc) <= 0)[0]) + 1
+        raise InputError(f"curve_zr_mm: Z must increase strictly (point {i + 1}: Z = {Zc[i]:g} mm after "
+                         f"{Zc[i - 1]:g} mm)", field="payout.curve_zr_mm")
+    if len(pts) >= 4:
+        from scipy.interpolate import CubicSpline
+
+        spl = CubicSpline(Zc, Rc, bc_type="natural", extrapolate=False)
+
+        def F(Z: FloatArray) -> FloatArray:
+            inner = spl(np.clip(Z, Zc[0], Zc[-1]))
+            return np.where(Z < Zc[0], Rc[0], np.where(Z > Zc[-1], Rc[-1], inner))
+    else:
+        def F(Z: FloatArray) -> FloatArray:
+            return np.interp(Z, Zc, Rc)
+
+    return lambda Z, R: R - F(Z)
+
+
+def geometric_law(line: Any, mandrel: Any, law: str, spec: Any = None, *, k: int | None = None,
+                  parameter: str | None = None, grid_points: int | None = None, workspace: Workspace | None = None,
+                  curve: Callable[[FloatArray, FloatArray], FloatArray] | None = None,
+                  state: State | None = None) -> EyePath:
+    """Eye path of a geometric law (11): solve (10) + (11) for l(x) at each grid point.
+
+    Parameters
+    ----------
+    line : ContactLine or WindingLine-like
+    mandrel : engine.mandrel.Mandrel
+    law : 'parallel' (R = eye_radius_mm), 'equidistant' (distance offset_mm from the contour),
+        'equal-tangent' (l = free_length_mm) or 'curve' (R = F(Z) through curve_zr_mm, or ``curve(Z, R) = 0``).
+    spec : engine.job.PayoutSpec (defaults used if None).
+
+    The result's ``report`` says which constraints the law violates (geometric laws ignore them).
+    """
+    from engine.job import PayoutSpec
+
+    spec = spec if spec is not None else PayoutSpec()
+    if law not in GEOMETRIC_LAWS:
+        raise InputError(f"unknown geometric law {law!r}; use one of {', '.join(GEOMETRIC_LAWS)}", field="payout.law")
+    k = spec.impregnation_k if k is None else k
+    parameter = spec.parameter if parameter is None else parameter
+    geo, env, contour = _prepare(line, mandrel, spec, parameter, grid_points, workspace, state)
+    l_cap = spec.free_length_max_mm
+    if law == "parallel":
+        R0 = spec.eye_radius_mm if spec.eye_radius_mm is not None else mandrel.r_max + spec.clearance_mm
+        l = parallel_free_length(geo, float(R0))
+    elif law == "equal-tangent":
+        l0 = spec.free_length_mm if spec.free_length_mm is not None else float(env.l_min.max())
+        l = np.full(geo.n, float(l0))
+    elif law == "equidistant":
+        h = spec.offset_mm if spec.offset_mm is not None else spec.clearance_mm
+        l = _first_root(geo, lambda Z, R: contour.distance(Z, R) - h, l_cap, law)
+    else:
+        if curve is None:
+            if not spec.curve_zr_mm:
+                raise InputError("the 'curve' law needs curve_zr_mm (a table of eye (Z, R) points)",
+                                 field="payout.curve_zr_mm")
+            curve = _curve_function(spec.curve_zr_mm)
+        l = _first_root(geo, curve, l_cap, law)
+    eye = _build(geo, l, k, parameter, law, env)
+    rep = _report(geo, eye, env, spec.u_min)
+    if state is not None:
+        state.progress(1.0, f"{law} law done")
+    return _with_report(eye, rep)
+
+
+def _with_report(eye: EyePath, rep: dict[str, Any]) -> EyePath:
+    from dataclasses import replace
+
+    return replace(eye, report=rep)
+
+
+def _prepare(line: Any, mandrel: Any, spec: Any, parameter: str, grid_points: int | None,
+             workspace: Workspace | None, state: State | None) -> tuple[_Geo, Envelope, _Contour]:
+    cl = ContactLine.from_line(line)
+    n = spec.grid_points if grid_points is None else grid_points
+    geo = _grid(cl, parameter, n)
+    if workspace is None and (spec.workspace_z_mm is not None or spec.workspace_r_mm is not None):
+        workspace = BoxWorkspace(spec.workspace_z_mm, spec.workspace_r_mm)
+    check_cancel(state)
+    contour = _Contour(mandrel)
+    env = envelope(geo, contour, spec.clearance_mm, spec.free_length_max_mm, workspace)
+    if state is not None:
+        state.progress(0.2, "clearance envelope")
+    check_cancel(state)
+    return geo, env, contour
+
+
+# ------------------------------------------------------------------------------------------------
+# Technological law: (13)–(15)
+# ------------------------------------------------------------------------------------------------
+class _Problem:
+    """The discretised problem in the variables μ_i = l_i − k·R_i(l_i)."""
+
+    def __init__(self, geo: _Geo, env: Envelope, k: int) -> None:
+        import scipy.sparse as sp
+
+        self.geo, self.env, self.k = geo, env, k
+        n = geo.n
+        self.n = n
+        self.dx = np.diff(geo.x)
+        self.ds = np.diff(geo.line.s)
+        self.D = sp.diags([-np.ones(n - 1), np.ones(n - 1)], [0, 1], shape=(n - 1, n), format="csr")
+        self.mu_lo = geo.mu(env.l_min, k)
+        self.mu_hi = geo.mu(env.l_max, k)
+        L = geo.line
+        ends_equal = all(
+            abs(float(arr[0] - arr[-1])) <= 1e-9 * max(1.0, float(np.abs(arr).max()))
+            for arr in (L.r, geo.a, geo.b, geo.c)
+        )
+        self.exact_cyclic = ends_equal or k == 0
+        self.U = float((L.s[-1] - L.s[0]) / (geo.x[-1] - geo.x[0]))
+        # nonlinear rows (family -> set of interval indices) kept in the model
+        self.rows: dict[str, set[int]] = {"no_sag": set(), "no_reverse_rotation": set()}
+        if k == 0:
+            self.rows["no_sag"] = set(range(n - 1))  # exactly linear in μ = l
+
+    def l_of(self, mu: FloatArray) -> FloatArray:
+        return self.geo.l_of_mu(mu, self.k)
+
+    def u(self, mu: FloatArray) -> FloatArray:
+        return (self.ds + np.diff(mu)) / self.dx
+
+    def nonlinear_values(self, mu: FloatArray) -> dict[str, FloatArray]:
+        l = self.l_of(mu)
+        _, _, V, _ = self.geo.eye(l)
+        return {"no_sag": np.diff(self.geo.line.s + l) / self.dx, "no_reverse_rotation": np.diff(V) / self.dx}
+
+    def cut_rows(self, mu: FloatArray) -> tuple[Any, FloatArray]:
+        """Linearised rows G·μ >= h of the kept nonlinear constraints, at μ."""
+        import scipy.sparse as sp
+
+        l = self.l_of(mu)
+        dl_dmu = 1.0 / (1.0 - self.k * self.geo.dR_dl(l)) if self.k else np.ones_like(l)
+        _, _, V, _ = self.geo.eye(l)
+        blocks, rhs = [], []
+        vals = {"no_sag": self.geo.line.s + l, "no_reverse_rotation": V}
+        grads = {"no_sag": dl_dmu, "no_reverse_rotation": self.geo.dV_dl(l) * dl_dmu}
+        for name, rows in self.rows.items():
+            if not rows:
+                continue
+            i = np.array(sorted(rows))
+            g, f = grads[name], vals[name]
+            m = i.size
+            data = np.concatenate([-g[i], g[i + 1]])
+            cols = np.concatenate([i, i + 1])
+            rr = np.concatenate([np.arange(m), np.arange(m)])
+            G = sp.csr_matrix((data, (rr, cols)), shape=(m, self.n))
+            # f(i+1) − f(i) + g(i+1)(μ' − μ(i+1)) − g(i)(μ' − μ(i)) >= 0
+            h = -(f[i + 1] - f[i]) + g[i + 1] * mu[i + 1] - g[i] * mu[i]
+            blocks.append(G)
+            rhs.append(h)
+        if not blocks:
+            return sp.csr_matrix((0, self.n)), np.zeros(0)
+        return sp.vstack(blocks, format="csr"), np.concatenate(rhs)
+
+    def cyclic_row(self, mu: FloatArray) -> tuple[FloatArray, float]:
+        """Row c·μ = e for l_0 = l_{N-1} (exact when both ends have the same geometry)."""
+        c = np.zeros(self.n)
+        if self.exact_cyclic:
+            c[0], c[-1] = 1.0, -1.0
+            return c, 0.0
+        l = self.l_of(mu)
+        g = 1.0 / (1.0 - self.k * self.geo.dR_dl(l))
+        c[0], c[-1] = g[0], -g[-1]
+        return c, float(-(l[0] - l[-1]) + g[0] * mu[0] - g[-1] * mu[-1])
+
+    def update_rows(self, mu: FloatArray, margin: float) -> float:
+        """Add nonlinear rows that are violated or within ``margin``; return the worst exact violation."""
+        worst = 0.0
+        for name, val in self.nonlinear_values(mu).items():
+            near = np.flatnonzero(val < margin)
+            self.rows[name].update(int(i) for i in near)
+            worst = max(worst, float(-val.min()))
+        if not self.exact_cyclic:
+            l = self.l_of(mu)
+            worst = max(worst, abs(float(l[0] - l[-1])))
+        return worst
+
+
+def _linprog(c: FloatArray, A_ub: Any, b_ub: FloatArray, A_eq: Any, b_eq: FloatArray,
+             bounds: FloatArray) -> Any:
+    from scipy.optimize import linprog
+
+    return linprog(c, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, bounds=bounds, method=_LP_METHOD,
+                   options={"presolve": True, "primal_feasibility_tolerance": 1e-9,
+                            "dual_feasibility_tolerance": 1e-9})
+
+
+def _qp_highs(Q: Any, c: FloatArray, A: Any, row_lo: FloatArray, row_hi: FloatArray,
+              col_lo: FloatArray, col_hi: FloatArray) -> tuple[FloatArray | None, str, str]:
+    """min ½xᵀQx + cᵀx s.t. row_lo <= A x <= row_hi, col_lo <= x <= col_hi with HiGHS' QP solver.
+
+    Returns (x or None, model status text, backend name).
+    """
+    import scipy.sparse as sp
+
+    try:
+        import highspy as hs  # type: ignore[import-not-found]
+
+        core: Any = hs
+        highs = hs.Highs()
+        backend = "highspy"
+    except ImportError:
+        try:
+            from scipy.optimize._highspy import _core as core  # HiGHS vendored in SciPy
+
+            highs = core._Highs()
+            backend = "scipy-vendored HiGHS"
+        except ImportError:  # pragma: no cover - depends on the SciPy build
+            return None, "unavailable", "none"
+    inf = core.kHighsInf
+    n = Q.shape[0]
+    lp = core.HighsLp()
+    lp.num_col_ = n
+    lp.num_row_ = A.shape[0]
+    lp.col_cost_ = np.asarray(c, dtype=float)
+    lp.col_lower_ = np.where(np.isfinite(col_lo), col_lo, -inf)
+    lp.col_upper_ = np.where(np.isfinite(col_hi), col_hi, inf)
+    lp.row_lower_ = np.where(np.isfinite(row_lo), row_lo, -inf)
+    lp.row_upper_ = np.where(np.isfinite(row_hi), row_hi, inf)
+    Ac = sp.csc_matrix(A)
+    lp.a_matrix_.format_ = core.MatrixFormat.kColwise
+    lp.a_matrix_.start_ = Ac.indptr.astype(np.int32)
+    lp.a_matrix_.index_ = Ac.indices.astype(np.int32)
+    lp.a_matrix_.value_ = Ac.data.astype(float)
+    lp.a_matrix_.num_col_ = n
+    lp.a_matrix_.num_row_ = A.shape[0]
+    model = core.HighsModel()
+    model.lp_ = lp
+    Ht = sp.tril(sp.csc_matrix(Q)).tocsc()
+    hess = core.HighsHessian()
+    hess.dim_ = n
+    hess.format_ = core.HessianFormat.kTriangular
+    hess.start_ = Ht.indptr.astype(np.int32)
+    hess.index_ = Ht.indices.astype(np.int32)
+    hess.value_ = Ht.data.astype(float)
+    model.hessian_ = hess
+    highs.setOptionValue("output_flag", _QP_LOG)
+    highs.setOptionValue("time_limit", float(_QP_TIME_LIMIT))
+    highs.passModel(model)
+    highs.run()
+    status = highs.getModelStatus()
+    text = highs.modelStatusToString(status)
+    if status != core.HighsModelStatus.kOptimal:
+        return None, text, backend
+    return np.array(highs.getSolution().col_value, dtype=float), text, backend
+
+
+def _qp_trust_constr(Q: Any, c: FloatArray, A: Any, row_lo: FloatArray, row_hi: FloatArray,
+                     col_lo: FloatArray, col_hi: FloatArray, x0: FloatArray) -> FloatArray:
+    from scipy.optimize import Bounds, LinearConstraint, minimize
+
+    res = minimize(lambda x: 0.5 * x @ (Q @ x) + c @ x, x0, jac=lambda x: Q @ x + c, hess=lambda x: Q,
+                   method="trust-constr", constraints=[LinearConstraint(A, row_lo, row_hi)],
+                   bounds=Bounds(col_lo, col_hi), options={"gtol": 1e-10, "xtol": 1e-12, "maxiter": 5000})
+    return np.asarray(res.x, dtype=float)
+
+
+@dataclass
+class _Stage:
+    name: str
+    mu: FloatArray
+    value: float
+    iterations: int
+    seconds: float
+
+
+def _diagnose_infeasible(prob: _Problem) -> InfeasibleError:
+    """Say which constraint family makes the pointwise-admissible set empty, and where."""
+    geo, env = prob.geo, prob.env
+    lo, hi = env.l_min, env.l_max
+    x, z = geo.x, geo.line.z
+    if max(lo[0], lo[-1]) > min(hi[0], hi[-1]) + 1e-9:
+        return InfeasibleError(
+            f"cyclicity l(x_n) = l(x_k) cannot hold: admissible free length is [{lo[0]:.4g}, {hi[0]:.4g}] mm at the "
+            f"start (z = {z[0]:.5g} mm) but [{lo[-1]:.4g}, {hi[-1]:.4g}] mm at the end (z = {z[-1]:.5g} mm)",
+            field="payout")
+    # no sag: l_{i+1} >= l_i − Δs_i: propagate the smallest admissible sequence forward (twice, cyclic)
+    ds = np.diff(geo.line.s)
+    low = lo.copy()
+    for _ in range(2):
+        for i in range(len(low) - 1):
+            low[i + 1] = max(low[i + 1], low[i] - ds[i])
+        low[0] = max(low[0], low[-1])
+    bad = np.flatnonzero(low > hi + 1e-9)
+    if bad.size:
+        i = int(bad[0])
+        return InfeasibleError(
+            f"no sag (d(s + l)/dx >= 0) cannot hold with the envelope at x = {x[i]:.6g} (z = {z[i]:.5g} mm, grid "
+            f"point {i}): the free length would have to stay above {low[i]:.4g} mm but at most {hi[i]:.4g} mm is "
+            f"admissible there ({env.workspace}, free_length_max_mm = {env.free_length_max_mm:g})", field="payout")
+    return InfeasibleError(
+        "no free-length law keeps the mandrel from rotating backwards (dV/dx >= 0) inside the clearance/workspace "
+        f"envelope (clearance_mm = {env.clearance_mm:g}, {env.workspace}, free_length_max_mm = "
+        f"{env.free_length_max_mm:g}); relax the envelope", field="payout")
+
+
+def _solve_lp_stage(prob: _Problem, kind: str, u_lo: float | None, mu0: FloatArray, state: State | None,
+                    tol: float, max_iter: int = 40) -> _Stage:
+    """(13) kind='maxmin' or (14) kind='minmax' with the cutting-plane loop for the nonlinear rows."""
+    import scipy.sparse as sp
+
+    n = prob.n
+    t0 = time.perf_counter()
+    mu = mu0
+    dxcol = sp.csr_matrix(prob.dx[:, None])
+    for it in range(1, max_iter + 1):
+        check_cancel(state)
+        G, h = prob.cut_rows(mu)
+        cyc, e = prob.cyclic_row(mu)
+        Gx = sp.hstack([G, sp.csr_matrix((G.shape[0], 1))], format="csr")
+        if kind == "maxmin":
+            # max t: t·Δx − Dμ <= Δs
+            A = sp.vstack([sp.hstack([-prob.D, dxcol]), -Gx], format="csr")
+            b = np.concatenate([prob.ds, -h])
+            cost = np.zeros(n + 1)
+            cost[-1] = -1.0
+        else:
+            # min T: Dμ − T·Δx <= −Δs ; −Dμ <= Δs − u_lo·Δx
+            assert u_lo is not None
+            A = sp.vstack([sp.hstack([prob.D, -dxcol]), sp.hstack([-prob.D, sp.csr_matrix((n - 1, 1))]), -Gx],
+                          format="csr")
+            b = np.concatenate([-prob.ds, prob.ds - u_lo * prob.dx, -h])
+            cost = np.zeros(n + 1)
+            cost[-1] = 1.0
+        A_eq = sp.csr_matrix(np.append(cyc, 0.0)[None, :])
+        bounds = np.column_stack([np.append(prob.mu_lo, -np.inf), np.append(prob.mu_hi, np.inf)])
+        res = _linprog(cost, A, b, A_eq, np.array([e]), bounds)
+        if res.status == 2:
+            raise _diagnose_infeasible(prob)
+        if res.status != 0:
+            raise InfeasibleError(f"the pull-speed {'(13)' if kind == 'maxmin' else '(14)'} problem could not be "
+                                  f"solved ({res.message.strip().rstrip('.')}); try fewer grid_points", field="payout")
+        mu = res.x[:n]
+        if prob.update_rows(mu, margin=10 * tol) <= tol:
+            return _Stage(kind, mu, float(res.x[-1]), it, time.perf_counter() - t0)
+    return _Stage(kind, mu, float(res.x[-1]), max_iter, time.perf_counter() - t0)
+
+
+def _solve_qp_stage(prob: _Problem, u_lo: float, u_hi: float, mu0: FloatArray, state: State | None,
+                    tol: float, max_iter: int = 40) -> tuple[_Stage, str]:
+    """(15): min Σ (u_i − U)²·Δx_i, u_lo <= u <= u_hi, with the same cutting-plane loop."""
+    import scipy.sparse as sp
+
+    t0 = time.perf_counter()
+    W = sp.diags(1.0 / prob.dx)
+    D = prob.D
+    Q = (2.0 * (D.T @ W @ D)).tocsc()
+    rhs = prob.ds - prob.U * prob.dx
+    c = 2.0 * (D.T @ (rhs / prob.dx))
+    const = float(np.sum(rhs * rhs / prob.dx))
+    mu = mu0
+    backend = ""
+    it = 0
+    for it in range(1, max_iter + 1):  # noqa: B007 - reported below
+        check_cancel(state)
+        G, h = prob.cut_rows(mu)
+        cyc, e = prob.cyclic_row(mu)
+        A = sp.vstack([D, G, sp.csr_matrix(cyc[None, :])], format="csc")
+        row_lo = np.concatenate([u_lo * prob.dx - prob.ds, h, [e]])
+        row_hi = np.concatenate([u_hi * prob.dx - prob.ds, np.full(h.size, np.inf), [e]])
+        sol, status, backend = _qp_highs(Q, c, A, row_lo, row_hi, prob.mu_lo, prob.mu_hi)
+        if sol is None:
+            if status == "unavailable":
+                sol = _qp_trust_constr(Q, c, A, row_lo, row_hi, prob.mu_lo, prob.mu_hi, mu)
+                backend = "trust-constr"
+            elif "nfeasible" in status:
+                raise _diagnose_infeasible(prob)
+            else:  # time limit / numerical trouble: keep the (14) answer (it satisfies every constraint)
+                backend += f" ({status}: jerk not minimised, (14) answer kept)"
+                break
+        worst = prob.update_rows(sol, margin=10 * tol)
+        mu = sol
+        if worst <= tol:
+            break
+    val = float(0.5 * mu @ (Q @ mu) + c @ mu) + const
+    return _Stage("jerk", mu, val, it, time.perf_counter() - t0), backend
+
+
+def min_range_law(line: Any, mandrel: Any, spec: Any = None, workspace: Workspace | None = None,
+                  state: State | None = None, *, k: int | None = None, parameter: str | None = None,
+                  grid_points: int | None = None) -> EyePath:
+    """The technological law (13)–(15): the free length with the narrowest, smoothest pull speed.
+
+    Solves, on ``spec.grid_points`` points of x: (13) max min u → u_min*; (14) min max u with
+    u >= u_min* → u_max*; (15) min ∫(u − U)² dx with u_min* <= u <= u_max*.  All subject to
+    cyclicity, no sag, no reverse rotation and the clearance/workspace envelope.  The final answer is
+    checked with the exact nonlinear formulas (``report['constraints']``).
+
+    Raises
+    ------
+    InfeasibleError
+        The envelope is empty somewhere, the constraints contradict each other, or the best
+        achievable lower pull speed is below ``spec.u_min``; the message says which and where.
+    """
+    from engine.job import PayoutSpec
+
+    spec = spec if spec is not None else PayoutSpec()
+    k = spec.impregnation_k if k is None else int(k)
+    parameter = spec.parameter if parameter is None else parameter
+    geo, env, _ = _prepare(line, mandrel, spec, parameter, grid_points, workspace, state)
+    prob = _Problem(geo, env, k)
+    tol = 1e-9 * max(1.0, float(env.l_max.max()))
+    # start: the lower envelope (admissible), made cyclic by the larger end value
+    mu0 = prob.mu_lo.copy()
+    t_start = time.perf_counter()
+    s13 = _solve_lp_stage(prob, "maxmin", None, mu0, state, tol)
+    u13 = s13.value
+    if state is not None:
+        state.progress(0.45, "(13) max min u")
+    u_floor = float(spec.u_min)
+    if u13 < u_floor - 1e-9:
+        u = prob.u(s13.mu)
+        i = int(np.argmin(u))
+        raise InfeasibleError(
+            f"the pull speed cannot be kept at u >= u_min = {u_floor:g}: the best lower bound is {u13:.6g}, "
+            f"limited at x = {0.5 * (geo.x[i] + geo.x[i + 1]):.6g} (z = {geo.line.z[i]:.5g} mm)",
+            field="payout.u_min")
+    u_lo = u13 - 1e-7 * max(1.0, abs(u13))
+    s14 = _solve_lp_stage(prob, "minmax", u_lo, s13.mu, state, tol)
+    if state is not None:
+        state.progress(0.7, "(14) min max u")
+    u_hi = s14.value + 1e-7 * max(1.0, abs(s14.value))
+    s15, backend = _solve_qp_stage(prob, u_lo, u_hi, s14.mu, state, tol)
+    solve_s = time.perf_counter() - t_start
+    if state is not None:
+        state.progress(0.95, "(15) jerk")
+    l = prob.l_of(s15.mu)
+    eye = _build(geo, l, k, parameter, "min-range", env)
+    rep = _report(geo, eye, env, u_floor, extra={
+        "solver": {
+            "lp": "scipy.optimize.linprog (HiGHS)",
+            "qp": backend,
+            "variables": "mu = l - k*R(l) (exact), nonlinear rows by cutting planes",
+            "iterations": {"13": s13.iterations, "14": s14.iterations, "15": s15.iterations},
+            "seconds": {"13": s13.seconds, "14": s14.seconds, "15": s15.seconds, "total": solve_s},
+            "nonlinear_rows": {kk: len(v) for kk, v in prob.rows.items()},
+            "u_min_13": u13,
+            "u_max_14": s14.value,
+            "jerk_15": s15.value,
+        }
+    })
+    if state is not None:
+        state.progress(1.0, "min-range law done")
+    return _with_report(eye, rep)
+
+
+# ------------------------------------------------------------------------------------------------
+# A reference line (closed form) for tests and benchmarks
+# ------------------------------------------------------------------------------------------------
+def reference_vessel_circuit(radius: float = 100.0, cylinder_length: float = 300.0, C: float = 40.0,
+                             n: int = 2000) -> ContactLine:
+    """One closed geodesic circuit on a cylinder with hemispherical domes, in closed form (mm, rad).
+
+    Helix (β0 = asin(C/radius)) along the cylinder, a great-circle half on the right dome (turning at
+    r = C), the helix back and a great-circle half on the left dome; it starts and ends at z = 0
+    going +z.  On ``Mandrel.vessel(radius, cylinder_length, "hemisphere", pole_radii=p)`` with p < C.
+    """
+    a = float(radius)
+    if not 0 < C < a:
+        raise InputError(f"Clairaut constant must be in (0, {a:g}) mm, got {C!r}")
+    b0 = math.asin(C / a)
+    sa, ca = math.cos(b0), C / a  # sin α, cos α of the great-circle plane
+    lh = cylinder_length / math.cos(b0)
+    ld = math.pi * a
+    total = 2 * lh + 2 * ld
+    parts: list[dict[str, FloatArray]] = []
+    v0, s0 = 0.0, 0.0
+    for seg in range(4):
+        if seg % 2 == 0:  # helix
+            m = max(8, int(n * lh / total))
+            t = np.linspace(0.0, lh, m, endpoint=False)
+            sign = 1.0 if seg == 0 else -1.0
+            z = (0.0 if seg == 0 else cylinder_length) + sign * t * math.cos(b0)
+            part = {"z": z, "r": np.full(m, a), "dr": np.zeros(m), "v": v0 + t * math.sin(b0) / a,
+                    "beta": np.full(m, b0), "direction": np.full(m, sign), "s": s0 + t}
+            v0, s0 = v0 + lh * math.sin(b0) / a, s0 + lh
+        else:  # dome: p(φ) = a(cos φ, sin φ cos α, sin φ sin α) about the dome centre
+            m = max(8, int(n * ld / total))
+            phi = np.linspace(0.0, math.pi, m, endpoint=False)
+            sign = 1.0 if seg == 1 else -1.0
+            zc = cylinder_length if seg == 1 else 0.0
+            dz = sign * a * np.sin(phi) * sa
+            r = a * np.sqrt(np.cos(phi) ** 2 + (np.sin(phi) * ca) ** 2)
+            vloc = np.unwrap(np.arctan2(np.sin(phi) * ca, np.cos(phi)))
+            direction = sign * np.where(np.cos(phi) >= 0, 1.0, -1.0)
+            part = {"z": zc + dz, "r": r, "dr": -dz / r, "v": v0 + vloc,
+                    "beta": np.arcsin(np.clip(C / r, 0.0, 1.0)), "direction": direction, "s": s0 + a * phi}
+            v0, s0 = v0 + math.pi, s0 + ld
+        parts.append(part)
+    end = {"z": np.array([0.0]), "r": np.array([a]), "dr": np.array([0.0]), "v": np.array([v0]),
+           "beta": np.array([b0]), "direction": np.array([1.0]), "s": np.array([s0])}
+    parts.append(end)
+    cat = {k: np.concatenate([p[k] for p in parts]) for k in end}
+    return ContactLine(**cat)
+
+
+# ------------------------------------------------------------------------------------------------
+# Job level
+# ------------------------------------------------------------------------------------------------
+def payout_law(line: Any, mandrel: Any, spec: Any = None, law: str | None = None,
+               workspace: Workspace | None = None, state: State | None = None, **kw: Any) -> EyePath:
+    """Dispatch to :func:`geometric_law` or :func:`min_range_law` by ``law`` (default ``spec.law``)."""
+    from engine.job import PayoutSpec
+
+    spec = spec if spec is not None else PayoutSpec()
+    law = spec.law if law is None else law
+    if law == "min-range":
+        return min_range_law(line, mandrel, spec, workspace=workspace, state=state, **kw)
+    return geometric_law(line, mandrel, law, spec, workspace=workspace, state=state, **kw)
+
+
+def payout_for_job(job: Any, line: Any, mandrel: Any, state: State | None = None, law: str | None = None,
+                   workspace: Workspace | None = None) -> EyePath:
+    """The eye path of the job's first circuit (the pattern repeats it), by ``job.payout``.
+
+    ``line`` is the job's WindingLine (or any ContactLine-like object with an optional ``circuit``).
+    Use :func:`extend_to_line` to evaluate the law at every point of the full line.
+    """
+    cl = ContactLine.from_line(line).first_circuit()
+    return payout_law(cl, mandrel, job.payout, law=law, workspace=workspace, state=state)
+
+
+def extend_to_line(eye: EyePath, line: Any) -> EyePath:
+    """Evaluate ``eye``'s law l(x) at every point of ``line`` (all circuits: l repeats each circuit).
+
+    l is interpolated linearly in the within-circuit parameter; grid points of the first circuit
+    keep their exact value.
+    """
+    cl = ContactLine.from_line(line)
+    x_all = _parameter(cl, eye.parameter)
+    circ = cl.circuit if cl.circuit is not None else np.zeros(cl.z.size, dtype=np.int64)
+    l = np.empty(cl.z.size)
+    period = float(eye.x[-1] - eye.x[0])
+    for c in np.unique(circ):
+        m = circ == c
+        xc = x_all[m] - x_all[m][0] + eye.x[0]
+        if period > 0:
+            xc = eye.x[0] + np.mod(xc - eye.x[0], period * (1 + 1e-12))
+        l[m] = np.interp(xc, eye.x, eye.l)
+    idx = np.arange(cl.z.size)
+    a, b, c3 = tangent_components(cl.r, cl.dr, cl.beta, cl.direction)
+    geo = _Geo(cl, x_all, a, b, c3, idx.astype(np.int64))
+    keep = np.concatenate([[True], np.diff(x_all) > 0])
+    if not keep.all():  # u undefined on zero-length steps: evaluate on the strictly increasing subset
+        geo = _Geo(cl.take(idx[keep]), x_all[keep], a[keep], b[keep], c3[keep], idx[keep].astype(np.int64))
+        l = l[keep]
+    out = _build(geo, l, eye.k, eye.parameter, eye.law)
+    return _with_report(out, {"law": eye.law, "extended_from_points": int(eye.x.size), "points": int(l.size)})
+
+
+__all__ = [
+    "BoxWorkspace",
+    "ContactLine",
+    "Envelope",
+    "EyePath",
+    "GEOMETRIC_LAWS",
+    "LAWS",
+    "Workspace",
+    "envelope",
+    "extend_to_line",
+    "eye_path",
+    "geometric_law",
+    "min_range_law",
+    "parallel_free_length",
+    "payout_for_job",
+    "payout_law",
+    "reference_vessel_circuit",
+    "tangent_components",
+]
