@@ -1178,7 +1178,11 @@ def payout_for_job(job: Any, line: Any, mandrel: Any, state: State | None = None
     ``line`` is the job's WindingLine (or any ContactLine-like object with an optional ``circuit``).
     Use :func:`extend_to_line` to evaluate the law at every point of the full line.
     """
-    cl = ContactLine.from_line(line).first_circuit()
+    one = getattr(line, "one_circuit", None)  # WindingLine: first circuit including its closing point
+    if one is not None and not isinstance(line, ContactLine):
+        cl = ContactLine.from_line(one() if callable(one) else one)
+    else:
+        cl = ContactLine.from_line(line).first_circuit()
     return payout_law(cl, mandrel, job.payout, law=law, workspace=workspace, state=state)
 
 
