@@ -154,9 +154,10 @@ def clean_env(**extra: str) -> dict[str, str]:
     return {"PATH": CLEAN_PATH, "HOME": os.environ.get("HOME", "/tmp"), **extra}
 
 
-def source_env(**extra: str) -> dict[str, str]:
+def source_env(src: Path, **extra: str) -> dict[str, str]:
+    """The environment of the source install: this Python with ``src`` (a source tree) first on the path."""
     env = dict(os.environ, **extra)
-    env["PYTHONPATH"] = str(ROOT)
+    env["PYTHONPATH"] = str(src)
     return env
 
 
@@ -193,10 +194,10 @@ def textwrap_indent(s: str) -> str:
     return "\n".join("        | " + line for line in s.splitlines())
 
 
-def check_startup(rep: Report, exe: Path, scratch: Path) -> None:
+def check_startup(rep: Report, exe: Path, scratch: Path, src_root: Path) -> None:
     ver = version()
     fro = run([str(exe), "--version"], scratch, clean_env())
-    src = run([*SOURCE_CMD, "--version"], scratch, source_env())
+    src = run([*SOURCE_CMD, "--version"], scratch, source_env(src_root))
     if fro.rc == 0 and fro.out.strip() == f"winder {ver}" == src.out.strip():
         rep.ok(f"--version: {fro.out.strip()!r} in {fro.seconds:.2f} s (source {src.seconds:.2f} s)")
     else:
@@ -208,16 +209,16 @@ def check_startup(rep: Report, exe: Path, scratch: Path) -> None:
             rep.fail("--selftest (offscreen)", f"rc={fro.rc}\n{fro.err}")
             return
         if attempt == 2:
-            src = run([*SOURCE_CMD, "--selftest"], scratch, source_env(QT_QPA_PLATFORM="offscreen"))
+            src = run([*SOURCE_CMD, "--selftest"], scratch, source_env(src_root, QT_QPA_PLATFORM="offscreen"))
             ts = selftest_times(src.err)
             rep.ok(f"--selftest (offscreen): window {t.get('window', math.nan):.2f} s, mandrel "
                    f"{t['mandrel']:.2f} s, exit {fro.seconds:.2f} s (source: {ts.get('window', math.nan):.2f} / "
                    f"{ts.get('mandrel', math.nan):.2f} / {src.seconds:.2f} s)")
 
 
-def compare_case(rep: Report, case: Case, exe: Path, scratch: Path) -> None:
+def compare_case(rep: Report, case: Case, exe: Path, scratch: Path, src_root: Path) -> None:
     outs = {}
-    for who, cmd, env in (("source", SOURCE_CMD, source_env()), ("frozen", [str(exe)], clean_env())):
+    for who, cmd, env in (("source", SOURCE_CMD, source_env(src_root)), ("frozen", [str(exe)], clean_env())):
         d = scratch / who
         if case.output:
             (d / case.output).unlink(missing_ok=True)
@@ -258,8 +259,8 @@ def compare_case(rep: Report, case: Case, exe: Path, scratch: Path) -> None:
         rep.ok(f"{case.label}: JSON{note} {timing}")
 
 
-def copy_examples(dest: Path) -> None:
-    shutil.copytree(ROOT / "resources" / "examples", dest / "examples", dirs_exist_ok=True)
+def copy_examples(src_root: Path, dest: Path) -> None:
+    shutil.copytree(src_root / "resources" / "examples", dest / "examples", dirs_exist_ok=True)
 
 
 def namespace_prefix(hide: Sequence[Path]) -> tuple[list[str], str] | None:
@@ -295,7 +296,7 @@ def paths_to_hide() -> list[Path]:
     return out
 
 
-def check_clean_machine(rep: Report, archive: Path | None, app: Path, scratch: Path, quick: bool) -> None:
+def check_clean_machine(rep: Report, archive: Path | None, app: Path, scratch: Path, src_root: Path) -> None:
     home = Path(tempfile.mkdtemp(prefix="winder-unpacked-"))
     try:
         if archive is not None and archive.suffix == ".gz":
@@ -308,7 +309,7 @@ def check_clean_machine(rep: Report, archive: Path | None, app: Path, scratch: P
         exe = home / "winder" / "winder"
         elsewhere = home / "cwd"
         elsewhere.mkdir()
-        copy_examples(elsewhere)
+        copy_examples(src_root, elsewhere)
         hide = paths_to_hide()
         ns = namespace_prefix(hide)
         pre, how = ns if ns else ([], "")
@@ -324,7 +325,7 @@ def check_clean_machine(rep: Report, archive: Path | None, app: Path, scratch: P
                  "mandrel" in t)
         # The computations with the bundled resources (machine templates, cutting data, controllers).
         ref_dir = scratch / "source"
-        for case in select_cases(quick=True):
+        for case in select_cases(src_root, quick=True):
             if case.command not in ("mandrel", "turning", "run"):
                 continue
             if case.output:
@@ -335,7 +336,7 @@ def check_clean_machine(rep: Report, archive: Path | None, app: Path, scratch: P
                 want = (ref_dir / case.output).read_text() if (ref_dir / case.output).is_file() else None
                 same = r.rc == 0 and want is not None and mask_text(got) == mask_text(want)
             else:
-                want = run([*SOURCE_CMD, *case.args], ref_dir, source_env())
+                want = run([*SOURCE_CMD, *case.args], ref_dir, source_env(src_root))
                 same = r.rc == 0 and want.rc == 0 and not json_differences(json.loads(want.out), json.loads(r.out))[0]
             _verdict(rep, r, f"clean env: {case.label} same as source", same)
     finally:
@@ -349,25 +350,48 @@ def _verdict(rep: Report, r: Run, label: str, good: bool) -> None:
         rep.fail(label, f"rc={r.rc}\nstdout: {r.out[-1500:]}\nstderr: {r.err[-1500:]}")
 
 
-def check_x11(rep: Report, exe: Path, scratch: Path) -> None:
+def check_x11(rep: Report, exe: Path, scratch: Path, src_root: Path) -> None:
     """The selftest with the real 3D view (VTK/OpenGL) under a virtual X server."""
     if not shutil.which("xvfb-run"):
         rep.info("xvfb-run not found: real-GL selftest skipped")
         return
     inner = ('exec env -i PATH="$PATH" HOME="$HOME" DISPLAY="$DISPLAY" XAUTHORITY="$XAUTHORITY" '
-             'QT_QPA_PLATFORM=xcb "$@"')
+             'PYTHONPATH="${PYTHONPATH:-}" QT_QPA_PLATFORM=xcb "$@"')
     xvfb = ["xvfb-run", "-a", "-s", "-screen 0 1600x1000x24", "sh", "-c", inner, "sh"]
-    fro = run([*xvfb, str(exe), "--selftest"], scratch, dict(os.environ, PATH=CLEAN_PATH))
+    fro = run([*xvfb, str(exe), "--selftest"], scratch, clean_env())
     t = selftest_times(fro.err)
     if fro.rc == 0 and "mandrel" in t:
         rep.ok(f"--selftest under Xvfb with the VTK 3D view: mandrel shown after {t['mandrel']:.2f} s")
         return
     src = run([*xvfb, *SOURCE_CMD, "--selftest"], scratch,
-              dict(os.environ, PATH=f"{CLEAN_PATH}", PYTHONPATH=str(ROOT)))
+              source_env(src_root, PATH=CLEAN_PATH))
     if src.rc != 0:
         rep.info(f"--selftest under Xvfb fails from source too (rc={src.rc}): not a packaging problem")
     else:
         rep.fail("--selftest under Xvfb (VTK 3D view) fails frozen, passes from source", fro.err)
+
+
+def source_under_test(rep: Report, app: Path) -> Path:
+    """The source tree to compare with: the build's snapshot (``build/source``) if intact, else the repository."""
+    try:
+        info = json.loads((app / "BUILD-INFO.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        rep.info("no BUILD-INFO.json: comparing with the working tree")
+        return ROOT
+    rep.info(f"build: {info.get('built_at')} in {info.get('build_seconds')} s from "
+             f"{info.get('from_git') or 'the working tree'} (commit {str(info.get('git_commit'))[:10]})")
+    snap = Path(str(info.get("source_snapshot", "")))
+    digest = info.get("source_digest")
+    if snap.is_dir() and source_digest(snap) == digest:
+        live = "unchanged" if source_digest() == digest else "changed since (not what this test compares)"
+        rep.info(f"source install under test: the build's snapshot {snap} (working tree {live})")
+        return snap
+    if source_digest() == digest:
+        rep.info("source install under test: the working tree (identical to the build's sources)")
+    else:
+        rep.info("source install under test: the working tree, which CHANGED since the build: rebuild "
+                 "(make installer) before reading differences as packaging bugs")
+    return ROOT
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -387,26 +411,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     size = f"{app.name}/ {mib(tree_size(app))}"
     size += f", {archive.name} {mib(archive.stat().st_size)}" if archive.is_file() else ", no archive"
     rep.info(f"size: {size}")
-    info_file = app / "BUILD-INFO.json"
-    if info_file.is_file():
-        info = json.loads(info_file.read_text(encoding="utf-8"))
-        fresh = info.get("source_digest") == source_digest()
-        rep.info(f"build: {info.get('built_at')} in {info.get('build_seconds')} s, commit "
-                 f"{str(info.get('git_commit'))[:10]}; "
-                 + ("source unchanged since" if fresh else "SOURCE CHANGED since the build: rebuild (make installer)"
-                    " before reading differences as packaging bugs"))
+    src_root = source_under_test(rep, app)
 
     scratch = Path(tempfile.mkdtemp(prefix="winder-smoke-"))
     try:
         for who in ("source", "frozen"):
-            copy_examples(scratch / who)
-        check_startup(rep, exe, scratch)
-        for case in select_cases(quick=args.quick):
-            compare_case(rep, case, exe, scratch)
+            copy_examples(src_root, scratch / who)
+        check_startup(rep, exe, scratch, src_root)
+        for case in select_cases(src_root, quick=args.quick):
+            compare_case(rep, case, exe, scratch, src_root)
         if not args.no_isolation:
-            check_clean_machine(rep, archive if archive.is_file() else None, app, scratch, args.quick)
+            check_clean_machine(rep, archive if archive.is_file() else None, app, scratch, src_root)
         if not args.quick and sys.platform.startswith("linux"):
-            check_x11(rep, exe, scratch)
+            check_x11(rep, exe, scratch, src_root)
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
 
