@@ -82,3 +82,65 @@ def test_3d_view_shows_the_revolved_mandrel(gl_window, qtbot) -> None:
     assert all(c.blue() > c.red() for c in top)  # the bluish-grey background
     mid = img.pixelColor(o.x() + vw // 2, o.y() + vh // 2)
     assert abs(mid.red() - top[0].red()) + abs(mid.green() - top[0].green()) > 20  # the mandrel, not background
+
+
+STEP_SHOTS = ROOT / "docs" / "screenshots"
+
+
+def test_workflow_3d_paths_and_step_screenshots(qtbot, tmp_path, monkeypatch) -> None:
+    """Run the vessel, check the drawn paths/eye/fibre against the engine, grab each step."""
+    from PySide6.QtGui import QGuiApplication
+
+    if QGuiApplication.platformName() in ("offscreen", "minimal"):
+        pytest.skip("needs a real display (xvfb-run with QT_QPA_PLATFORM=xcb)")
+    monkeypatch.setenv("WINDER_SETTINGS", str(tmp_path / "settings.ini"))
+    monkeypatch.setenv("WINDER_AUTOSAVE_DIR", str(tmp_path / "autosave"))
+    from winder_gui.main_window import MainWindow
+    from winder_gui.views.geometry import to_view
+
+    w = MainWindow(ROOT / "resources/examples/pressure_vessel.toml")
+    w.confirm_discard = False
+    qtbot.addWidget(w)
+    w.resize(1500, 940)
+    w.show()
+    try:
+        assert w.wait_idle()
+        qtbot.waitUntil(lambda: w.view3d.backend != "pending", timeout=30000)
+        assert w.view3d.backend == "vtk"
+        assert w.run_pipeline_now()
+        assert w.wait_idle(300000) and w.last_error == ""
+        w.compute_timelaw()
+        assert w.wait_idle(300000) and w.last_error == ""
+        v = w.view3d
+        p = v.paths
+        np.testing.assert_allclose(v.actor_points("paths"), p.line_xyz, rtol=1e-5, atol=1e-3)  # float32 in VTK
+        eye = w.result.eye
+        v.set_frame(100)
+        e, c = v.eye_at_frame()
+        np.testing.assert_array_equal(e, to_view(eye.eye_xyz[p.frame_index[100:101]])[0])
+        fib = v.actor_points("fibre")
+        np.testing.assert_allclose(fib[[0, -1]], [c, e], rtol=1e-5, atol=1e-3)
+        np.testing.assert_allclose(v.actor_points("eye_path"), v.trail(), rtol=1e-5, atol=1e-3)
+        sphere = v.actor_points("eye")
+        np.testing.assert_allclose(sphere.mean(axis=0), e, atol=1e-2 * max(1.0, float(np.abs(e).max())))
+        v.set_colour_by("winding angle β [deg]")
+        sc = np.asarray(v.plotter.actors["paths"].mapper.dataset.point_data["c"])
+        np.testing.assert_allclose(sc, np.degrees(w.result.line.beta[p.line_index]), rtol=1e-6)
+        v.set_frame(p.frame_index.size // 3)
+        STEP_SHOTS.mkdir(parents=True, exist_ok=True)
+        for i, key in enumerate(("mandrel", "winding", "payout", "machine", "timelaw", "nc")):
+            w.go_to_step(key)
+            if key == "payout":
+                w.plot_tabs.setCurrentWidget(w.pull_plot)
+            qtbot.wait(400)
+            img = w.screenshot()
+            assert img.save(str(STEP_SHOTS / f"step{i + 1}_{key}.png"))
+        w.plot_tabs.setCurrentWidget(w.coverage_plot)
+        qtbot.wait(300)
+        assert w.screenshot().save(str(STEP_SHOTS / "coverage.png"))
+        w.plot_tabs.setCurrentWidget(w.eye_plot)
+        qtbot.wait(300)
+        assert w.screenshot().save(str(STEP_SHOTS / "eye_path.png"))
+    finally:
+        w.wait_idle(60000)
+        w.close()

@@ -26,6 +26,7 @@ from PySide6.QtWidgets import QMessageBox
 from engine.job import load_job
 from winder_gui.main_window import AUTOSAVE_HEADER, MainWindow, autosave_origin
 from winder_gui.views.geometry import to_view
+from winder_gui.views.view3d import MAX_FRAMES, TRAIL_FRAMES
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "resources" / "examples"
@@ -360,7 +361,7 @@ def test_animation_play_pause_scrub(pipe_window, qtbot) -> None:
     _run(w)
     v = w.view3d
     n = v.paths.frame_index.size
-    assert 2 <= n <= 1500 and v.slider.maximum() == n - 1
+    assert 2 <= n <= MAX_FRAMES and v.slider.maximum() == n - 1
     v.slider.setValue(n // 2)
     assert v.frame == n // 2
     v.play()
@@ -376,6 +377,8 @@ def test_animation_play_pause_scrub(pipe_window, qtbot) -> None:
         assert v.colour_scalars().size == v.paths.line_xyz.shape[0]
     v.set_colour_by("winding angle β [deg]")
     np.testing.assert_allclose(v.colour_scalars(), np.degrees(w.result.line.beta[v.paths.line_index]))
+    v.set_frame(TRAIL_FRAMES + 5)
+    np.testing.assert_array_equal(v.trail(), v.paths.eye_xyz[5:TRAIL_FRAMES + 6])
 
 
 def test_decimation_keeps_a_million_points_interactive() -> None:

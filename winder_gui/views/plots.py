@@ -73,6 +73,8 @@ class PlotPage(QWidget):
         p.setLabel("bottom", bottom)
         p.setClipToView(True)
         p.setDownsampling(auto=True, mode="peak")
+        for side in ("left", "bottom"):
+            p.getAxis(side).enableAutoSIPrefix(False)  # the unit is in the label; no hidden ×1000
         self.plots[name] = p
         return p
 
@@ -181,9 +183,9 @@ class WindingPlots(PlotPage):
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
-        self.add_plot("beta", 0, 0, "winding angle β [deg]", "z [mm]")
-        self.add_plot("C", 1, 0, "Clairaut C = r·sin β [mm]", "z [mm]")
-        self.add_plot("lam", 2, 0, "slip tendency λ [–]", "z [mm]")
+        self.add_plot("beta", 0, 0, "β [deg]", "", title="winding angle β(z)")
+        self.add_plot("C", 1, 0, "C [mm]", "", title="Clairaut function C(z) = r·sin β")
+        self.add_plot("lam", 2, 0, "λ [–]", "z [mm]", title="slip tendency λ(z) (dashed: ±μ)")
         self.plots["C"].setXLink(self.plots["beta"])
         self.plots["lam"].setXLink(self.plots["beta"])
 
@@ -294,9 +296,12 @@ class AxesPlot(PlotPage):
             self.plots.clear()
             self.curves.clear()
 
+        last = len(machine.axes) - 1
+
         def row(k: int, ax: Any) -> None:
-            pp = self.add_plot(f"{ax.name}.q", k, 0, f"{ax.name} [{ax.units}]", "t [s]")
-            pv = self.add_plot(f"{ax.name}.v", k, 1, f"{ax.name} speed [{ax.units}/s]", "t [s]")
+            t_label = "t [s]" if k == last else ""
+            pp = self.add_plot(f"{ax.name}.q", k, 0, f"{ax.name} [{ax.units}]", t_label)
+            pv = self.add_plot(f"{ax.name}.v", k, 1, f"{ax.name}' [{ax.units}/s]", t_label)
             first = next(iter(self.plots.values()))
             if pp is not first:
                 pp.setXLink(first)

@@ -31,8 +31,10 @@ from winder_gui.workers import JobRunner
 HEADLESS_PLATFORMS = {"offscreen", "minimal", "vnc"}
 MAX_DISPLAY_POINTS = 200_000
 """Largest number of winding-path points drawn (the path is thinned by a stride above it)."""
-MAX_FRAMES = 1500
+MAX_FRAMES = 20_000
 """Animation frames over the eye path (thinned by a stride above it)."""
+TRAIL_FRAMES = 60
+"""The eye's trajectory is drawn over the last this many frames (its whole path would hide the mandrel)."""
 COLOUR_BY = ("circuit", "winding angle β [deg]", "λ [–]", "pull speed u")
 FRAME_MS = 33
 
@@ -281,7 +283,8 @@ class MandrelView3D(QWidget):
         if self.paths is None or self.paths.frame_index.size == 0:
             self.pause()
             return
-        self.set_frame((self.frame + 1) % self.paths.frame_index.size)
+        n = self.paths.frame_index.size
+        self.set_frame((self.frame + max(1, n // 3000)) % n)  # a whole program plays in about 100 s
 
     def _frame_text(self, short: bool = False) -> str:
         if self.paths is None or self.paths.frame_index.size == 0:
@@ -304,10 +307,8 @@ class MandrelView3D(QWidget):
         line.point_data["c"] = np.asarray(self.colour_scalars(), dtype=float)
         cmap = "tab20" if self.colour_by == "circuit" else "viridis"
         self.plotter.add_mesh(line, name="paths", scalars="c", cmap=cmap, line_width=2, show_scalar_bar=True,
-                              scalar_bar_args={"title": self.colour_by, "vertical": True}, reset_camera=False)
-        if p.eye_xyz.shape[0] >= 2:
-            self.plotter.add_mesh(pv.lines_from_points(p.eye_xyz), name="eye_path", color="#e07b00", line_width=1.5,
-                                  reset_camera=False)
+                              scalar_bar_args={"title": self.colour_by.split(" [")[0].replace("winding angle ", ""),
+                                               "vertical": True}, reset_camera=False)
         self._update_eye()
 
     def _update_eye(self) -> None:
@@ -320,7 +321,17 @@ class MandrelView3D(QWidget):
         size = 0.03 * float(np.max(np.abs(self.paths.line_xyz[:, 1:]))) if self.paths is not None else 3.0
         self.plotter.add_mesh(pv.Sphere(radius=size, center=eye), name="eye", color="#e0201a", reset_camera=False)
         self.plotter.add_mesh(pv.Line(contact, eye), name="fibre", color="#202020", line_width=3, reset_camera=False)
+        trail = self.trail()
+        if trail is not None and trail.shape[0] >= 2:
+            self.plotter.add_mesh(pv.lines_from_points(trail), name="eye_path", color="#e07b00", line_width=2.5,
+                                  reset_camera=False)
         self.plotter.render()
+
+    def trail(self) -> np.ndarray | None:
+        """The eye's trajectory over the last :data:`TRAIL_FRAMES` frames up to the current one (view frame)."""
+        if self.paths is None or self.paths.frame_index.size == 0:
+            return None
+        return self.paths.eye_xyz[max(0, self.frame - TRAIL_FRAMES): self.frame + 1]
 
     def actor_points(self, name: str) -> np.ndarray | None:
         """Points of a VTK actor (``paths``, ``eye_path``, ``eye``, ``fibre``), or ``None``."""
