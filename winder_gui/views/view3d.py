@@ -37,6 +37,8 @@ TRAIL_FRAMES = 60
 """The eye's trajectory is drawn over the last this many frames (its whole path would hide the mandrel)."""
 COLOUR_BY = ("circuit", "winding angle β [deg]", "λ [–]", "pull speed u")
 FRAME_MS = 33
+VTK_TITLES = dict(zip(COLOUR_BY, ("circuit", "beta (deg)", "lambda", "pull speed u"), strict=True))
+"""Scalar-bar titles in ASCII (VTK's default font has no Greek letters)."""
 
 
 def gl_available() -> bool:
@@ -307,8 +309,8 @@ class MandrelView3D(QWidget):
         line.point_data["c"] = np.asarray(self.colour_scalars(), dtype=float)
         cmap = "tab20" if self.colour_by == "circuit" else "viridis"
         self.plotter.add_mesh(line, name="paths", scalars="c", cmap=cmap, line_width=2, show_scalar_bar=True,
-                              scalar_bar_args={"title": self.colour_by.split(" [")[0].replace("winding angle ", ""),
-                                               "vertical": True}, reset_camera=False)
+                              scalar_bar_args={"title": VTK_TITLES[self.colour_by], "vertical": True},
+                              reset_camera=False)
         self._update_eye()
 
     def _update_eye(self) -> None:

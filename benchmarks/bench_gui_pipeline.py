@@ -1,0 +1,95 @@
+"""GUI responsiveness while the engine works, and how fast Cancel stops it.
+
+For each example (pipe, pressure vessel): a 10 ms QTimer heartbeat runs through a full pipeline run
+in the main window (plus the payout-law comparison and all view updates).  Printed: the largest
+wall-clock gap between ticks, the GUI thread's own CPU time between ticks (what the window controls;
+the wall gap also includes other processes and the worker holding the GIL), and the ratios to the
+100 ms target.  Then a run is cancelled in each stage: the time until the window is idle (target:
+at once) and until the worker thread has really ended (target: 0.5 s).
+
+Run: ``.venv/bin/python benchmarks/bench_gui_pipeline.py [pipe|pressure_vessel ...]`` (offscreen).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+_tmp = tempfile.mkdtemp(prefix="winder-bench-")
+os.environ.setdefault("WINDER_SETTINGS", str(Path(_tmp) / "settings.ini"))
+os.environ.setdefault("WINDER_AUTOSAVE_DIR", str(Path(_tmp) / "autosave"))
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+
+def main(names: list[str]) -> int:
+    from PySide6.QtCore import QTimer
+    from PySide6.QtWidgets import QApplication
+
+    app = QApplication.instance() or QApplication([])
+    from winder_gui.main_window import MainWindow
+
+    for name in names:
+        w = MainWindow(ROOT / "resources" / "examples" / f"{name}.toml")
+        w.confirm_discard = False
+        w.auto_run = False
+        w.show()
+        assert w.wait_idle()
+        wall: list[float] = []
+        cpu: list[float] = []
+        last = [time.perf_counter(), time.thread_time()]
+
+        def tick(wall: list[float] = wall, cpu: list[float] = cpu, last: list[float] = last) -> None:
+            now, c = time.perf_counter(), time.thread_time()
+            wall.append(now - last[0])
+            cpu.append(c - last[1])
+            last[0], last[1] = now, c
+
+        timer = QTimer()
+        timer.setInterval(10)
+        timer.timeout.connect(tick)
+        t0 = time.perf_counter()
+        timer.start()
+        w.run_pipeline_now()
+        while w.busy() or w.views_pending():
+            app.processEvents()
+            time.sleep(0.001)
+        timer.stop()
+        took = time.perf_counter() - t0
+        print(f"{name}: full run + views {took:.1f} s, {len(wall)} ticks; max wall gap {max(wall) * 1e3:.0f} ms "
+              f"(ratio to 100 ms: {max(wall) / 0.1:.2f}); max GUI-thread CPU between ticks {max(cpu) * 1e3:.0f} ms "
+              f"(ratio {max(cpu) / 0.1:.2f}); ticks over 100 ms: {sum(g > 0.1 for g in wall)}")
+
+        # cancel in each stage: edit the mandrel so every stage re-runs, cancel once the stage started
+        for stage in ("winding", "payout", "axes", "blocks"):
+            w.mandrel_panel.set_value("radius_mm", float(w.job.mandrel.radius_mm) + 1.0)  # type: ignore[union-attr]
+            assert w.wait_idle(pipeline=False)
+            seen: list[str] = []
+            w.pipe_runner.progress.connect(lambda _f, m, seen=seen: seen.append(m))
+            w.run_pipeline_now()
+            prev = {"winding": "mandrel", "payout": "winding", "axes": "payout", "blocks": "axes"}[stage]
+            deadline = time.monotonic() + 300
+            while f"{prev} done" not in seen and w.pipe_runner.is_busy() and time.monotonic() < deadline:
+                app.processEvents()
+                time.sleep(0.001)
+            time.sleep(0.05)
+            c0 = time.perf_counter()
+            w.cancel_run()
+            idle = time.perf_counter() - c0
+            w.pipe_runner.wait(60000)
+            ended = time.perf_counter() - c0
+            print(f"  cancel during {stage:8s}: window idle after {idle * 1e3:.1f} ms, worker ended after "
+                  f"{ended * 1e3:.0f} ms (ratio to 0.5 s: {ended / 0.5:.2f})")
+            app.processEvents()
+        w.set_dirty(False)
+        w.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:] or ["pipe", "pressure_vessel"]))
