@@ -98,6 +98,7 @@ class ContactLine:
     def from_line(cls, line: Any) -> ContactLine:
         """Take the fields from any object with ``z, r, dr, v, beta, direction, s`` (e.g. WindingLine)."""
         if isinstance(line, ContactLine):
+            line.validate()
             return line
         try:
             z = np.asarray(line.z, dtype=float).ravel()
@@ -1013,6 +1014,9 @@ def _solve_qp_stage(prob: _Problem, u_lo: float, u_hi: float, mu0: FloatArray, s
     mu = mu0
     backend = ""
     it = 0
+    if u_hi - u_lo <= 1e-6 * max(1.0, abs(u_hi)):  # the band pins u: the (14) answer is the jerk optimum
+        val = float(0.5 * mu @ (Q @ mu) + c @ mu) + const
+        return _Stage("jerk", mu, val, 0, time.perf_counter() - t0), "none (band of zero width)"
     for it in range(1, max_iter + 1):  # noqa: B007 - reported below
         check_cancel(state)
         G, h = prob.cut_rows(mu)
@@ -1030,6 +1034,9 @@ def _solve_qp_stage(prob: _Problem, u_lo: float, u_hi: float, mu0: FloatArray, s
             else:  # time limit / numerical trouble: keep the (14) answer (it satisfies every constraint)
                 backend += f" ({status}: jerk not minimised, (14) answer kept)"
                 break
+        if not np.isfinite(sol).all() or (sol < prob.mu_lo - 1e-6).any() or (sol > prob.mu_hi + 1e-6).any():
+            backend += " (returned an invalid point: jerk not minimised, (14) answer kept)"
+            break
         worst = prob.update_rows(sol, margin=10 * tol)
         mu = sol
         if worst <= tol:
