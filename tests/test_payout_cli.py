@@ -1,0 +1,90 @@
+"""``winder payout`` and the payout stage on the example vessel (real WindingLine from engine.winding)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from engine.cli import main
+from engine.job import build_mandrel, load_job
+from engine.payout import extend_to_line, geometric_law, payout_for_job
+from engine.winding import winding_line_for_job
+
+ROOT = Path(__file__).resolve().parents[1]
+VESSEL = ROOT / "resources" / "examples" / "pressure_vessel.toml"
+
+
+@pytest.fixture(scope="module")
+def vessel_job():
+    job = load_job(VESSEL)
+    job = job.replace(payout=job.payout.model_copy(update={"grid_points": 300}))
+    mandrel = build_mandrel(job, VESSEL)
+    return job, mandrel, winding_line_for_job(job, VESSEL)
+
+
+def test_example_vessel_min_range_beats_every_geometric_law(vessel_job) -> None:
+    job, mandrel, line = vessel_job
+    eye = payout_for_job(job, line, mandrel)
+    rep = eye.report
+    assert rep["feasible"] and all(c["ok"] for c in rep["constraints"].values())
+    circ = line.one_circuit
+    # the eye lies on the winding line's own tangent (WindingLine.tau) at the free length l
+    tau = circ.tau[eye.index]
+    assert np.abs(eye.contact_xyz - circ.xyz[eye.index]).max() < 1e-6
+    w = eye.eye_xyz - eye.contact_xyz
+    along = np.sum(w * tau, axis=1)
+    assert np.linalg.norm(w - along[:, None] * tau, axis=1).max() < 1e-6
+    assert np.abs(along - eye.l).max() < 1e-6
+    spec = job.payout
+    z_lo, z_hi = mandrel.z_min, mandrel.z_max
+    curve = [(z_lo - 150.0, 60.0), (z_lo, 150.0), (z_hi, 150.0), (z_hi + 150.0, 60.0)]
+    for law in ("parallel", "equidistant", "equal-tangent", "curve"):
+        g = geometric_law(circ, mandrel, law, spec.model_copy(update={"curve_zr_mm": curve}))
+        assert rep["u_range"] <= g.report["u_range"] + 1e-6, law
+
+
+def test_extend_to_whole_line(vessel_job) -> None:
+    job, mandrel, line = vessel_job
+    eye1 = payout_for_job(job, line, mandrel, law="equal-tangent")
+    full = extend_to_line(eye1, line)
+    assert full.eye_xyz.shape[0] >= 0.99 * line.z.size  # only zero-length steps are dropped
+    assert np.abs(full.contact_xyz - line.xyz[full.index]).max() < 1e-6
+    assert np.allclose(full.l, eye1.l[0])
+    d = np.linalg.norm(full.eye_xyz - full.contact_xyz, axis=1)
+    assert np.abs(d - eye1.l[0]).max() < 1e-9
+
+
+def test_cli_json_and_csv(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "eye.csv"
+    rc = main(["payout", str(VESSEL), "--law", "equidistant", "--points", "200", "--json", "--csv", str(out)])
+    rep = json.loads(capsys.readouterr().out)
+    assert rc == 0
+    for key in ("u_min", "u_max", "u_range", "jerk", "l_min", "l_max", "feasible"):
+        assert key in rep
+    assert rep["law"] == "equidistant"
+    rows = out.read_text().splitlines()
+    assert rows[0].startswith("x,") and len(rows) == rep["points"] + 1
+
+
+def test_cli_infeasible_is_clean_message(tmp_path: Path, capsys) -> None:
+    text = VESSEL.read_text().replace("clearance_mm = 20.0", "clearance_mm = 20.0\nfree_length_max_mm = 15.0")
+    job = tmp_path / "tight.toml"
+    job.write_text(text)
+    rc = main(["payout", str(job), "--law", "min-range", "--points", "100"])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert "clearance" in err and "tight.toml" in err and "Traceback" not in err
+
+
+def test_cli_subprocess() -> None:
+    exe = Path(sys.executable).parent / "winder"
+    r = subprocess.run([str(exe), "payout", str(VESSEL), "--law", "min-range", "--points", "200", "--json"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    rep = json.loads(r.stdout)
+    assert rep["feasible"] and rep["u_range"] > 0
