@@ -185,6 +185,20 @@ def test_pipe_workflow(pipe_window, tmp_path, monkeypatch) -> None:
     np.testing.assert_allclose(w.eye_plot.curve_data("eye")[1], 95.0, rtol=1e-9)
     _check_views(w)
 
+    # the time-law method is read by the blocks stage only: the stages before it are re-used
+    w.timelaw_panel.set_value("timelaw.method", "tube")
+    assert w.job.timelaw.method == "tube"
+    assert w.wait_idle(180000) and w.last_error == ""
+    assert w.result.reused == ("mandrel", "winding", "payout", "axes")
+    if isinstance(getattr(w.result, "timelaw", None), dict):
+        assert "tube law" in w.timelaw_panel.program_label.text()
+    _check_views(w)
+    w.timelaw_panel.set_value("timelaw.method", "blocks")
+    assert w.wait_idle(180000) and "(17)/(18)" in w.timelaw_panel.program_label.text()
+
+    # the progress bar went through the stages up to 100 %
+    assert w.progress_bar.value() == 1000 and not w.progress_bar.isVisible()
+
     # cancel a run in flight: the window is idle at once and keeps the finished stages
     before = w.result
     w.winding_panel.set_value("winding.dwell_deg.1", 170)
@@ -460,6 +474,28 @@ def test_autosave_and_restore(qtbot, tmp_path) -> None:
     _close(w2)
     w.set_dirty(False)
     _close(w)
+
+
+def test_autosave_offered_at_start(qtbot, tmp_path, monkeypatch) -> None:
+    w = _window(qtbot)
+    w.payout_panel.set_value("payout.clearance_mm", 29)
+    p = w.autosave_now()
+    edited = w.job
+    w2 = _window(qtbot, None)
+    asked: list[str] = []
+    monkeypatch.setattr(QMessageBox, "question", lambda *a, **k: asked.append(a[2]) or QMessageBox.StandardButton.Yes)
+    w2.offer_autosaves()
+    assert w2.wait_idle()
+    assert len(asked) == 1 and p.name in asked[0] and str(PIPE.resolve()) in asked[0]
+    assert w2.job == edited and w2.dirty
+    # "Discard" deletes the copy
+    w3 = _window(qtbot, None)
+    monkeypatch.setattr(QMessageBox, "question", lambda *a, **k: QMessageBox.StandardButton.Discard)
+    w3.offer_autosaves()
+    assert not p.exists() and w3.job.name == "untitled"
+    for x in (w, w2, w3):
+        x.set_dirty(False)
+        _close(x)
 
 
 def test_autosave_survives_a_killed_process(tmp_path) -> None:

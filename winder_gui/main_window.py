@@ -935,6 +935,12 @@ class MainWindow(QMainWindow):
         program = f"; program time {res.blocks.total:.2f} s" if res.blocks is not None else ""
         self._status(f"Pipeline done in {took:.1f} s{reused}{program}"
                      + (f"; {warn} warning{'s' if warn != 1 else ''} (NC step)" if warn else ""))
+        info = getattr(res, "timelaw", None)  # the time law that set the block times (method tube/dp/toppra)
+        self.timelaw_panel.program_label.setText(
+            f"Program block times: {info.get('method')} law over the job's axis path, "
+            f"{float(info.get('total_time_s', 0.0)):.2f} s, {info.get('iterations', 0)} iterations"
+            if isinstance(info, dict) else
+            f"Program block times: (17)/(18), {res.blocks.total:.2f} s" if res.blocks is not None else "")
         eye_key = res.keys.get("payout", "")
         if eye_key != self._laws_key and res.eye_circuit is not None:
             self._laws_key = eye_key

@@ -43,7 +43,8 @@ class TimeLawPanel(SectionPanel):
         v = QVBoxLayout(box)
         note = QLabel("Runs the DP tube algorithm, a single DP and the TOPP-RA bound on the paper's 7-axis "
                       "example path (Tables 4–5 limits) with the levels, penalty, tube share and stop "
-                      "criterion above. The NC program's block times use (17)/(18).")
+                      "criterion above. The method above sets the NC program's block times: (17)/(18) "
+                      "('blocks') or a time law over the job's axis path.")
         note.setWordWrap(True)
         note.setStyleSheet("color: #555;")
         v.addWidget(note)
@@ -54,6 +55,10 @@ class TimeLawPanel(SectionPanel):
         self.summary = QLabel("")
         self.summary.setWordWrap(True)
         v.addWidget(self.summary)
+        self.program_label = QLabel("")
+        self.program_label.setObjectName("timelaw.program")
+        self.program_label.setWordWrap(True)
+        v.addWidget(self.program_label)
         self.lay.addWidget(box)
         self.finish()
 
