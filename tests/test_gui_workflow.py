@@ -132,7 +132,7 @@ def _check_views(w: MainWindow) -> None:
     # NC panel: summary with the program time, the program's first lines, the warnings
     assert f"{blocks.total:.2f} s" in w.nc_panel.summary.text()
     head = w.nc_panel.preview.toPlainText().split("\n")
-    assert head[:50] == res.nc_text.split("\n")[:50]
+    assert head[:50] == res.nc_text.splitlines()[:50]
     shown = [w.nc_panel.warnings.item(i).text() for i in range(w.nc_panel.warnings.count())]
     assert shown == (w.run_warnings or ["none"])
     for page in (w.winding_plots, w.eye_plot, w.pull_plot, w.axes_plot, w.coverage_plot):
@@ -568,15 +568,36 @@ def test_pipeline_error_is_a_readable_dialog(pipe_window) -> None:
 def test_every_example_end_to_end(qtbot, tmp_path, example: Path) -> None:
     w = _window(qtbot, example)
     try:
-        assert w.job == load_job(example)
+        job0 = load_job(example)
+        assert w.job == job0
+        # edit the mandrel (a longer cylindrical body), then run everything
+        key = {"vessel": "cylinder_length_mm", "bottle": "body_length_mm"}[job0.mandrel.kind]
+        w.mandrel_panel.set_value(key, getattr(job0.mandrel, key) + 10.0)
+        assert w.wait_idle()
+        assert getattr(w.job.mandrel, key) == getattr(job0.mandrel, key) + 10.0
         _run(w)
+        assert w.result.job == w.job and w.result.reused == ()
+        _check_views(w)
+        # cancel a run in flight, re-run: only the NC stage depends on the dialect
+        w.machine_panel.post_combo.setCurrentText("fanuc")
+        w.machine_panel._on_edited()
+        w._run_timer.stop()
+        assert w.run_pipeline_now()
+        w.cancel_run()
+        assert not w.busy() and "Cancelled" in w.status_msg.text()
+        _run(w)
+        assert w.result.post_name == "fanuc" and w.result.reused == ("mandrel", "winding", "payout", "axes", "blocks")
         _check_views(w)
         out = tmp_path / f"{example.stem}{w.result.extension}"
         assert w.export_nc(out, force=True)
-        assert w.wait_idle() and out.read_text() == w.result.nc_text
+        assert w.wait_idle() and out.read_bytes() == w.result.nc_text.encode()  # line ends kept (CR LF for fanuc)
         saved = tmp_path / "saved.toml"
         assert w.save_job(saved)
-        assert load_job(saved) == w.job
+        job = w.job
+        w.open_job(example)
+        assert w.wait_idle() and w.job == job0
+        w.open_job(saved)
+        assert w.wait_idle() and w.job == job == load_job(saved) and not w.dirty
     finally:
         _close(w)
 

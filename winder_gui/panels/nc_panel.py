@@ -143,7 +143,7 @@ class NCPanel(QWidget):
             self.warnings.addItem(w)
         if not warns:
             self.warnings.addItem("none")
-        head = text.split("\n", PREVIEW_LINES)
+        head = text.replace("\r\n", "\n").split("\n", PREVIEW_LINES)  # some dialects end lines with CR LF
         shown = "\n".join(head[:PREVIEW_LINES])
         if len(head) > PREVIEW_LINES:
             shown += f"\n… ({lines - PREVIEW_LINES} more lines)"
