@@ -59,6 +59,7 @@ class PipelineResult:
     machine: Any = None
     axes: Any = None
     blocks: Any = None
+    timelaw: dict[str, Any] | None = None
     nc_text: str | None = None
     post_name: str | None = None
     extension: str = ".nc"
@@ -72,6 +73,8 @@ class PipelineResult:
             return []
         from engine.blocks import check_program
 
+        if self.timelaw is not None and self.blocks is not None and self.machine is not None:
+            return list(self.axes.violations) + timelaw_block_check(self.machine, self.blocks)[0]
         return check_program(self.axes, self.blocks, self.machine)
 
     def warnings(self) -> list[str]:
@@ -88,6 +91,8 @@ class PipelineResult:
             out.append(f"payout: the eye path violates a constraint: {bad}")
         for v in self.violations:
             out.append(getattr(v, "message", str(v)))
+        if self.timelaw is not None and self.blocks is not None and self.machine is not None:
+            out += timelaw_block_check(self.machine, self.blocks)[1]
         return out
 
     def report(self) -> dict[str, Any]:
@@ -115,6 +120,8 @@ class PipelineResult:
             rep["max_speed_ratio"] = _speed_ratios(b, self.machine)
             rep["max_accel_ratio"] = _accel_ratios(b, self.machine)
             rep["max_error_mm"] = float(np.max(b.max_error)) if b.n else 0.0
+        if self.timelaw is not None:
+            rep["timelaw"] = dict(self.timelaw)
         if self.post_name:
             rep["post"] = self.post_name
         rep["warnings"] = self.warnings()
@@ -259,13 +266,16 @@ _STAGE_FIELDS = {
     "winding": ("line",),
     "payout": ("eye_circuit", "eye"),
     "axes": ("machine", "axes"),
-    "blocks": ("blocks",),
+    "blocks": ("blocks", "timelaw"),
     "nc": ("nc_text", "post_name", "extension"),
 }
 
 
+_OPTIONAL_FIELDS = ("timelaw",)   # None when the stage ran without it (method "blocks")
+
+
 def _has(res: PipelineResult, stage: str) -> bool:
-    return all(getattr(res, f) is not None for f in _STAGE_FIELDS[stage])
+    return all(getattr(res, f) is not None for f in _STAGE_FIELDS[stage] if f not in _OPTIONAL_FIELDS)
 
 
 def _copy_stage(res: PipelineResult, prev: PipelineResult, stage: str) -> PipelineResult:
@@ -300,8 +310,11 @@ def _run_stage(res: PipelineResult, stage: str, state: State | None) -> Pipeline
             res.machine, res.axes, tol_mm=job.post.tolerance_mm, min_block_time=job.post.min_block_time_s,
             state=SubState(state, 0.0, 0.5) if state is not None else None,
         )
-        blocks = optimise_block_times(blocks, res.machine, state=SubState(state, 0.5, 1.0) if state else None)
-        return replace(res, blocks=blocks)
+        if job.timelaw.method == "blocks":
+            blocks = optimise_block_times(blocks, res.machine, state=SubState(state, 0.5, 1.0) if state else None)
+            return replace(res, blocks=blocks, timelaw=None)
+        blocks, info = _time_law_blocks(res, blocks, SubState(state, 0.5, 1.0) if state is not None else None)
+        return replace(res, blocks=blocks, timelaw=info)
     if stage == "nc":
         from engine.post import get_post, load_controller
 
@@ -310,6 +323,381 @@ def _run_stage(res: PipelineResult, stage: str, state: State | None) -> Pipeline
         text = post.render(res.blocks, res.machine, profile)
         return replace(res, nc_text=text, post_name=post.name, extension=post.extension)
     raise AssertionError(stage)  # pragma: no cover
+
+
+# --------------------------------------------------------------------------------------------------
+# The time law drives the blocks (job.timelaw.method = "tube" | "dp" | "toppra"); docs/timeparam.md
+# --------------------------------------------------------------------------------------------------
+_TL_TOL_SPEED = 0.02    # node refinement: |X'_nodes - X'_path| / V at the axis-speed cap, per axis
+_TL_TOL_ACCEL = 0.10    # node refinement: |X''_nodes - X''_path| / A at the axis-speed cap squared
+_TL_STRIDE = 16         # initial node spacing (path points) before the refinement
+_TL_SPLIT_ROUNDS = 24   # block-splitting rounds for the speed-jump limits
+_TL_VB_SHARE = 0.9      # share of the time-optimal junction speed used as the circuit boundary speed
+
+
+class _NoPartial:
+    """Forwards progress and cancellation but not the tube iterations (the pipeline's partials are
+    PipelineResults)."""
+
+    def __init__(self, parent: State | None) -> None:
+        self._p = parent
+
+    def progress(self, fraction: float, message: str = "") -> None:
+        if self._p is not None:
+            self._p.progress(fraction, message)
+
+    def cancelled(self) -> bool:
+        return self._p is not None and self._p.cancelled()
+
+    def partial(self, result: Any) -> None:
+        pass
+
+
+def _hermite_derivs(X0, X1, D0, D1, E0, E1, h, tau):  # noqa: ANN001, ANN202
+    """dX/ds and d²X/ds² of the quintic Hermite interpolant (the time law's path model) at ``tau``."""
+    a1, a2 = h * D0, h * h * E0 / 2.0
+    r0, r1, r2 = X1 - X0 - a1 - a2, h * D1 - a1 - 2.0 * a2, h * h * E1 - 2.0 * a2
+    a3, a4, a5 = 10.0 * r0 - 4.0 * r1 + 0.5 * r2, -15.0 * r0 + 7.0 * r1 - r2, 6.0 * r0 - 3.0 * r1 + 0.5 * r2
+    d1 = (a1 + tau * (2.0 * a2 + tau * (3.0 * a3 + tau * (4.0 * a4 + tau * 5.0 * a5)))) / h
+    d2 = (2.0 * a2 + tau * (6.0 * a3 + tau * (12.0 * a4 + tau * 20.0 * a5))) / (h * h)
+    return d1, d2
+
+
+def _law_nodes(s: np.ndarray, X: np.ndarray, D1: np.ndarray, D2: np.ndarray, V: np.ndarray, A: np.ndarray
+               ) -> np.ndarray:
+    """Path points used as time-law nodes: every ``_TL_STRIDE``-th point, refined (worst point first)
+    until the quintic Hermite interpolant of the nodes reproduces the path's X' and X'' at every path
+    point: speed error <= 2 % of V and acceleration error <= 10 % of A at the local speed cap."""
+    n = s.size
+    isn = np.zeros(n, bool)
+    isn[::_TL_STRIDE] = True
+    isn[-1] = True
+    w = (np.abs(D1) / V).max(axis=1)
+    sref = 1.0 / np.maximum(w, 1e-300)
+    sref = np.minimum(sref, 1e12)
+    active = np.ones(n, bool)                      # points whose segment may still be bad
+    for _ in range(200):
+        nd = np.flatnonzero(isn)
+        pts = np.flatnonzero(~isn & active)
+        if pts.size == 0:
+            break
+        seg = np.searchsorted(nd, pts, side="right") - 1
+        a, b = nd[seg], nd[seg + 1]
+        h = (s[b] - s[a])[:, None]
+        tau = (s[pts] - s[a])[:, None] / h
+        d1, d2 = _hermite_derivs(X[a], X[b], D1[a], D1[b], D2[a], D2[b], h, tau)
+        e1 = (np.abs(d1 - D1[pts]) / V).max(axis=1) * sref[pts]
+        e2 = (np.abs(d2 - D2[pts]) / A).max(axis=1) * sref[pts] ** 2
+        err = np.maximum(e1 / _TL_TOL_SPEED, e2 / _TL_TOL_ACCEL)
+        bad = err > 1.0
+        if not bad.any():
+            break
+        o = np.lexsort((-err, seg))
+        first = np.concatenate([[True], seg[o][1:] != seg[o][:-1]])
+        worst = o[first]
+        worst = worst[bad[worst]]
+        isn[pts[worst]] = True
+        # only the points of segments that were bad need another look
+        bad_seg = np.zeros(nd.size, bool)
+        bad_seg[seg[worst]] = True
+        active[:] = False
+        active[pts[bad_seg[seg]]] = True
+    return np.flatnonzero(isn)
+
+
+def _circuit_plan(res: PipelineResult, s: np.ndarray, X: np.ndarray) -> list[tuple[int, int]]:
+    """Path-index ranges ``(start, end)`` (inclusive) of the pieces that get a law each: the circuits
+    when the middle ones repeat the same motion (up to constant axis offsets, e.g. the mandrel angle),
+    else the whole program as one piece."""
+    n = s.size
+    line = res.line
+    nc = int(getattr(line, "circuits", 1) or 1)
+    m = int(getattr(line, "points_per_circuit", 0) or 0)
+    if nc < 3 or m < 2 or nc * m + 1 != n:
+        return [(0, n - 1)]
+    ref = slice(m, 2 * m + 1)
+    dq_ref = X[ref] - X[m]
+    ds_ref = s[ref] - s[m]
+    tol_q = 1e-7 * (1.0 + np.abs(X).max(axis=0))
+    tol_s = 1e-7 * (1.0 + abs(float(s[-1])))
+    for k in range(2, nc - 1):
+        sl = slice(k * m, (k + 1) * m + 1)
+        if (np.any(np.abs(X[sl] - X[k * m] - dq_ref) > tol_q)
+                or np.any(np.abs(s[sl] - s[k * m] - ds_ref) > tol_s)):
+            return [(0, n - 1)]
+    return [(k * m, (k + 1) * m) for k in range(nc)]
+
+
+def _piece_arrays(s: np.ndarray, X: np.ndarray, a: int, b: int, V: np.ndarray, A: np.ndarray
+                  ) -> tuple[np.ndarray, ...]:
+    """Nodes of the piece of the path a..b: local s (from 0), X, X', X'' (cubic spline of the whole
+    piece at full resolution, evaluated at the refined nodes)."""
+    from scipy.interpolate import CubicSpline
+
+    sp, Xp = s[a:b + 1] - s[a], X[a:b + 1]
+    keep = np.concatenate([[True], np.diff(sp) > 0])         # s must increase strictly
+    sp, Xp = sp[keep], Xp[keep]
+    cs = CubicSpline(sp, Xp, axis=0)
+    D1, D2 = cs(sp, 1), cs(sp, 2)
+    # derivatives at round-off level are exact zeros (an axis at rest), not noise
+    scale1 = np.abs(D1).max(axis=0) + 1e-300
+    D1 = np.where(np.abs(D1) < 1e-12 * scale1, 0.0, D1)
+    scale2 = np.abs(D2).max(axis=0) + 1e-300
+    D2 = np.where(np.abs(D2) < 1e-12 * scale2, 0.0, D2)
+    nodes = _law_nodes(sp, Xp, D1, D2, V, A)
+    return sp[nodes], Xp[nodes], D1[nodes], D2[nodes]
+
+
+def _parametrize(method: str, nodes: tuple[np.ndarray, ...], limits: Any, state: State | None) -> Any:
+    from engine.timeparam import parametrize
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return parametrize(*nodes, limits, method=method, state=_NoPartial(state))
+
+
+def _junction_speed(mid: tuple[np.ndarray, ...], limits: Any) -> float:
+    """The time-optimal path speed (TOPP-RA) where one repeated circuit meets the next, from rest to
+    rest over two circuits."""
+    from dataclasses import replace as dc_replace
+
+    s, X, D1, D2 = mid
+    L = float(s[-1])
+    s2 = np.concatenate([s, s[1:] + L])
+    X2 = np.concatenate([X, X[1:] + (X[-1] - X[0])])
+    law = _parametrize("toppra", (s2, X2, np.concatenate([D1, D1[1:]]), np.concatenate([D2, D2[1:]])),
+                       dc_replace(limits, sdot_start=0.0, sdot_end=0.0), None)
+    return float(law.sdot[s.size - 1])
+
+
+def _time_law_blocks(res: PipelineResult, blocks: Any, state: State | None) -> tuple[Any, dict[str, Any]]:
+    """Block times from a time law s(t) of the whole program (see docs/timeparam.md, "NC output")."""
+    from dataclasses import replace as dc_replace
+
+    from engine.errors import InfeasibleError
+    from engine.timeparam import TimeLimits, time_at
+
+    job, machine, axes = res.job, res.machine, res.axes
+    spec = job.timelaw
+    t_start = time.perf_counter()
+    s = np.asarray(res.eye.s, dtype=float)
+    q = np.asarray(axes.q, dtype=float)
+    if s.shape[0] != q.shape[0]:
+        raise InputError(f"the eye path has {s.shape[0]} points but the axis path {q.shape[0]}", field="timelaw")
+    X = machine.to_internal(q)
+    scales = np.abs(machine.scales)
+    V = machine.limits("max_speed") / scales
+    A = machine.limits("max_accel") / scales
+    # the law sees the path through its nodes (quintic Hermite), which reproduce the path's X' within
+    # _TL_TOL_SPEED·V and X'' within _TL_TOL_ACCEL·A at the speed cap: the law gets limits reduced by
+    # those shares, so the real path (and every block's chord speed) keeps the machine's limits
+    limits = TimeLimits(
+        v_max=tuple(V * (1.0 - _TL_TOL_SPEED)), a_max=tuple(A * (1.0 - _TL_TOL_ACCEL)),
+        sdot_max=float(spec.sdot_max) if spec.sdot_max is not None else float("inf"),
+        sddot_max=float(spec.sddot_max) if spec.sddot_max is not None else float("inf"),
+        levels=int(spec.levels), penalty=float(spec.penalty), tube_share=float(spec.tube_share),
+        stop_percent=float(spec.stop_percent), sdot_start=0.0, sdot_end=0.0)
+    pieces = _circuit_plan(res, s, X)
+    check_cancel(state)
+    laws: list[Any] = []
+    v_b = 0.0
+    if len(pieces) == 1:
+        nodes = _piece_arrays(s, X, *pieces[0], V, A)
+        laws = [_parametrize(spec.method, nodes, limits, state)]
+        n_nodes = nodes[0].size
+        piece_law = [0]
+    else:
+        first = _piece_arrays(s, X, *pieces[0], V, A)
+        mid = _piece_arrays(s, X, *pieces[1], V, A)
+        last = _piece_arrays(s, X, *pieces[-1], V, A)
+        n_nodes = first[0].size + mid[0].size + last[0].size
+        try:
+            v_b = _TL_VB_SHARE * _junction_speed(mid, limits)
+        except InfeasibleError:
+            v_b = 0.0
+        # the circuits need not join smoothly (X' may change at the junction): the boundary speed
+        # keeps the speed step of every axis there within its max_jump
+        P = machine.limits("max_jump") / scales
+        for d_in, d_out in ((first[2][-1], mid[2][0]), (mid[2][-1], mid[2][0]), (mid[2][-1], last[2][0])):
+            dd = np.abs(d_out - d_in)
+            with np.errstate(divide="ignore"):
+                v_b = min(v_b, float(np.min(np.where(dd > 0, P / np.where(dd > 0, dd, 1.0), np.inf))))
+        while True:
+            check_cancel(state)
+            try:
+                laws = [
+                    _parametrize(spec.method, first, dc_replace(limits, sdot_end=v_b),
+                                 SubState(state, 0.0, 0.3) if state is not None else None),
+                    _parametrize(spec.method, mid, dc_replace(limits, sdot_start=v_b, sdot_end=v_b),
+                                 SubState(state, 0.3, 0.7) if state is not None else None),
+                    _parametrize(spec.method, last, dc_replace(limits, sdot_start=v_b),
+                                 SubState(state, 0.7, 1.0) if state is not None else None),
+                ]
+                break
+            except InfeasibleError:
+                if v_b <= 0.0:
+                    raise
+                v_b = 0.0 if v_b < 1e-3 else 0.5 * v_b     # a lower boundary speed, at last rest
+        piece_law = [0] + [1] * (len(pieces) - 2) + [2]
+    # time at every path point: law of its piece, shifted by the time of the pieces before
+    n = s.size
+    T = np.empty(n)
+    t0 = 0.0
+    for (a, b), li in zip(pieces, piece_law, strict=True):
+        T[a:b + 1] = t0 + time_at(laws[li], s[a:b + 1] - s[a])
+        t0 += laws[li].total_time_s
+    law_total = t0
+    check_cancel(state)
+    out, split_info = _split_for_jumps(machine, axes, blocks, T, float(job.post.min_block_time_s))
+    info = {
+        "method": spec.method,
+        "total_time_s": float(law_total),
+        "compute_s": time.perf_counter() - t_start,
+        "iterations": int(sum(len(lw.iterations) for lw in laws)),
+        "max_accel_ratio": float(max(lw.max_accel_ratio for lw in laws)),
+        "max_speed_ratio": float(max(lw.max_speed_ratio for lw in laws)),
+        "energy": float(sum(laws[li].energy for li in piece_law)),
+        "pieces": len(pieces),
+        "laws_computed": len(laws),
+        "nodes": int(n_nodes),
+        "boundary_speed_mm_s": float(v_b),
+        **split_info,
+    }
+    return out, info
+
+
+def _jump_pairs(v: np.ndarray, p: np.ndarray, cyclic: bool) -> tuple[np.ndarray, np.ndarray]:
+    nb = v.shape[0]
+    i = np.arange(nb) if cyclic and nb > 2 else np.arange(nb - 1)
+    j = (i + 1) % nb
+    bad = (np.abs(v[j] - v[i]) > p * (1 + 1e-9)).any(axis=1)
+    return i[bad], j[bad]
+
+
+def _split_for_jumps(machine: Any, axes: Any, blocks: Any, T: np.ndarray, tau: float
+                     ) -> tuple[Any, dict[str, Any]]:
+    """Blocks timed by the law (``T`` = law time at every path point), split where neighbouring
+    block speeds jump by more than ``max_jump`` (the blocks are shorter where the law accelerates;
+    the program time stays the law's)."""
+    from engine.blocks import preliminary_times
+
+    q = np.asarray(axes.q, dtype=float)
+    fmax = machine.limits("max_speed")
+    p = machine.limits("max_jump")
+    idx = np.asarray(blocks.index, dtype=np.int64)
+    split = 0
+    for _round in range(_TL_SPLIT_ROUNDS):
+        dur = np.diff(T[idx])
+        v = np.diff(q[idx], axis=0) / dur[:, None]
+        bi, bj = _jump_pairs(v, p, blocks.cyclic)
+        if bi.size == 0:
+            break
+        cand = np.unique(np.concatenate([bi, bj]))
+        cand = cand[idx[cand + 1] - idx[cand] >= 2]
+        mids = (idx[cand] + idx[cand + 1]) // 2
+        # never below the minimal block time tau of (17)
+        ok = (T[mids] - T[idx[cand]] >= tau) & (T[idx[cand + 1]] - T[mids] >= tau)
+        cand, mids = cand[ok], mids[ok]
+        if cand.size == 0:
+            break
+        idx = np.sort(np.concatenate([idx, mids]))
+        split += int(cand.size)
+    qb = q[idx]
+    delta = np.diff(qb, axis=0)
+    t17 = preliminary_times(delta, fmax, tau)
+    dur = np.diff(T[idx])
+    clamped = dur < t17
+    time_b = np.maximum(dur, t17)
+    alpha = np.minimum(t17 / time_b, 1.0)
+    err = np.asarray(blocks.max_error, dtype=float)
+    if split:
+        old = np.asarray(blocks.index, dtype=np.int64)
+        k = np.clip(np.searchsorted(old, idx[:-1]), 0, old.size - 2)
+        same = (old[k] == idx[:-1]) & (old[k + 1] == idx[1:])
+        new_err = np.where(same, err[k], 0.0)
+        new_err[~same] = _block_errors(machine, axes, idx)[~same]
+        err = new_err
+    arrs = []
+    for a in (idx, qb, delta, t17, time_b, alpha, err):
+        a = np.ascontiguousarray(a)
+        a.flags.writeable = False
+        arrs.append(a)
+    total = float(time_b.sum())
+    out = replace(blocks, index=arrs[0], q=arrs[1], delta=arrs[2], t17=arrs[3], time=arrs[4], alpha=arrs[5],
+                  max_error=arrs[6], total_t17=float(t17.sum()), total_start=total, history=(total,))
+    hard, soft = timelaw_block_check(machine, out)
+    out = replace(out, violations=tuple(hard))
+    return out, {"blocks_split": split, "blocks_at_min_time": int(clamped.sum()),
+                 "time_added_s": float((time_b - dur).sum()),
+                 "jump_warnings": int(sum(int(w.split(":")[1].split()[0]) for w in soft))}
+
+
+def timelaw_block_check(machine: Any, blocks: Any) -> tuple[list[Any], list[str]]:
+    """Limit check of a block program timed by a time law: ``(violations, warnings)``.
+
+    Position and speed limits are hard (violations).  A speed jump between neighbouring blocks above
+    ``max_jump`` is a hard violation only when it also exceeds what the axis acceleration allows over
+    the two blocks, ``|Δv| > max_accel·(t_i + t_j)/2``; otherwise it is a warning: the law bounds the
+    acceleration of the real motion (the physical limit), and the jump is the block program's coarse
+    picture of it where a block cannot be split (one path step, or halves shorter than tau).
+    """
+    from engine.blocks import check_blocks
+    from engine.kinematics import violations_from_mask
+
+    no_jump = replace(machine, axes=tuple(replace(a, max_jump=float("inf")) for a in machine.axes))
+    hard = check_blocks(no_jump, blocks)
+    soft: list[str] = []
+    nb = blocks.n
+    if nb < 2:
+        return hard, soft
+    spd = blocks.speed
+    t = np.asarray(blocks.time, dtype=float)
+    cyc = blocks.cyclic and nb > 2
+    nxt = np.roll(spd, -1, axis=0) if cyc else np.vstack([spd[1:], spd[-1:]])
+    tn = np.roll(t, -1) if cyc else np.append(t[1:], t[-1])
+    jump = np.abs(nxt - spd)
+    p = machine.limits("max_jump")
+    amax = machine.limits("max_accel")
+    for k, ax in enumerate(machine.axes):
+        over = jump[:, k] > p[k] * (1 + 1e-9)
+        if not over.any():
+            continue
+        acc = jump[:, k] / (0.5 * (t + tn))
+        bad = over & (acc > amax[k] * (1 + 1e-6))
+        u = f" {ax.units}/s"
+        hard += violations_from_mask("jump", ax.name, bad, jump[:, k], p[k], u, where="block",
+                                     what="speed jump to the next block (also above max_accel)")
+        ok = over & ~bad
+        if ok.any():
+            i = int(np.argmax(np.where(ok, jump[:, k], -1.0)))
+            soft.append(f"axis {ax.name}: {int(ok.sum())} block speed jumps above max_jump {p[k]:g}{u} (largest "
+                        f"{jump[i, k]:.4g}{u} after block {i}) where a block cannot be split; the acceleration "
+                        f"over the two blocks stays within max_accel {amax[k]:g} {ax.units}/s² (time law)")
+    return hard, soft
+
+
+def _block_errors(machine: Any, axes: Any, idx: np.ndarray) -> np.ndarray:
+    """Largest eye-position error of the linear interpolation inside every block (as make_blocks
+    measures it: a path point is compared at its (17) time fraction of the block), mm."""
+    from engine.kinematics import forward_kinematics
+
+    q = np.asarray(axes.q, dtype=float)
+    eye = np.asarray(axes.eye_xyz, dtype=float)
+    fmax = machine.limits("max_speed")
+    w = np.concatenate(([0.0], np.cumsum(np.max(np.abs(np.diff(q, axis=0)) / fmax, axis=1))))
+    nb = idx.size - 1
+    pts = np.arange(q.shape[0])
+    blk = np.clip(np.searchsorted(idx, pts, side="right") - 1, 0, nb - 1)
+    inner = pts != idx[blk]
+    pts, blk = pts[inner], blk[inner]
+    a, b = idx[blk], idx[blk + 1]
+    span = w[b] - w[a]
+    u = np.where(span > 0, (w[pts] - w[a]) / np.where(span > 0, span, 1.0), (pts - a) / (b - a))
+    qi = q[a] + u[:, None] * (q[b] - q[a])
+    e_fk, _ = forward_kinematics(machine, qi)
+    err = np.linalg.norm(e_fk - eye[pts], axis=1)
+    out = np.zeros(nb)
+    np.maximum.at(out, blk, err)
+    return out
 
 
 def write_program(result: PipelineResult, path: str | Path, force: bool = False) -> Path:
