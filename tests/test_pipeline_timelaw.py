@@ -1,0 +1,140 @@
+"""The time law drives the NC output (job.timelaw.method = "tube" | "dp" | "toppra")."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from engine.blocks import Blocks
+from engine.job import load_job
+from engine.pipeline import STAGES, run_pipeline, timelaw_block_check
+from engine.post import load_controller
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "resources" / "examples"
+
+
+def _with_method(job, method: str):
+    return job.replace(timelaw={**job.timelaw.model_dump(), "method": method})
+
+
+@pytest.fixture(scope="module", params=["pipe", "pressure_vessel"])
+def runs(request: pytest.FixtureRequest):
+    path = EXAMPLES / f"{request.param}.toml"
+    job = load_job(path)
+    base = run_pipeline(job, path, upto="axes")
+    blocks18 = run_pipeline(job, path, previous=base)
+    tube = run_pipeline(_with_method(job, "tube"), path, previous=base)
+    return request.param, blocks18, tube
+
+
+def _inverse_time_program_time(nc_text: str) -> float:
+    """Sum of 60/F over the G1 blocks of a G93 program (F = 1 / block time in minutes)."""
+    feeds = [float(m.group(1)) for m in re.finditer(r"^G1 .*F([0-9.]+)\s*$", nc_text, re.MULTILINE)]
+    assert feeds, "no G1 ... F blocks"
+    return float(np.sum(60.0 / np.array(feeds)))
+
+
+def test_program_time_equals_the_law(runs) -> None:
+    name, _b18, res = runs
+    rep = res.report()
+    tl = rep["timelaw"]
+    for key in ("method", "total_time_s", "compute_s", "iterations", "max_accel_ratio", "energy"):
+        assert key in tl
+    assert tl["method"] == "tube" and tl["iterations"] >= 2
+    assert tl["max_accel_ratio"] <= 1.0 + 1e-6
+    assert rep["program_time_s"] == pytest.approx(tl["total_time_s"], rel=0.01)
+    assert res.blocks.time.size == res.blocks.n
+    assert np.all(res.blocks.alpha <= 1.0) and np.all(res.blocks.alpha > 0)
+    # every block at least its (17) time: the law includes the axis speed limits
+    assert np.all(res.blocks.time >= res.blocks.t17 * (1 - 1e-12))
+    assert max(rep["max_speed_ratio"].values()) <= 1.0 + 1e-9
+    json.dumps(rep)
+
+
+def test_nc_feeds_reproduce_the_law_time(runs) -> None:
+    name, _b18, res = runs
+    assert res.post_name == "linuxcnc"
+    assert "G93" in res.nc_text
+    prog = _inverse_time_program_time(res.nc_text)
+    assert prog == pytest.approx(res.timelaw["total_time_s"], rel=0.01)
+    prof = load_controller("linuxcnc")
+    assert prof.feed_mode == "inverse_time"
+
+
+def test_law_respects_accelerations_that_18_ignores(runs) -> None:
+    name, b18, res = runs
+    r18, rtl = b18.report(), res.report()
+    assert "timelaw" not in r18
+    # (18) bounds block speed jumps only: its block-to-block accelerations exceed max_accel
+    assert max(r18["max_accel_ratio"].values()) > 1.5
+    # the law: speed change over the mean duration of two blocks stays within max_accel
+    assert max(rtl["max_accel_ratio"].values()) <= 1.0 + 1e-6
+    # both keep the axis speeds; both are above the pure speed bound (17) of their own blocks
+    assert rtl["program_time_s"] >= rtl["program_time_t17_s"]
+    assert r18["program_time_s"] >= r18["program_time_t17_s"]
+    print(f"{name}: (18) {r18['program_time_s']:.1f} s, time law {rtl['program_time_s']:.1f} s")
+
+
+def test_no_hard_violations_and_jump_warnings_are_explained(runs) -> None:
+    name, _b18, res = runs
+    assert res.violations == []
+    jw = [w for w in res.warnings() if "max_jump" in w]
+    assert all("max_accel" in w for w in jw)
+    assert res.timelaw["jump_warnings"] >= 0
+
+
+def test_stage_reuse_with_time_law(runs) -> None:
+    name, _b18, res = runs
+    path = EXAMPLES / f"{name}.toml"
+    other = res.job.replace(post={**res.job.post.model_dump(), "post": "fanuc"})
+    res2 = run_pipeline(other, path, previous=res)
+    assert res2.reused == STAGES[:5]
+    assert res2.timelaw is res.timelaw and res2.blocks is res.blocks
+    back = run_pipeline(_with_method(res.job, "blocks"), path, previous=res)
+    assert "blocks" not in back.reused and back.timelaw is None
+
+
+def test_toppra_is_the_lower_bound_of_the_tube() -> None:
+    """Second method on the same limits: the time-optimal TOPP-RA law bounds the tube law from below."""
+    path = EXAMPLES / "pipe.toml"
+    job = load_job(path)
+    base = run_pipeline(job, path, upto="axes")
+    tube = run_pipeline(_with_method(job, "tube"), path, previous=base, upto="blocks")
+    topp = run_pipeline(_with_method(job, "toppra"), path, previous=base, upto="blocks")
+    t_tube, t_topp = tube.timelaw["total_time_s"], topp.timelaw["total_time_s"]
+    assert t_topp <= t_tube * (1 + 1e-3)
+    assert t_tube <= t_topp * 1.05
+    assert topp.blocks.total == pytest.approx(t_topp, rel=0.01)
+
+
+def _blocks(speeds: np.ndarray, times: np.ndarray) -> Blocks:
+    delta = speeds * times[:, None]
+    q = np.vstack([np.zeros((1, speeds.shape[1])), np.cumsum(delta, axis=0)])
+    n = times.size
+    return Blocks("m", ("A", "X"), np.arange(n + 1), q, delta, times.copy(), times.copy(), np.ones(n),
+                  np.zeros(n), 0.05, cyclic=False)
+
+
+def test_jump_check_soft_and_hard() -> None:
+    from engine.kinematics import load_machine
+
+    m = load_machine("lathe2")          # X: max_jump 60 mm/s, max_accel 2000 mm/s²
+    pos = 0.5 * (m.axes[1].min + m.axes[1].max) - m.axes[1].offset
+    base = np.array([[0.0, 0.0]])
+    # jump of 100 mm/s over blocks of 0.1 s: 1000 mm/s² <= 2000 -> warning only
+    v = np.array([[10.0, 0.0], [10.0, 100.0], [10.0, 100.0]])
+    b = _blocks(v, np.full(3, 0.1))
+    b = Blocks(b.machine, b.axis_names, b.index, b.q + base + [0.0, pos + m.axes[1].offset], b.delta, b.t17,
+               b.time, b.alpha, b.max_error, b.tol_mm, cyclic=False)
+    hard, soft = timelaw_block_check(m, b)
+    assert hard == [] and len(soft) == 1 and "axis X: 1 block speed jumps" in soft[0]
+    # the same jump over blocks of 0.01 s: 10000 mm/s² > 2000 -> violation
+    b2 = _blocks(v, np.full(3, 0.01))
+    b2 = Blocks(b2.machine, b2.axis_names, b2.index, b2.q + [0.0, pos + m.axes[1].offset], b2.delta, b2.t17,
+                b2.time, b2.alpha, b2.max_error, b2.tol_mm, cyclic=False)
+    hard, soft = timelaw_block_check(m, b2)
+    assert [h.kind for h in hard] == ["jump"] and hard[0].axis == "X" and soft == []
