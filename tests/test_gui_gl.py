@@ -75,8 +75,8 @@ def test_3d_view_shows_the_revolved_mandrel(gl_window, qtbot) -> None:
     # the 3D area holds the rendered scene: a smooth background gradient at the top, the mandrel in the middle
     from PySide6.QtCore import QPoint
 
-    o = w.view3d.mapTo(w, QPoint(0, 0))
-    vw, vh = w.view3d.width(), w.view3d.height()
+    o = w.view3d.gl_widget.mapTo(w, QPoint(0, 0))
+    vw, vh = w.view3d.gl_widget.width(), w.view3d.gl_widget.height()
     top = [img.pixelColor(o.x() + vw - 20 - 40 * k, o.y() + 6) for k in range(5)]
     assert max(c.red() for c in top) - min(c.red() for c in top) <= 3  # no GL garbage
     assert all(c.blue() > c.red() for c in top)  # the bluish-grey background

@@ -1397,9 +1397,10 @@ class MainWindow(QMainWindow):
         """The window as an image, with the GL-drawn 3D view composed in (for docs and tests)."""
         img = self.grab().toImage()
         view = self.view3d.render_image()
-        if view is not None:
-            top_left = self.view3d.mapTo(self, QPoint(0, 0))
-            size = self.view3d.size()
+        gl = self.view3d.gl_widget
+        if view is not None and gl is not None:
+            top_left = gl.mapTo(self, QPoint(0, 0))
+            size = gl.size()
             painter = QPainter(img)
             painter.drawImage(QRect(top_left, size), view)
             painter.end()

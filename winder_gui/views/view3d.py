@@ -71,6 +71,8 @@ class MandrelView3D(QWidget):
         self._loader: JobRunner | None = None
         self._reset_camera = True
         self.paths: PathsViewData | None = None
+        self.gl_widget: QWidget | None = None
+        """The VTK render widget (below the animation controls), once created."""
         self.colour_by = COLOUR_BY[0]
         self.frame = 0
         self._anim = QTimer(self)
@@ -154,7 +156,8 @@ class MandrelView3D(QWidget):
         self.plotter = plotter
         self._layout.removeWidget(self._label)
         self._label.hide()
-        self._layout.addWidget(plotter.interactor if hasattr(plotter, "interactor") else plotter, 1)
+        self.gl_widget = plotter.interactor if hasattr(plotter, "interactor") else plotter
+        self._layout.addWidget(self.gl_widget, 1)
         self.backend = "vtk"
         if self.data is not None:
             self._render()
