@@ -1,0 +1,68 @@
+"""Payout stage benchmark: laws side by side on the example vessel, and the (13)–(15) solve times.
+
+Run: ``.venv/bin/python benchmarks/bench_payout.py [--points 4000] [--qp-time-limit 60]``.
+Prints, for k = 0 and k = 1, the pull-speed band of every law (the min-range law must have the
+smallest range) and the wall time of each technological problem at the given grid size.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import engine.payout as P
+from engine.job import build_mandrel, load_job
+from engine.winding import winding_line_for_job
+
+ROOT = Path(__file__).resolve().parents[1]
+JOB = ROOT / "resources" / "examples" / "pressure_vessel.toml"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--points", type=int, nargs="*", default=[1000, 4000])
+    ap.add_argument("--compare-points", type=int, default=1000)
+    ap.add_argument("--qp-time-limit", type=float, default=60.0)
+    args = ap.parse_args()
+    P._QP_TIME_LIMIT = args.qp_time_limit
+    job = load_job(JOB)
+    mandrel = build_mandrel(job, JOB)
+    t0 = time.perf_counter()
+    line = winding_line_for_job(job, JOB)
+    circ = line.one_circuit
+    print(f"{job.name}: winding line {line.z.size} points, {line.circuits} circuits "
+          f"({time.perf_counter() - t0:.2f} s); one circuit {circ.z.size} points, s = {circ.s[-1]:.1f} mm")
+    z0, z1 = mandrel.z_min, mandrel.z_max
+    curve = [(z0 - 150.0, 60.0), (z0, 150.0), (z1, 150.0), (z1 + 150.0, 60.0)]
+    print(f"\nLaws side by side ({args.compare_points} grid points, x = s, u dimensionless, U = 1):")
+    print(f"{'law':<14} {'k':>2} {'u_min':>9} {'u_max':>9} {'range':>9} {'jerk':>10} {'l_min':>7} {'l_max':>7}  ok")
+    for k in (0, 1):
+        spec = job.payout.model_copy(update={"impregnation_k": k, "grid_points": args.compare_points,
+                                             "curve_zr_mm": curve})
+        ranges = {}
+        for law in P.LAWS:
+            e = P.payout_law(circ, mandrel, spec, law=law)
+            r = e.report
+            ranges[law] = r["u_range"]
+            bad = [n for n, c in r["constraints"].items() if not c["ok"]]
+            print(f"{law:<14} {k:>2} {r['u_min']:9.4f} {r['u_max']:9.4f} {r['u_range']:9.4f} {r['jerk']:10.3f} "
+                  f"{r['l_min']:7.1f} {r['l_max']:7.1f}  {'yes' if r['feasible'] else 'NO: ' + ','.join(bad)}")
+        best = min(v for kk, v in ranges.items() if kk != "min-range")
+        print(f"   min-range range / best geometric range = {ranges['min-range'] / best:.3f}"
+              if best > 1e-12 else f"   min-range range {ranges['min-range']:.2e} (a geometric law is already flat)")
+    print("\nTechnological problems (13), (14), (15): wall time in s")
+    print(f"{'points':>6} {'k':>2} {'(13)':>7} {'(14)':>7} {'(15)':>7} {'total':>7}  iterations  qp backend")
+    for n in args.points:
+        for k in (0, 1):
+            spec = job.payout.model_copy(update={"impregnation_k": k, "grid_points": n})
+            e = P.min_range_law(circ, mandrel, spec)
+            sv = e.report["solver"]
+            s = sv["seconds"]
+            print(f"{e.x.size:6d} {k:>2} {s['13']:7.3f} {s['14']:7.3f} {s['15']:7.3f} {s['total']:7.3f}  "
+                  f"{sv['iterations']}  {sv['qp']}   range {e.report['u_range']:.4f} feasible {e.report['feasible']}")
+    print("\ntarget: (13)+(14)+(15) at 4000 points under 1 s together")
+
+
+if __name__ == "__main__":
+    main()
