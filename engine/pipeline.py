@@ -332,7 +332,7 @@ _TL_TOL_SPEED = 0.02    # node refinement: |X'_nodes - X'_path| / V at the axis-
 _TL_TOL_ACCEL = 0.10    # node refinement: |X''_nodes - X''_path| / A at the axis-speed cap squared
 _TL_STRIDE = 16         # initial node spacing (path points) before the refinement
 _TL_SPLIT_ROUNDS = 24   # block-splitting rounds for the speed-jump limits
-_TL_VB_SHARE = 0.9      # share of the time-optimal junction speed used as the circuit boundary speed
+_TL_VB_SHARE = 0.5      # share of the local speed cap used as the circuit boundary speed (halved if infeasible)
 
 
 class _NoPartial:
@@ -455,18 +455,18 @@ def _parametrize(method: str, nodes: tuple[np.ndarray, ...], limits: Any, state:
         return parametrize(*nodes, limits, method=method, state=_NoPartial(state))
 
 
-def _junction_speed(mid: tuple[np.ndarray, ...], limits: Any) -> float:
-    """The time-optimal path speed (TOPP-RA) where one repeated circuit meets the next, from rest to
-    rest over two circuits."""
-    from dataclasses import replace as dc_replace
-
-    s, X, D1, D2 = mid
-    L = float(s[-1])
-    s2 = np.concatenate([s, s[1:] + L])
-    X2 = np.concatenate([X, X[1:] + (X[-1] - X[0])])
-    law = _parametrize("toppra", (s2, X2, np.concatenate([D1, D1[1:]]), np.concatenate([D2, D2[1:]])),
-                       dc_replace(limits, sdot_start=0.0, sdot_end=0.0), None)
-    return float(law.sdot[s.size - 1])
+def _junction_cap(pieces: tuple[tuple[np.ndarray, ...], ...], V: np.ndarray, A: np.ndarray) -> float:
+    """A path speed the law can hold where circuits meet: the axis-speed cap ``min V/|X'|`` and the
+    curvature cap ``min sqrt(A/|X''|)`` on both sides of every junction (the law's limits would
+    otherwise make it slow down there anyway)."""
+    caps = [np.inf]
+    for nodes in pieces:
+        for k in (0, -1):
+            d1, d2 = np.abs(nodes[2][k]), np.abs(nodes[3][k])
+            with np.errstate(divide="ignore"):
+                caps.append(float(np.min(np.where(d1 > 0, V / np.where(d1 > 0, d1, 1.0), np.inf))))
+                caps.append(float(np.min(np.where(d2 > 0, np.sqrt(A / np.where(d2 > 0, d2, 1.0)), np.inf))))
+    return float(min(caps))
 
 
 def _time_law_blocks(res: PipelineResult, blocks: Any, state: State | None) -> tuple[Any, dict[str, Any]]:
@@ -498,10 +498,12 @@ def _time_law_blocks(res: PipelineResult, blocks: Any, state: State | None) -> t
         stop_percent=float(spec.stop_percent), sdot_start=0.0, sdot_end=0.0)
     pieces = _circuit_plan(res, s, X)
     check_cancel(state)
+    t_nodes = 0.0
     laws: list[Any] = []
     v_b = 0.0
     if len(pieces) == 1:
         nodes = _piece_arrays(s, X, *pieces[0], V, A)
+        t_nodes = time.perf_counter() - t_start
         laws = [_parametrize(spec.method, nodes, limits, state)]
         n_nodes = nodes[0].size
         piece_law = [0]
@@ -510,10 +512,10 @@ def _time_law_blocks(res: PipelineResult, blocks: Any, state: State | None) -> t
         mid = _piece_arrays(s, X, *pieces[1], V, A)
         last = _piece_arrays(s, X, *pieces[-1], V, A)
         n_nodes = first[0].size + mid[0].size + last[0].size
-        try:
-            v_b = _TL_VB_SHARE * _junction_speed(mid, limits)
-        except InfeasibleError:
-            v_b = 0.0
+        t_nodes = time.perf_counter() - t_start
+        v_b = _TL_VB_SHARE * _junction_cap((first, mid, last), np.asarray(limits.v_max), np.asarray(limits.a_max))
+        if spec.sdot_max is not None:
+            v_b = min(v_b, _TL_VB_SHARE * float(spec.sdot_max))
         # the circuits need not join smoothly (X' may change at the junction): the boundary speed
         # keeps the speed step of every axis there within its max_jump
         P = machine.limits("max_jump") / scales
@@ -546,6 +548,7 @@ def _time_law_blocks(res: PipelineResult, blocks: Any, state: State | None) -> t
         T[a:b + 1] = t0 + time_at(laws[li], s[a:b + 1] - s[a])
         t0 += laws[li].total_time_s
     law_total = t0
+    t_laws = time.perf_counter() - t_start - t_nodes
     check_cancel(state)
     out, split_info = _split_for_jumps(machine, axes, blocks, T, float(job.post.min_block_time_s))
     info = {
@@ -562,6 +565,8 @@ def _time_law_blocks(res: PipelineResult, blocks: Any, state: State | None) -> t
         "boundary_speed_mm_s": float(v_b),
         **split_info,
     }
+    info["phase_s"] = {"nodes": t_nodes, "laws": t_laws,
+                       "blocks": info["compute_s"] - t_nodes - t_laws}
     return out, info
 
 

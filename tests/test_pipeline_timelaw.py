@@ -138,3 +138,23 @@ def test_jump_check_soft_and_hard() -> None:
                 b2.time, b2.alpha, b2.max_error, b2.tol_mm, cyclic=False)
     hard, soft = timelaw_block_check(m, b2)
     assert [h.kind for h in hard] == ["jump"] and hard[0].axis == "X" and soft == []
+
+
+def test_repeated_circuit_laws_match_the_whole_program_law(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Second method: one law over the whole program (rest to rest, every node) against the laws of
+    one circuit repeated (first / middle x n-2 / last, boundary speed v_b between circuits)."""
+    import engine.pipeline as pl
+
+    path = EXAMPLES / "pipe.toml"
+    job = _with_method(load_job(path), "tube")
+    base = run_pipeline(job, path, upto="axes")
+    rep = run_pipeline(job, path, previous=base, upto="blocks")
+    assert rep.timelaw["pieces"] == base.line.circuits and rep.timelaw["laws_computed"] == 3
+    monkeypatch.setattr(pl, "_circuit_plan", lambda res, s, X: [(0, s.size - 1)])
+    whole = run_pipeline(job, path, previous=base, upto="blocks")
+    assert whole.timelaw["pieces"] == 1 and whole.timelaw["boundary_speed_mm_s"] == 0.0
+    t_rep, t_whole = rep.timelaw["total_time_s"], whole.timelaw["total_time_s"]
+    # the repeated laws pass the circuit junctions no faster than the whole-program law
+    assert t_whole * 0.99 <= t_rep <= t_whole * 1.06
+    assert whole.blocks.total == pytest.approx(t_whole, rel=0.01)
+    assert whole.violations == []
