@@ -70,10 +70,10 @@ from engine.state import check_cancel
 from winder_gui.panels.mandrel_panel import MandrelPanel
 from winder_gui.panels.section_panel import SectionPanel, payout_panel, winding_panel
 from winder_gui.panels.steps import STEPS, StepBar
-from winder_gui.views.geometry import MandrelViewData, mandrel_view_data, paths_view_data
+from winder_gui.views.geometry import MandrelViewData, mandrel_view_data
 from winder_gui.views.plots import AxesPlot, CoveragePlot, EyePlot, PullSpeedPlot, TimeLawPlot, WindingPlots
 from winder_gui.views.profile_plot import ProfilePlot
-from winder_gui.views.view3d import MAX_DISPLAY_POINTS, MAX_FRAMES, MandrelView3D
+from winder_gui.views.view3d import MandrelView3D
 from winder_gui.workers import JobRunner, cad_call
 
 if TYPE_CHECKING:  # engine.mandrel (scipy) is first imported by the build worker, off the start-up path
@@ -316,6 +316,7 @@ class MainWindow(QMainWindow):
         self._run_t0 = 0.0
         self._shown: dict[str, str] = {}
         self._laws_key = ""
+        self._paths_key: str | None = None
         self._autosaved: Path | None = None
         self.undo_stack = QUndoStack(self)
         self.pipe_runner = JobRunner(self)
@@ -927,6 +928,9 @@ class MainWindow(QMainWindow):
         self._checked = res
         self._partial = None
         self._show_result(res)
+        if out.paths is not None and (self.view3d.paths is None or self._paths_key != res.keys.get("payout")):
+            self._paths_key = res.keys.get("payout")
+            self._view_queue.append(lambda: self.view3d.set_paths(out.paths))
         self._view_queue.append(lambda: self.nc_panel.set_result(res, self.run_warnings))
         self._view_timer.start()
         took = time.monotonic() - self._run_t0
@@ -988,6 +992,7 @@ class MainWindow(QMainWindow):
         self._partial = None
         self.laws = None
         self._laws_key = ""
+        self._paths_key = None
         self._shown.clear()
         self._view_queue.clear()
         for page in (self.winding_plots, self.eye_plot, self.axes_plot, self.coverage_plot):
@@ -1013,15 +1018,10 @@ class MainWindow(QMainWindow):
 
         if fresh("winding", res.line):
             todo += [lambda: self.winding_plots.set_line(res.line), lambda: self.coverage_plot.set_line(res.line)]
-            if res.eye is None:
-                todo.append(lambda: self.view3d.set_paths(
-                    paths_view_data(res.line, None, MAX_DISPLAY_POINTS, MAX_FRAMES)))
         if fresh("payout", res.eye):
-            todo += [lambda: self.eye_plot.set_eye(res.eye_circuit, res.mandrel),
-                     lambda: self.view3d.set_paths(paths_view_data(res.line, res.eye, MAX_DISPLAY_POINTS, MAX_FRAMES))]
+            todo.append(lambda: self.eye_plot.set_eye(res.eye_circuit, res.mandrel))
         if fresh("blocks", res.blocks):
-            todo += self.axes_plot.plan(res.machine)
-            todo.append(lambda: self.axes_plot.set_blocks(res.blocks, res.machine))
+            todo += self.axes_plot.updates(res.blocks, res.machine)
         if todo:
             self._view_queue.extend(todo)
             self._view_timer.start()
@@ -1042,7 +1042,7 @@ class MainWindow(QMainWindow):
         job_law = res.eye_circuit.law if res is not None and res.eye_circuit is not None else ""
         param = res.job.payout.parameter if res is not None else "s"
         self._view_queue.extend([*self.pull_plot.plan(list(laws)),
-                                 lambda: self.pull_plot.set_laws(laws, job_law, param),
+                                 *self.pull_plot.updates(laws, job_law, param),
                                  lambda: self.laws_done.emit(laws)])
         self._view_timer.start()
 
@@ -1060,12 +1060,13 @@ class MainWindow(QMainWindow):
 
     def _on_timelaw_done(self, r: Any) -> None:
         self.timelaw = r
-        self.timelaw_plot.set_laws(r.tube, r.dp, r.toppra, r.source)
+        self._view_queue.extend(self.timelaw_plot.updates(r.tube, r.dp, r.toppra, r.source))
+        self._view_timer.start()
         self.timelaw_panel.summary.setText(
             f"{r.source}: tube {r.tube.total_time_s:.3f} s in {len(r.tube.iterations)} iterations; "
             f"single DP {r.dp.total_time_s:.3f} s; TOPP-RA bound {r.toppra.total_time_s:.3f} s")
         self._status("Time law computed")
-        self.timelaw_done.emit(r)
+        self._view_queue.append(lambda: self.timelaw_done.emit(r))
 
     def _on_timelaw_failed(self, exc: BaseException, tb: str) -> None:
         self.timelaw_panel.summary.setText("")

@@ -25,15 +25,20 @@ class RunOutput:
     result: Any
     warnings: list[str]
     violations: list[Any]
+    paths: Any = None
+    """:class:`winder_gui.views.geometry.PathsViewData` for the 3D view (thinned in the worker)."""
 
 
 def pipeline_task(job: Job, job_path: Path | None, previous: Any, upto: str, *, state: Any) -> RunOutput:
     """:func:`engine.pipeline.run_pipeline` up to ``upto``, re-using the unchanged stages of ``previous``."""
     from engine.pipeline import run_pipeline
+    from winder_gui.views.geometry import paths_view_data
+    from winder_gui.views.view3d import MAX_DISPLAY_POINTS, MAX_FRAMES
 
     res = run_pipeline(job, job_path, upto=upto, previous=previous, state=state)
     check_cancel(state)
-    return RunOutput(res, res.warnings(), list(res.violations))
+    paths = paths_view_data(res.line, res.eye, MAX_DISPLAY_POINTS, MAX_FRAMES) if res.line is not None else None
+    return RunOutput(res, res.warnings(), list(res.violations), paths)
 
 
 def laws_task(result: Any, *, state: Any) -> dict[str, Any]:

@@ -254,16 +254,22 @@ class PullSpeedPlot(PlotPage):
 
     def set_laws(self, laws: dict[str, Any], job_law: str, parameter: str) -> None:
         """Show ``laws`` (law name -> EyePath or an error message)."""
+        for step in (*self.plan(list(laws)), *self.updates(laws, job_law, parameter)):
+            step()
+
+    def updates(self, laws: dict[str, Any], job_law: str, parameter: str) -> list[Any]:
+        """Steps of :meth:`set_laws` after :meth:`plan` (one plot each), to run one per event-loop turn."""
         unit_x = "s [mm]" if parameter == "s" else "v [rad]"
         unit_u = "u = dλ/ds [–]" if parameter == "s" else "u = dλ/dv [mm/rad]"
-        for step in self.plan(list(laws)):
-            step()
-        for p in self.plots.values():
-            p.clear()
-        self.curves.clear()
-        self.laws = dict(laws)
-        notes = []
-        for col, (law, eye) in enumerate(laws.items()):
+        notes: list[str] = []
+
+        def start() -> None:
+            for p in self.plots.values():
+                p.clear()
+            self.curves.clear()
+            self.laws = dict(laws)
+
+        def one(col: int, law: str, eye: Any) -> None:
             p = self.plots[law]
             p.setTitle(f"{law}{' (job)' if law == job_law else ''}")
             p.setLabel("left", unit_u if col == 0 else "")
@@ -271,10 +277,12 @@ class PullSpeedPlot(PlotPage):
             if isinstance(eye, str):
                 p.addItem(pg.TextItem(eye[:160], color="#c01010"))
                 notes.append(f"{law}: not available")
-                continue
+                return
             self.set_curve(law, law, eye.x_mid, eye.u, LAW_COLOURS.get(law, "#333"), 2.0 if law == job_law else 1.5)
             notes.append(f"{law}: u {eye.u_min:.3g}…{eye.u_max:.3g}")
-        self._done(" · ".join(notes))
+
+        return [start, *[lambda c=c, law=law, e=e: one(c, law, e) for c, (law, e) in enumerate(laws.items())],
+                lambda: self._done(" · ".join(notes))]
 
 
 class AxesPlot(PlotPage):
@@ -311,25 +319,33 @@ class AxesPlot(PlotPage):
 
     def set_blocks(self, blocks: Any, machine: Any) -> None:
         """Show every axis of ``blocks`` (engine.blocks.Blocks) with the limits of ``machine``."""
-        for step in self.plan(machine):
+        for step in self.updates(blocks, machine):
             step()
-        for p in self.plots.values():
-            p.clear()
-        self.curves.clear()
+
+    def updates(self, blocks: Any, machine: Any) -> list[Any]:
+        """Steps of :meth:`set_blocks` (layout, then one axis each), to run one per event-loop turn."""
         t = np.concatenate([[0.0], np.cumsum(blocks.time)])
-        speed = blocks.speed
-        for k, ax in enumerate(machine.axes):
+
+        def start() -> None:
+            for p in self.plots.values():
+                p.clear()
+            self.curves.clear()
+
+        def axis(k: int, ax: Any) -> None:
             c = AXIS_COLOURS[k % len(AXIS_COLOURS)]
             pp, pv = self.plots[f"{ax.name}.q"], self.plots[f"{ax.name}.v"]
             self.set_curve(f"{ax.name}.q", f"{ax.name} position", t, blocks.q[:, k], c)
             # each block's constant speed drawn over its time span: (t_i, v_i), (t_i+1, v_i)
-            self.set_curve(f"{ax.name}.v", f"{ax.name} speed", np.repeat(t, 2)[1:-1], np.repeat(speed[:, k], 2), c)
+            v = blocks.delta[:, k] / blocks.time
+            self.set_curve(f"{ax.name}.v", f"{ax.name} speed", np.repeat(t, 2)[1:-1], np.repeat(v, 2), c)
             for lim in (ax.min, ax.max):
                 if math.isfinite(lim) and abs(lim) < 1e11:  # templates write "unlimited" as ±1e12
                     pp.addItem(pg.InfiniteLine(lim, angle=0, pen=_pen("#c01010", 1, True)))
             for lim in (-ax.max_speed, ax.max_speed):
                 pv.addItem(pg.InfiniteLine(lim, angle=0, pen=_pen("#c01010", 1, True)))
-        self._done(f"{blocks.n} blocks · program time {blocks.total:.2f} s · dashed red: limits")
+
+        return [*self.plan(machine), start, *[lambda k=k, ax=ax: axis(k, ax) for k, ax in enumerate(machine.axes)],
+                lambda: self._done(f"{blocks.n} blocks · program time {blocks.total:.2f} s · dashed red: limits")]
 
 
 class TimeLawPlot(PlotPage):
@@ -346,17 +362,25 @@ class TimeLawPlot(PlotPage):
 
     def set_laws(self, tube: Any, dp: Any, toppra: Any, source: str) -> None:
         """Show the tube law's iterations and the three final laws (engine.timeparam.TimeLaw)."""
-        self.clear_data()
+        for step in self.updates(tube, dp, toppra, source):
+            step()
+
+    def updates(self, tube: Any, dp: Any, toppra: Any, source: str) -> list[Any]:
+        """Steps of :meth:`set_laws` (a few curves each), to run one per event-loop turn."""
         its = tube.iterations
         n = len(its)
         shown = its if n <= MAX_ITERATION_CURVES else its[:: math.ceil(n / MAX_ITERATION_CURVES)] + [its[-1]]
-        for j, log in enumerate(shown):
+
+        def iteration(j: int, log: Any) -> None:
             col = pg.intColor(j, hues=max(len(shown), 2), values=1, maxValue=200)
             item = self.set_curve("iterations", f"iteration {log.r}", log.s, log.sdot, "#000", 1.2,
                                   legend=f"r = {log.r}" if j in (0, len(shown) - 1) else None)
             item.setPen(pg.mkPen(col, width=1.2))
-        last = its[-1] if its else None
-        if last is not None:
+
+        def tube_bounds() -> None:
+            last = its[-1] if its else None
+            if last is None:
+                return
             self.set_curve("iterations", "tube lower", last.s, last.lower, "#888", 1.0, True, legend="tube bounds")
             self.set_curve("iterations", "tube upper", last.s, last.upper, "#888", 1.0, True)
             for key, mask, sym, col in (("W touches", last.w_mask, "t", "#d62728"),
@@ -366,11 +390,17 @@ class TimeLawPlot(PlotPage):
                                      symbolBrush=col, symbolPen=None, name=key)
                 self.plots["iterations"].addItem(sc)
                 self.curves[key] = sc
-        for name, law, col in (("tube", tube, "#d62728"), ("DP", dp, "#1f77b4"), ("TOPP-RA", toppra, "#2ca02c")):
-            self.set_curve("final", f"final {name}", law.t, law.sdot, col, 2.0,
-                           legend=f"{name}: {law.total_time_s:.3f} s")
-        self._done(f"{source} · {n} tube iterations · T tube {tube.total_time_s:.3f} s, DP {dp.total_time_s:.3f} s, "
-                   f"TOPP-RA {toppra.total_time_s:.3f} s")
+
+        def finals() -> None:
+            for name, law, col in (("tube", tube, "#d62728"), ("DP", dp, "#1f77b4"),
+                                   ("TOPP-RA", toppra, "#2ca02c")):
+                self.set_curve("final", f"final {name}", law.t, law.sdot, col, 2.0,
+                               legend=f"{name}: {law.total_time_s:.3f} s")
+
+        return [self.clear_data, *[lambda j=j, log=log: iteration(j, log) for j, log in enumerate(shown)],
+                tube_bounds, finals,
+                lambda: self._done(f"{source} · {n} tube iterations · T tube {tube.total_time_s:.3f} s, "
+                                   f"DP {dp.total_time_s:.3f} s, TOPP-RA {toppra.total_time_s:.3f} s")]
 
 
 class CoveragePlot(PlotPage):
