@@ -199,6 +199,15 @@ def test_pipe_workflow(pipe_window, tmp_path, monkeypatch) -> None:
     # the progress bar went through the stages up to 100 %
     assert w.progress_bar.value() == 1000 and not w.progress_bar.isVisible()
 
+    # edits in quick succession while a run is in flight: the last edit's run supersedes the others
+    assert w.run_pipeline_now()
+    w.payout_panel.set_value("payout.clearance_mm", 24)
+    w.payout_panel.set_value("payout.clearance_mm", 26)
+    w.payout_panel.set_value("payout.clearance_mm", 25)
+    assert w.wait_idle(180000) and w.last_error == ""
+    assert w.result.job == w.job and w.result.job.payout.clearance_mm == 25.0
+    np.testing.assert_allclose(w.eye_plot.curve_data("eye")[1], 95.0, rtol=1e-9)
+
     # cancel a run in flight: the window is idle at once and keeps the finished stages
     before = w.result
     w.winding_panel.set_value("winding.dwell_deg.1", 170)
@@ -292,6 +301,34 @@ def test_bad_input_disables_run(pipe_window) -> None:
     assert "not a number" in w.machine_panel.table_error.text() and not w.actions["run"].isEnabled()
     w.machine_panel.set_cell("X", "max_speed", "")
     assert w.actions["run"].isEnabled() and w.machine_panel.table_error.isHidden()
+
+
+@pytest.mark.parametrize("text", ["", "abc", "nan", "1e999", "-1", "1,5:"])
+def test_any_text_in_any_field_never_crashes(pipe_window, text: str) -> None:
+    """Every field takes any text: either the job takes a valid value or the field shows why not and Run is off."""
+    w = pipe_window
+    for key, panel in w.section_panels.items():
+        for name in list(panel.rows):
+            if panel.rows[name].spec.kind == "choice":
+                continue
+            before = w.job
+            panel.set_value(name, text)
+            msg = panel.error_text(name) or panel.status.text()
+            if msg:
+                assert not w.actions["run"].isEnabled() and w.run_block_reason(), (name, text)
+                assert w.job == before  # nothing invalid reaches the job
+            panel.set_job(w.job)  # back to the job's values
+            panel._on_edited()
+            assert panel.errors() == "", (key, name, panel.errors())
+    for kind_key in [k for (kind, k) in w.mandrel_panel.rows if kind == "pipe"]:
+        w.mandrel_panel.set_value(kind_key, text)
+        assert w.wait_idle()
+        if w.mandrel_panel.error_text(kind_key):
+            assert not w.actions["run"].isEnabled()
+        w.mandrel_panel.set_spec(w.job.mandrel)
+        w.mandrel_panel.set_value(kind_key, getattr(w.job.mandrel, kind_key))
+        assert w.wait_idle() and w.actions["run"].isEnabled()
+    assert w.error_box is None
 
 
 def test_machine_template_axes_and_post(pipe_window) -> None:
