@@ -341,20 +341,26 @@ def envelope(geo: _Geo, contour: _Contour, clearance: float, l_cap: float,
     """
     ls = np.linspace(0.0, l_cap, _SCAN)
 
-    def ok_at(l: FloatArray) -> NDArray[np.bool_]:
-        Z, R, _, _ = geo.eye(l)
-        good = contour.distance(Z, R) >= clearance
-        if workspace is not None:
-            good &= workspace.contains(Z, R)
-        return good
-
     L = np.broadcast_to(ls, (geo.n, _SCAN))
-    ok = ok_at(L)
-    first, last, has = _first_true_run(ok)
+    Zs, Rs, _, _ = geo.eye(L)
+    dist_s = contour.distance(Zs, Rs)
+    ok = dist_s >= clearance
+    if workspace is not None:
+        ok &= workspace.contains(Zs, Rs)
+    # the free fibre (contact -> eye) must not pass through the mandrel: cut each row at the first
+    # sample inside it; of the admissible runs before the cut take the farthest one (on a concave
+    # mandrel a short pocket near the contact would make l jump between neighbouring points)
+    inside = dist_s < -0.01
+    inside[:, 0] = False
+    cut = np.where(inside.any(axis=1), np.argmax(inside, axis=1), _SCAN)
+    ok &= np.arange(_SCAN)[None, :] < cut[:, None]
+    rev_first, _, has = _first_true_run(ok[:, ::-1])
+    last = _SCAN - 1 - rev_first
+    before = (np.arange(_SCAN)[None, :] < last[:, None]) & ~ok
+    first = np.where(before.any(axis=1), _SCAN - 1 - np.argmax(before[:, ::-1], axis=1) + 1, 0)
     if not has.all():
         i = int(np.flatnonzero(~has)[0])
-        Z, R, _, _ = geo.eye(L)
-        dist = contour.distance(Z, R)
+        Z, R, dist = Zs, Rs, dist_s
         clear_any = (dist[i] >= clearance).any()
         z, x = geo.line.z[i], geo.x[i]
         if not clear_any:

@@ -88,3 +88,24 @@ def test_cli_subprocess() -> None:
     assert r.returncode == 0, r.stderr
     rep = json.loads(r.stdout)
     assert rep["feasible"] and rep["u_range"] > 0
+
+
+def test_bottle_free_fibre_never_crosses_the_mandrel() -> None:
+    """Concave neck: the chosen eye path keeps the whole free fibre outside the mandrel."""
+    from engine.payout import _Contour
+
+    path = ROOT / "resources" / "examples" / "bottle.toml"
+    job = load_job(path)
+    job = job.replace(payout=job.payout.model_copy(update={"grid_points": 300}))
+    mandrel = build_mandrel(job, path)
+    eye = payout_for_job(job, winding_line_for_job(job, path), mandrel)
+    assert eye.feasible
+    t = np.linspace(0.02, 1.0, 200)
+    pts = eye.contact_xyz[:, None, :] + (eye.eye_xyz - eye.contact_xyz)[:, None, :] * t[None, :, None]
+    d = _Contour(mandrel).distance(pts[..., 2], np.hypot(pts[..., 0], pts[..., 1]))
+    assert d.min() > -0.01
+    # the eye itself keeps the clearance; a coarser grid gives nearly the same band
+    assert (_Contour(mandrel).distance(eye.Z, eye.R) >= job.payout.clearance_mm - 1e-6).all()
+    coarse = payout_for_job(job.replace(payout=job.payout.model_copy(update={"grid_points": 150})),
+                            winding_line_for_job(job, path), mandrel)
+    assert abs(coarse.report["u_range"] - eye.report["u_range"]) < 0.25 * eye.report["u_range"]
