@@ -469,6 +469,58 @@ def _junction_cap(pieces: tuple[tuple[np.ndarray, ...], ...], V: np.ndarray, A: 
     return float(min(caps))
 
 
+def _same_nodes(a: tuple[np.ndarray, ...], b: tuple[np.ndarray, ...]) -> bool:
+    """Same nodes and derivatives (the positions may differ by a constant offset, e.g. the mandrel angle)."""
+    if a[0].shape != b[0].shape:
+        return False
+    return all(np.allclose(x, y, rtol=1e-9, atol=1e-9 * (1.0 + float(np.abs(y).max())))
+               for x, y in ((a[0], b[0]), (a[2], b[2]), (a[3], b[3])))
+
+
+def _end_law(method: str, nodes: tuple[np.ndarray, ...], mid: tuple[np.ndarray, ...], law_mid: Any,
+             limits: Any, at_start: bool, state: State | None) -> Any:
+    """The law of the first (``at_start``) or the last circuit.
+
+    When that circuit is the repeated one (same nodes), only its start (end) needs a law of its own:
+    from rest to the middle law's speed at node k (from that speed at node N-1-k to rest), spliced with
+    the middle law (constraints act per interval, so the splice is admissible); k = N/8, doubled while
+    no admissible ramp exists within k nodes.  Otherwise, or when no k works, the whole circuit.
+    """
+    from dataclasses import replace as dc_replace
+
+    from engine.errors import InfeasibleError
+    from engine.timeparam import curvature_energy
+
+    n = nodes[0].size
+    if _same_nodes(nodes, mid):
+        k = max(n // 8, 8)
+        while k < n - 1:
+            check_cancel(state)
+            try:
+                if at_start:
+                    part = _parametrize(method, tuple(x[:k + 1] for x in nodes),
+                                        dc_replace(limits, sdot_end=float(law_mid.sdot[k])), state)
+                    s = np.concatenate([part.s, law_mid.s[k + 1:]])
+                    sdot = np.concatenate([part.sdot, law_mid.sdot[k + 1:]])
+                    t = np.concatenate([part.t, part.t[-1] + law_mid.t[k + 1:] - law_mid.t[k]])
+                else:
+                    j = n - 1 - k
+                    part = _parametrize(method, tuple(x[j:] - (x[j] if i == 0 else 0.0) for i, x in enumerate(nodes)),
+                                        dc_replace(limits, sdot_start=float(law_mid.sdot[j])), state)
+                    s = np.concatenate([law_mid.s[:j], part.s + law_mid.s[j]])
+                    sdot = np.concatenate([law_mid.sdot[:j], part.sdot])
+                    t = np.concatenate([law_mid.t[:j], law_mid.t[j] + part.t])
+                return dc_replace(part, s=s, sdot=sdot, t=t, total_time_s=float(t[-1]),
+                                  max_accel_ratio=max(part.max_accel_ratio, law_mid.max_accel_ratio),
+                                  max_speed_ratio=max(part.max_speed_ratio, law_mid.max_speed_ratio),
+                                  max_sddot_ratio=max(part.max_sddot_ratio, law_mid.max_sddot_ratio),
+                                  energy=curvature_energy(t, sdot),
+                                  energy_mm=curvature_energy(t, sdot, speed_unit=1.0))
+            except InfeasibleError:
+                k *= 2
+    return _parametrize(method, nodes, limits, state)
+
+
 def _time_law_blocks(res: PipelineResult, blocks: Any, state: State | None) -> tuple[Any, dict[str, Any]]:
     """Block times from a time law s(t) of the whole program (see docs/timeparam.md, "NC output")."""
     from dataclasses import replace as dc_replace
@@ -526,13 +578,14 @@ def _time_law_blocks(res: PipelineResult, blocks: Any, state: State | None) -> t
         while True:
             check_cancel(state)
             try:
+                law_mid = _parametrize(spec.method, mid, dc_replace(limits, sdot_start=v_b, sdot_end=v_b),
+                                       SubState(state, 0.0, 0.6) if state is not None else None)
                 laws = [
-                    _parametrize(spec.method, first, dc_replace(limits, sdot_end=v_b),
-                                 SubState(state, 0.0, 0.3) if state is not None else None),
-                    _parametrize(spec.method, mid, dc_replace(limits, sdot_start=v_b, sdot_end=v_b),
-                                 SubState(state, 0.3, 0.7) if state is not None else None),
-                    _parametrize(spec.method, last, dc_replace(limits, sdot_start=v_b),
-                                 SubState(state, 0.7, 1.0) if state is not None else None),
+                    _end_law(spec.method, first, mid, law_mid, dc_replace(limits, sdot_end=v_b), True,
+                             SubState(state, 0.6, 0.8) if state is not None else None),
+                    law_mid,
+                    _end_law(spec.method, last, mid, law_mid, dc_replace(limits, sdot_start=v_b), False,
+                             SubState(state, 0.8, 1.0) if state is not None else None),
                 ]
                 break
             except InfeasibleError:
