@@ -13,6 +13,13 @@ Stages and the job sections they read (cumulative):
     axes     + [machine]
     blocks   + [post].tolerance_mm, [post].min_block_time_s, [timelaw]
     nc       + [post].post, [post].controller
+
+Block times: ``[timelaw].method = "blocks"`` (default) uses (17)/(18) (engine.blocks);
+``"tube"``, ``"dp"``, ``"toppra"`` time the blocks by a time law s(t) of the whole program
+(engine.timeparam): laws of the first, the repeated and the last circuit (or of the whole program when
+the circuits differ), block durations from the law, blocks split where their speed jumps exceed
+``max_jump``; ``PipelineResult.timelaw`` / the report's ``"timelaw"`` hold its figures.  See
+docs/timeparam.md, "The time law drives the NC output".
 """
 
 from __future__ import annotations
@@ -93,6 +100,11 @@ class PipelineResult:
             out.append(getattr(v, "message", str(v)))
         if self.timelaw is not None and self.blocks is not None and self.machine is not None:
             out += timelaw_block_check(self.machine, self.blocks)[1]
+            r = float(self.timelaw.get("max_accel_ratio", 0.0))
+            if r > 1.0 + 1e-6:
+                out.append(f"time law ({self.timelaw.get('method')}): axis accelerations inside the node intervals "
+                           f"reach {r:.3f} x the law's limit (TOPP-RA checks its grid points only); "
+                           f"the tube and dp methods keep them")
         return out
 
     def report(self) -> dict[str, Any]:
