@@ -20,6 +20,13 @@ ROOT = Path(__file__).resolve().parents[1]
 SCREENSHOT = ROOT / "docs" / "screenshots" / "main_window.png"
 
 
+@pytest.fixture(autouse=True)
+def _isolated(tmp_path, monkeypatch):
+    """Settings and autosave copies in the test's own folder, never the user's."""
+    monkeypatch.setenv("WINDER_SETTINGS", str(tmp_path / "settings.ini"))
+    monkeypatch.setenv("WINDER_AUTOSAVE_DIR", str(tmp_path / "autosave"))
+
+
 @pytest.fixture
 def gl_window(qtbot):
     from PySide6.QtGui import QGuiApplication
@@ -87,14 +94,12 @@ def test_3d_view_shows_the_revolved_mandrel(gl_window, qtbot) -> None:
 STEP_SHOTS = ROOT / "docs" / "screenshots"
 
 
-def test_workflow_3d_paths_and_step_screenshots(qtbot, tmp_path, monkeypatch) -> None:
+def test_workflow_3d_paths_and_step_screenshots(qtbot) -> None:
     """Run the vessel, check the drawn paths/eye/fibre against the engine, grab each step."""
     from PySide6.QtGui import QGuiApplication
 
     if QGuiApplication.platformName() in ("offscreen", "minimal"):
         pytest.skip("needs a real display (xvfb-run with QT_QPA_PLATFORM=xcb)")
-    monkeypatch.setenv("WINDER_SETTINGS", str(tmp_path / "settings.ini"))
-    monkeypatch.setenv("WINDER_AUTOSAVE_DIR", str(tmp_path / "autosave"))
     from winder_gui.main_window import MainWindow
     from winder_gui.views.geometry import to_view
 
