@@ -383,8 +383,8 @@ def source_under_test(rep: Report, app: Path) -> Path:
     snap = Path(str(info.get("source_snapshot", "")))
     digest = info.get("source_digest")
     if snap.is_dir() and source_digest(snap) == digest:
-        live = "unchanged" if source_digest() == digest else "changed since (not what this test compares)"
-        rep.info(f"source install under test: the build's snapshot {snap} (working tree {live})")
+        live = "identical" if source_digest() == digest else "has changed since; not compared"
+        rep.info(f"source install under test: the build's snapshot {snap} (the working tree {live})")
         return snap
     if source_digest() == digest:
         rep.info("source install under test: the working tree (identical to the build's sources)")
