@@ -158,3 +158,20 @@ def test_repeated_circuit_laws_match_the_whole_program_law(monkeypatch: pytest.M
     assert t_whole * 0.99 <= t_rep <= t_whole * 1.06
     assert whole.blocks.total == pytest.approx(t_whole, rel=0.01)
     assert whole.violations == []
+
+
+def test_progress_partials_and_cancel_inside_the_time_law() -> None:
+    from engine.errors import Cancelled
+    from engine.pipeline import PipelineResult
+    from engine.state import RecordingState
+
+    path = EXAMPLES / "pipe.toml"
+    job = _with_method(load_job(path), "tube")
+    base = run_pipeline(job, path, upto="axes")
+    st = RecordingState()
+    run_pipeline(job, path, previous=base, upto="blocks", state=st)
+    assert st.partials and all(isinstance(p, PipelineResult) for p in st.partials)   # no tube iterations
+    assert all(0.0 <= f <= 1.0 for f in st.fractions)
+    assert st.polls > 10
+    with pytest.raises(Cancelled):
+        run_pipeline(job, path, previous=base, upto="blocks", state=RecordingState(cancel_after=st.polls // 2))
