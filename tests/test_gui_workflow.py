@@ -380,6 +380,13 @@ def test_time_law_iterations(pipe_window) -> None:
     np.testing.assert_array_equal(w.timelaw_plot.curve_data("tube lower")[1], last.lower)
     np.testing.assert_array_equal(w.timelaw_plot.curve_data("W touches")[0], last.s[np.asarray(last.w_mask, bool)])
     np.testing.assert_array_equal(w.timelaw_plot.curve_data("O touches")[0], last.s[np.asarray(last.o_mask, bool)])
+    # the tube and touches of any iteration on demand
+    first = r.tube.iterations[0]
+    w.timelaw_plot.bounds_of.setValue(first.r)
+    np.testing.assert_array_equal(w.timelaw_plot.curve_data("tube upper")[1], first.upper)
+    np.testing.assert_array_equal(w.timelaw_plot.curve_data("W touches")[0], first.s[np.asarray(first.w_mask, bool)])
+    np.testing.assert_array_equal(w.timelaw_plot.curve_data("O touches")[1],
+                                  first.sdot[np.asarray(first.o_mask, bool)])
     for name, law in (("tube", r.tube), ("DP", r.dp), ("TOPP-RA", r.toppra)):
         x, y = w.timelaw_plot.curve_data(f"final {name}")
         np.testing.assert_array_equal(x, law.t)

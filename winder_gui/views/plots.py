@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import Qt
-from PySide6.QtWidgets import QFileDialog, QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QFileDialog, QHBoxLayout, QLabel, QPushButton, QSpinBox, QVBoxLayout, QWidget
 
 from engine.fileio import atomic_write_text
 
@@ -359,6 +359,33 @@ class TimeLawPlot(PlotPage):
         it.addLegend(offset=(10, 10))
         fin = self.add_plot("final", 1, 0, "ṡ [mm/s]", "t [s]", title="final ṡ(t)")
         fin.addLegend(offset=(10, 10))
+        self.iterations: list[Any] = []
+        self.bounds_of = QSpinBox()
+        self.bounds_of.setObjectName("timelaw.bounds_of")
+        self.bounds_of.setPrefix("tube bounds and W/O touches of iteration r = ")
+        self.bounds_of.setToolTip("Which iteration's tube (dashed) and touches (W: ▲ red, O: ● blue) are marked")
+        self.bounds_of.setEnabled(False)
+        self.bounds_of.valueChanged.connect(self.show_iteration)
+        self.layout().itemAt(0).layout().insertWidget(1, self.bounds_of)
+
+    def show_iteration(self, r: int) -> None:
+        """Mark the tube bounds and the W/O touches of iteration ``r`` (1-based, as in the iteration log)."""
+        log = next((x for x in self.iterations if x.r == r), None)
+        if log is None:
+            return
+        self.set_curve("iterations", "tube lower", log.s, log.lower, "#888", 1.0, True,
+                       legend="tube bounds" if "tube lower" not in self.curves else None)
+        self.set_curve("iterations", "tube upper", log.s, log.upper, "#888", 1.0, True)
+        for key, mask, sym, col in (("W touches", log.w_mask, "t", "#d62728"),
+                                    ("O touches", log.o_mask, "o", "#1f77b4")):
+            old = self.curves.pop(key, None)
+            if old is not None:
+                self.plots["iterations"].removeItem(old)
+            m = np.asarray(mask, dtype=bool)
+            sc = pg.PlotDataItem(log.s[m], log.sdot[m], pen=None, symbol=sym, symbolSize=7,
+                                 symbolBrush=col, symbolPen=None)
+            self.plots["iterations"].addItem(sc)
+            self.curves[key] = sc
 
     def set_laws(self, tube: Any, dp: Any, toppra: Any, source: str) -> None:
         """Show the tube law's iterations and the three final laws (engine.timeparam.TimeLaw)."""
@@ -378,18 +405,16 @@ class TimeLawPlot(PlotPage):
             item.setPen(pg.mkPen(col, width=1.2))
 
         def tube_bounds() -> None:
-            last = its[-1] if its else None
-            if last is None:
+            self.iterations = list(its)
+            if not its:
+                self.bounds_of.setEnabled(False)
                 return
-            self.set_curve("iterations", "tube lower", last.s, last.lower, "#888", 1.0, True, legend="tube bounds")
-            self.set_curve("iterations", "tube upper", last.s, last.upper, "#888", 1.0, True)
-            for key, mask, sym, col in (("W touches", last.w_mask, "t", "#d62728"),
-                                        ("O touches", last.o_mask, "o", "#1f77b4")):
-                m = np.asarray(mask, dtype=bool)
-                sc = pg.PlotDataItem(last.s[m], last.sdot[m], pen=None, symbol=sym, symbolSize=7,
-                                     symbolBrush=col, symbolPen=None, name=key)
-                self.plots["iterations"].addItem(sc)
-                self.curves[key] = sc
+            self.bounds_of.blockSignals(True)
+            self.bounds_of.setRange(its[0].r, its[-1].r)
+            self.bounds_of.setValue(its[-1].r)
+            self.bounds_of.blockSignals(False)
+            self.bounds_of.setEnabled(True)
+            self.show_iteration(its[-1].r)
 
         def finals() -> None:
             for name, law, col in (("tube", tube, "#d62728"), ("DP", dp, "#1f77b4"),
