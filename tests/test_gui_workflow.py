@@ -161,6 +161,12 @@ def test_steps_pages_and_units(pipe_window) -> None:
     assert {"File", "Edit", "Run", "View", "Tools", "Help"} <= menus
     assert w.actions["run"].shortcut().toString() == "F5"
     assert w.actions["undo"].shortcut().toString() == "Ctrl+Z"
+    w.actions["shortcuts"].trigger()
+    text = w.dialogs["shortcuts"].text()
+    for keys, what in (("F5", "Run pipeline"), ("Ctrl+Z", "Undo"), ("Esc", "Cancel"), ("Space", "Play / pause"),
+                       ("Ctrl+3", "3 Payout"), ("Ctrl+Shift+E", "Export NC program")):
+        assert f"<b>{keys}" in text and what in text, (keys, what)
+    w.dialogs["shortcuts"].close()
 
 
 def test_pipe_workflow(pipe_window, tmp_path, monkeypatch) -> None:

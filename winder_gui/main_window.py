@@ -531,6 +531,7 @@ class MainWindow(QMainWindow):
             lambda: self.open_tool("slotting", "winder_gui.dialogs.slotting", "SlotDialog"))
 
         self.menu_help = mb.addMenu("&Help")
+        add(self.menu_help, "shortcuts", "&Keyboard shortcuts", self._action_shortcuts, "F1")
         add(self.menu_help, "about", "&About winder", self._action_about)
 
     def _build_toolbar(self) -> None:
@@ -1364,6 +1365,22 @@ class MainWindow(QMainWindow):
         box.setAttribute(Qt.WidgetAttribute.WA_DeleteOnClose)
         box.open()
         self.dialogs["about"] = box
+
+    def shortcuts_text(self) -> str:
+        """Every menu command with a keyboard shortcut, as an HTML table."""
+        rows = []
+        for act in self.actions.values():
+            keys = ", ".join(k.toString(QKeySequence.SequenceFormat.NativeText) for k in act.shortcuts())
+            if keys:
+                rows.append(f"<tr><td><b>{keys}</b></td><td>{act.text().replace('&', '').rstrip('…')}</td></tr>")
+        return "<table cellspacing=4>" + "".join(rows) + "</table>"
+
+    def _action_shortcuts(self) -> None:
+        box = QMessageBox(QMessageBox.Icon.NoIcon, "Keyboard shortcuts", self.shortcuts_text(),
+                          QMessageBox.StandardButton.Ok, self)
+        box.setAttribute(Qt.WidgetAttribute.WA_DeleteOnClose)
+        box.open()
+        self.dialogs["shortcuts"] = box
 
     def open_tool(self, key: str, module: str, cls_name: str) -> QWidget | None:
         """Open a tool dialog ``module.cls_name(parent)`` (imported lazily); a message if unavailable."""
