@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -11,10 +13,11 @@ import pytest
 
 from engine.blocks import Blocks
 from engine.job import load_job
-from engine.pipeline import STAGES, run_pipeline, timelaw_block_check
+from engine.pipeline import STAGES, run_pipeline, timelaw_block_check, write_program
 from engine.post import load_controller
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "resources" / "examples"
+RS274 = shutil.which("rs274") or ("/usr/bin/rs274" if Path("/usr/bin/rs274").exists() else None)
 
 
 def _with_method(job, method: str):
@@ -175,3 +178,35 @@ def test_progress_partials_and_cancel_inside_the_time_law() -> None:
     assert st.polls > 10
     with pytest.raises(Cancelled):
         run_pipeline(job, path, previous=base, upto="blocks", state=RecordingState(cancel_after=st.polls // 2))
+
+
+@pytest.mark.rs274
+@pytest.mark.skipif(RS274 is None, reason="LinuxCNC's rs274 interpreter is not installed")
+def test_linuxcnc_reads_the_time_law_program(runs, tmp_path: Path) -> None:
+    """LinuxCNC's own interpreter: the durations of its moves sum to the law's time.
+
+    In G93 the interpreter turns ``F`` (1/min) into a units/min rate for the canonical move:
+    ``SET_FEED_RATE = F·L``, L = the XYZ length of the move, or its ABC length when no linear axis
+    moves; the move's duration is ``60·L / rate`` s.
+    """
+    name, _b18, res = runs
+    ngc = write_program(res, tmp_path / f"{name}.ngc")          # no violations: written without force
+    proc = subprocess.run([RS274, "-g", str(ngc)], stdin=subprocess.DEVNULL, capture_output=True, text=True,
+                          timeout=300)
+    out = proc.stdout + proc.stderr
+    assert proc.returncode == 0 and not re.search(r"(?i)\berror\b", out), out[-2000:]
+    rate, pos, total, moves = None, None, 0.0, 0
+    for m in re.finditer(r"SET_FEED_RATE\(([0-9.]+)\)|STRAIGHT_(FEED|TRAVERSE)\(([^)]*)\)", out):
+        if m.group(1) is not None:
+            rate = float(m.group(1))
+            continue
+        new = np.array([float(x) for x in m.group(3).split(",")][:6])
+        if m.group(2) == "FEED":
+            d = new - pos
+            L = float(np.linalg.norm(d[:3])) or float(np.linalg.norm(d[3:]))
+            total += 60.0 * L / rate if L > 0 else 0.0
+            moves += 1
+        pos = new
+    assert moves == res.blocks.n
+    print(f"{name}: rs274 program time {total:.3f} s, law {res.timelaw['total_time_s']:.3f} s")
+    assert total == pytest.approx(res.timelaw["total_time_s"], rel=0.01)
