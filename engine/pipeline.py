@@ -420,24 +420,32 @@ def _law_nodes(s: np.ndarray, X: np.ndarray, D1: np.ndarray, D2: np.ndarray, V: 
 def _circuit_plan(res: PipelineResult, s: np.ndarray, X: np.ndarray) -> list[tuple[int, int]]:
     """Path-index ranges ``(start, end)`` (inclusive) of the pieces that get a law each: the circuits
     when the middle ones repeat the same motion (up to constant axis offsets, e.g. the mandrel angle),
-    else the whole program as one piece."""
+    else the whole program as one piece.  Circuit k starts at line point ``k·points_per_circuit``;
+    ``EyePath.index`` maps line points to path points (the payout may drop zero-length steps)."""
     n = s.size
+    whole = [(0, n - 1)]
     line = res.line
     nc = int(getattr(line, "circuits", 1) or 1)
     m = int(getattr(line, "points_per_circuit", 0) or 0)
-    if nc < 3 or m < 2 or nc * m + 1 != n:
-        return [(0, n - 1)]
-    ref = slice(m, 2 * m + 1)
-    dq_ref = X[ref] - X[m]
-    ds_ref = s[ref] - s[m]
+    idx = getattr(res.eye, "index", None)
+    if nc < 3 or m < 2 or idx is None or len(idx) != n:
+        return whole
+    idx = np.asarray(idx, dtype=np.int64)
+    starts = np.arange(nc + 1) * m
+    bk = np.searchsorted(idx, starts)
+    if np.any(bk >= n) or np.any(idx[np.minimum(bk, n - 1)] != starts) or bk[-1] != n - 1:
+        return whole
+    pieces = [(int(bk[k]), int(bk[k + 1])) for k in range(nc)]
+    a1, b1 = pieces[1]
+    dq_ref = X[a1:b1 + 1] - X[a1]
+    ds_ref = s[a1:b1 + 1] - s[a1]
     tol_q = 1e-7 * (1.0 + np.abs(X).max(axis=0))
     tol_s = 1e-7 * (1.0 + abs(float(s[-1])))
-    for k in range(2, nc - 1):
-        sl = slice(k * m, (k + 1) * m + 1)
-        if (np.any(np.abs(X[sl] - X[k * m] - dq_ref) > tol_q)
-                or np.any(np.abs(s[sl] - s[k * m] - ds_ref) > tol_s)):
-            return [(0, n - 1)]
-    return [(k * m, (k + 1) * m) for k in range(nc)]
+    for a, b in pieces[2:-1]:
+        if (b - a != b1 - a1 or np.any(np.abs(X[a:b + 1] - X[a] - dq_ref) > tol_q)
+                or np.any(np.abs(s[a:b + 1] - s[a] - ds_ref) > tol_s)):
+            return whole
+    return pieces
 
 
 def _piece_arrays(s: np.ndarray, X: np.ndarray, a: int, b: int, V: np.ndarray, A: np.ndarray

@@ -210,3 +210,51 @@ def test_linuxcnc_reads_the_time_law_program(runs, tmp_path: Path) -> None:
     assert moves == res.blocks.n
     print(f"{name}: rs274 program time {total:.3f} s, law {res.timelaw['total_time_s']:.3f} s")
     assert total == pytest.approx(res.timelaw["total_time_s"], rel=0.01)
+
+
+def test_technological_path_speed_limit_from_the_job() -> None:
+    """[timelaw].sdot_max caps the laying speed: the laid length of every block over its duration."""
+    path = EXAMPLES / "pipe.toml"
+    job = _with_method(load_job(path), "dp")
+    base = run_pipeline(job, path, upto="axes")
+    free = run_pipeline(job, path, previous=base, upto="blocks")
+    cap = 40.0
+    slow_job = job.replace(timelaw={**job.timelaw.model_dump(), "sdot_max": cap})
+    slow = run_pipeline(slow_job, path, previous=base, upto="blocks")
+    s = base.eye.s
+    b = slow.blocks
+    laid_speed = np.diff(s[b.index]) / b.time
+    assert laid_speed.max() <= cap * (1 + 1e-9)
+    assert np.diff(s[free.blocks.index]).sum() == pytest.approx(s[-1] - s[0])
+    assert (np.diff(s[free.blocks.index]) / free.blocks.time).max() > cap
+    assert slow.blocks.total > free.blocks.total
+    # a program at most at cap needs at least the laid length / cap
+    assert slow.blocks.total >= (s[-1] - s[0]) / cap
+
+
+def test_cli_run_with_the_time_law(tmp_path: Path) -> None:
+    from engine.cli import main
+
+    job = tmp_path / "pipe_tube.toml"
+    job.write_text((EXAMPLES / "pipe.toml").read_text() + '\n[timelaw]\nmethod = "tube"\n')
+    out, rep = tmp_path / "p.ngc", tmp_path / "r.json"
+    assert main(["run", str(job), "-o", str(out), "--report", str(rep), "--quiet"]) == 0
+    data = json.loads(rep.read_text())
+    assert data["written"] is True and data["timelaw"]["method"] == "tube"
+    assert data["program_time_s"] == pytest.approx(data["timelaw"]["total_time_s"], rel=0.01)
+    assert _inverse_time_program_time(out.read_text()) == pytest.approx(data["timelaw"]["total_time_s"], rel=0.01)
+
+
+def test_winder_run_subprocess_prints_stage_times(tmp_path: Path) -> None:
+    import sys
+
+    winder = Path(sys.executable).parent / "winder"
+    if not winder.exists():
+        pytest.skip("winder entry point not installed")
+    job = tmp_path / "pipe_tube.toml"
+    job.write_text((EXAMPLES / "pipe.toml").read_text() + '\n[timelaw]\nmethod = "tube"\n')
+    proc = subprocess.run([str(winder), "run", str(job), "-o", str(tmp_path / "p.ngc")], capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "stages: mandrel" in proc.stderr and "blocks " in proc.stderr
+    assert (tmp_path / "p.ngc").read_text().count("G1 ") > 100
