@@ -62,6 +62,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     app = QApplication.instance() or QApplication([sys.argv[0], *[a for a in args if a.startswith("-platform")]])
     app.setApplicationName("winder")
     app.setOrganizationName("winder")
+    app.setDesktopFileName("winder")  # matches installer/winder.desktop (Wayland window grouping)
+    from PySide6.QtGui import QIcon
+
+    from engine.resources import resource_path
+
+    icon = resource_path("icons", "winder.svg")
+    if icon.exists():
+        app.setWindowIcon(QIcon(str(icon)))
     quit_when = os.environ.get(QUIT_ENV, "") or ("full" if "--selftest" in args else "")
     skip = {i + 1 for i, a in enumerate(args) if a == "-platform"}
     jobs = [a for i, a in enumerate(args) if not a.startswith("-") and i not in skip]

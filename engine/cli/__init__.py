@@ -51,9 +51,10 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``winder``; returns the process exit code."""
     args_list = list(sys.argv[1:] if argv is None else argv)
-    gui_flags = {"--selftest"}
-    if not args_list or (args_list[0].startswith("-") and set(args_list) <= gui_flags | {"--"}) or (
-        args_list and args_list[0].endswith(".toml") and len(args_list) == 1
+    gui_flags = {"--selftest", "--"}
+    # the GUI: no arguments, or only GUI flags and at most one job file
+    if all(a in gui_flags or a.lower().endswith(".toml") for a in args_list) and (
+        sum(a.lower().endswith(".toml") for a in args_list) <= 1
     ):
         from winder_gui.app import main as gui_main  # lazy: the CLI never needs Qt
 
