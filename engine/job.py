@@ -211,9 +211,14 @@ class MachineSpec(_Model):
 
 
 class TimeLawSpec(_Model):
-    """Time parametrization (see engine.timeparam)."""
+    """Time parametrization (see engine.timeparam).
 
-    method: Literal["blocks", "tube", "dp", "toppra"] = "blocks"
+    ``method``: ``"tube"`` (default: DP + tube time law, keeps every axis acceleration limit, sets the
+    block times), ``"dp"`` (single DP), ``"toppra"`` (time-optimal reference; may exceed accelerations
+    between nodes), ``"blocks"`` (the block times of (17)/(18): speed and speed-jump limits only).
+    """
+
+    method: Literal["blocks", "tube", "dp", "toppra"] = "tube"
     levels: Annotated[int, Field(ge=5, le=5000)] = 100
     penalty: NonNegMM = 0.5e-11
     tube_share: Annotated[float, Field(gt=0, lt=1)] = 0.1

@@ -192,15 +192,18 @@ def test_pipe_workflow(pipe_window, tmp_path, monkeypatch) -> None:
     _check_views(w)
 
     # the time-law method is read by the blocks stage only: the stages before it are re-used
+    assert w.job.timelaw.method == "tube"  # the default: the time law sets the block times
+    w.timelaw_panel.set_value("timelaw.method", "blocks")
+    assert w.job.timelaw.method == "blocks"
+    assert w.wait_idle(180000) and w.last_error == ""
+    assert w.result.reused == ("mandrel", "winding", "payout", "axes")
+    assert "(17)/(18)" in w.timelaw_panel.program_label.text()
+    _check_views(w)
     w.timelaw_panel.set_value("timelaw.method", "tube")
-    assert w.job.timelaw.method == "tube"
     assert w.wait_idle(180000) and w.last_error == ""
     assert w.result.reused == ("mandrel", "winding", "payout", "axes")
     if isinstance(getattr(w.result, "timelaw", None), dict):
         assert "tube law" in w.timelaw_panel.program_label.text()
-    _check_views(w)
-    w.timelaw_panel.set_value("timelaw.method", "blocks")
-    assert w.wait_idle(180000) and "(17)/(18)" in w.timelaw_panel.program_label.text()
 
     # the progress bar went through the stages up to 100 %
     assert w.progress_bar.value() == 1000 and not w.progress_bar.isVisible()

@@ -29,7 +29,7 @@ def runs(request: pytest.FixtureRequest):
     path = EXAMPLES / f"{request.param}.toml"
     job = load_job(path)
     base = run_pipeline(job, path, upto="axes")
-    blocks18 = run_pipeline(job, path, previous=base)
+    blocks18 = run_pipeline(_with_method(job, "blocks"), path, previous=base)
     tube = run_pipeline(_with_method(job, "tube"), path, previous=base)
     return request.param, blocks18, tube
 
