@@ -94,8 +94,7 @@ class PipelineResult:
                     f"max |λ| = {self.line.max_abs_lambda:.4g}"
                 )
         if self.eye_circuit is not None and not self.eye_circuit.feasible:
-            bad = self.eye_circuit.report.get("violations") or self.eye_circuit.report.get("constraints")
-            out.append(f"payout: the eye path violates a constraint: {bad}")
+            out += _payout_warnings(self.eye_circuit)
         for v in self.violations:
             out.append(getattr(v, "message", str(v)))
         if self.timelaw is not None and self.blocks is not None and self.machine is not None:
@@ -139,6 +138,27 @@ class PipelineResult:
         rep["warnings"] = self.warnings()
         rep["reused_stages"] = list(self.reused)
         return rep
+
+
+def _payout_warnings(eye: Any) -> list[str]:
+    """One line per payout constraint the eye path breaks: where and by how much."""
+    law = eye.report.get("law", "?")
+    cons = eye.report.get("constraints") or {}
+    out: list[str] = []
+    for name, c in cons.items():
+        if not isinstance(c, dict) or c.get("ok", True):
+            continue
+        if "l_end_minus_l_start" in c:
+            out.append(f"payout ({law} law): not cyclic, the free length differs by "
+                       f"{c['l_end_minus_l_start']:.3f} mm between the start and the end of a circuit")
+            continue
+        runs = c.get("violated") or []
+        where = "; ".join(f"z {r['z_from']:.2f}..{r['z_to']:.2f} mm ({r['points']} point{'s' * (r['points'] > 1)})"
+                          for r in runs[:3])
+        more = f" and {len(runs) - 3} more places" if len(runs) > 3 else ""
+        out.append(f"payout ({law} law): constraint '{name}' violated by up to {-float(c.get('min_slack', 0.0)):.4g} "
+                   f"at {where}{more}")
+    return out or [f"payout ({law} law): the eye path is not feasible"]
 
 
 def _speed_ratios(blocks: Any, machine: Any) -> dict[str, float]:

@@ -133,3 +133,16 @@ def test_cli_run_bad_job_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[st
     err = capsys.readouterr().err
     assert "machine.template" in err and "nosuch" in err
     assert not (tmp_path / "x.ngc").exists()
+
+
+def test_payout_warnings_name_the_constraint_and_place() -> None:
+    path = EXAMPLES / "pipe.toml"
+    res = run_pipeline(load_job(path), path, upto="payout")
+    eye = res.eye_circuit
+    broken = [k for k, c in eye.report["constraints"].items() if isinstance(c, dict) and not c.get("ok", True)]
+    warns = [w for w in res.warnings() if w.startswith("payout")]
+    assert (not eye.feasible) == bool(warns)
+    for name in broken:
+        assert any(f"'{name}'" in w or "cyclic" in w for w in warns), (name, warns)
+    for w in warns:
+        assert "{" not in w and "(parallel law)" in w
