@@ -580,6 +580,45 @@ def _monotone_chain(pts: np.ndarray, kidx: np.ndarray, nk: np.ndarray) -> tuple[
     return np.take_along_axis(order, pos, 1), m
 
 
+def _drop_parallel(allr: np.ndarray, order: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Remove hull vertices (constraint normals) parallel to their CCW successor.
+
+    Two consecutive hull normals that are parallel (an axis at rest or moving linearly gives rows
+    ``(g, c)`` with ``g`` at round-off level; the collinearity tolerance of the hull then keeps
+    both) have no intersection: the polygon vertex would be 0/0.  Of two parallel normals pointing
+    the same way the longer one is the tighter constraint; the shorter one is dropped.  Repeats
+    until no neighbours are parallel (the polygon is unchanged up to round-off).
+    """
+    B = order.shape[0]
+    br = np.arange(B)[:, None]
+    for _ in range(order.shape[1]):
+        V = order.shape[1]
+        tt = np.arange(V)[None, :]
+        valid = tt < m[:, None]
+        nxt = np.where(valid, (tt + 1) % np.maximum(m, 1)[:, None], 0)
+        na = allr[br, order]
+        nb = allr[br, order[br, nxt]]
+        la = np.hypot(na[..., 0], na[..., 1])
+        lb = np.hypot(nb[..., 0], nb[..., 1])
+        det = na[..., 0] * nb[..., 1] - na[..., 1] * nb[..., 0]
+        dot = na[..., 0] * nb[..., 0] + na[..., 1] * nb[..., 1]
+        par = valid & (m[:, None] > 3) & ~(det > 0) & (dot > 0)
+        if not par.any():
+            break
+        # drop the shorter of each parallel pair (the successor on a tie); one drop per row and pass
+        t_star = np.argmax(par, axis=1)
+        rows_ = np.flatnonzero(par.any(axis=1))
+        t0 = t_star[rows_]
+        t1 = nxt[rows_, t0]
+        gone = np.where(la[rows_, t0] < lb[rows_, t0], t0, t1)
+        keep = valid.copy()
+        keep[rows_, gone] = False
+        pos = np.argsort(~keep, axis=1, kind="stable")
+        order = np.take_along_axis(order, pos, 1)
+        m = keep.sum(axis=1)
+    return order, m
+
+
 def _chains(rows: np.ndarray, h: np.ndarray, xn_prev: np.ndarray, xn_cur: np.ndarray
             ) -> dict[str, np.ndarray]:
     """The feasible polygon of every interval in the ``(x_k, x_j) = (ṡ²_{i-1}, ṡ²_i)`` plane.
@@ -608,6 +647,16 @@ def _chains(rows: np.ndarray, h: np.ndarray, xn_prev: np.ndarray, xn_cur: np.nda
     nb = allr[br, order[br, np.where(valid, (tt + 1) % m[:, None], 0)]]
     det = na[..., 0] * nb[..., 1] - na[..., 1] * nb[..., 0]
     det = np.where(valid, det, 1.0)
+    if np.any(valid & ~(det > 0)):
+        order, m = _drop_parallel(allr, order, m)
+        V = int(m.max())
+        order = order[:, :V]
+        tt = np.arange(V)[None, :]
+        valid = tt < m[:, None]
+        na = allr[br, order]
+        nb = allr[br, order[br, np.where(valid, (tt + 1) % m[:, None], 0)]]
+        det = na[..., 0] * nb[..., 1] - na[..., 1] * nb[..., 0]
+        det = np.where(valid & (det > 0), det, 1.0)
     zx = (nb[..., 1] - na[..., 1]) / det                           # x_k of the polygon vertex
     zu = (na[..., 0] - nb[..., 0]) / det                           # u
     xk = zx
@@ -740,6 +789,16 @@ def _prepare(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, chains:
     if chains:
         ch = _chains(hull_rows, h, xn[:-1], xn[1:])
         cap_dp = _reachable(cap_box, h, ch, limits)
+        # The box is a relaxation of the node caps.  Where no axis limits the speed (axes at rest or
+        # moving linearly, large V, no sdot_max) it is orders of magnitude larger than the speeds any
+        # law reaches, and the flattened chains (abscissa x_j/xn + 3i) lose the polygon to round-off:
+        # rebuild them with the box of the reachable speeds (also a valid relaxation).
+        xn_r = (1.5 * cap_dp) ** 2 + 1.0
+        loose = (xn > 1e12) & (xn > 1e6 * xn_r)                 # ṡ > 670 m/s: no physical limit
+        if loose.any():
+            xn = np.where(loose, xn_r, xn)
+            ch = _chains(hull_rows, h, xn[:-1], xn[1:])
+            cap_dp = np.minimum(cap_dp, _reachable(cap_box, h, ch, limits))
     else:
         e = np.zeros(0)
         ch = {"rq": e, "rk": e, "lq": e, "lk": e, "xjb": e, "xjt": e}

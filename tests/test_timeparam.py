@@ -485,3 +485,26 @@ def test_straight_line_bang_bang_closed_form(method) -> None:
     assert law.total_time_s == pytest.approx(T, rel=5e-3)
     assert law.total_time_s >= T * (1 - 1e-9) or method == "toppra"
     assert np.max(law.sdot) == pytest.approx(math.sqrt(100.0 * 10.0), rel=5e-3)   # peak at the middle
+
+
+@pytest.mark.parametrize(("v_lin", "noise"), [(1e6, 1e-16), (1e9, 0.0), (1e12, 0.0)])
+def test_axis_at_rest_and_linear_axis(v_lin: float, noise: float) -> None:
+    """One axis constant, one linear in s (X'' = 0, maybe round-off noise on the derivatives), no sdot_max.
+
+    The constraint normals of such intervals are parallel or at round-off level; the hull/chains used
+    to give 0/0 vertices (NaN, "path speed is unbounded") or lose the thin feasible polygon inside a
+    huge speed box (wrong windows, "no admissible law").  The answer is the bang-bang closed form of
+    the linear axis: L = 20 mm of axis travel, |a| <= 100 mm/s², T = 2·sqrt(L/a).
+    """
+    rng = np.random.default_rng(5)
+    s = np.linspace(0.0, 10.0, 21)
+    X = np.stack([np.full_like(s, 3.0), 2.0 * s], 1)
+    dX = np.stack([rng.normal(0.0, noise, s.size), 2.0 + rng.normal(0.0, noise, s.size)], 1)
+    ddX = rng.normal(0.0, noise, X.shape)
+    lim = TimeLimits(v_max=(5.0, v_lin), a_max=(10.0, 100.0), levels=50)
+    prob = prepare(s, X, dX, ddX, lim)
+    assert np.all(np.isfinite(prob.cap_dp)) and np.all(np.isfinite(prob.rk)) and np.all(np.isfinite(prob.lk))
+    law = parametrize(s, X, dX, ddX, lim, method="tube")
+    T = 2.0 * math.sqrt(20.0 / 100.0)
+    assert T * (1 - 1e-9) <= law.total_time_s <= T * 1.005
+    assert law.max_accel_ratio <= 1.0 + 1e-9

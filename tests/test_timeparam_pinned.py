@@ -1,0 +1,47 @@
+"""The DP + tube answers on the paper-sized example, pinned before the speed work of issue 6.
+
+Recorded with engine/timeparam.py at commit 95be922 (before the optimisation): every later change to
+the DP, the hull/chains or the tube must reproduce them -- total time to 1e-9 relative, the same
+iteration count and the same W/O touch counts in every iteration.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import pytest
+
+from engine.timeparam import parametrize
+from engine.timeparam_example import example_limits, example_path
+
+# M -> (total time of every iteration (s), (W, O) touches of every iteration)
+PINNED = {
+    74: ([7.141349496222921, 6.732151695733205, 6.534406822304678, 6.4412433026275036, 6.402321834990476,
+          6.380812807627346],
+         [(0, 0), (22, 2), (6, 2), (1, 2), (0, 2), (0, 2)]),
+    80: ([7.041519311447896, 6.6631475194188745, 6.5025312625334415, 6.425098343971128, 6.389602268060745,
+          6.374761622992732, 6.365964086797974],
+         [(0, 0), (20, 2), (5, 2), (0, 2), (2, 2), (0, 2), (0, 2)]),
+    90: ([6.920876524629107, 6.58307702704502, 6.456748749217984, 6.40312363061391, 6.378170104169611],
+         [(0, 0), (17, 2), (2, 2), (0, 2), (0, 2)]),
+    100: ([6.834929337060371, 6.525820663640517, 6.425058503277312, 6.388804606870523, 6.3716923116465205],
+          [(0, 0), (11, 2), (1, 2), (0, 2), (0, 2)]),
+}
+
+
+@pytest.fixture(scope="module")
+def example():
+    return (*example_path(), example_limits())
+
+
+@pytest.mark.parametrize("M", sorted(PINNED))
+def test_tube_answer_is_pinned(example, M: int) -> None:
+    s, X, dX, ddX, lim = example
+    law = parametrize(s, X, dX, ddX, replace(lim, levels=M), method="tube")
+    times, touches = PINNED[M]
+    assert len(law.iterations) == len(times)
+    assert law.total_time_s == pytest.approx(times[-1], rel=1e-9, abs=0)
+    for it, t, (w, o) in zip(law.iterations, times, touches):
+        assert it.total_time_s == pytest.approx(t, rel=1e-9, abs=0)
+        assert (it.w_touches, it.o_touches) == (w, o)
+    assert law.iterations[-1].stop and law.max_accel_ratio <= 1.0 + 1e-9
