@@ -481,6 +481,11 @@ def _poly_eval(coef: np.ndarray, tau: np.ndarray) -> np.ndarray:
     return out
 
 
+def _rows(B: int, R: int) -> np.ndarray:
+    """Flat offsets of the rows of a C-contiguous (B, R) array, shape (B, 1)."""
+    return np.arange(0, B * R, R, dtype=np.intp)[:, None]
+
+
 def _hull_ccw(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Convex hull vertices of every row of ``pts`` (B, R, 2), counter-clockwise.
 
@@ -490,18 +495,21 @@ def _hull_ccw(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """
     B, R0, _ = pts.shape
     # hull membership is invariant under a per-row axis scaling: make every cloud round-ish first
-    sc = np.max(np.abs(pts), axis=1, keepdims=True)
-    pts = pts / np.where(sc > 0, sc, 1.0)
+    px, py = np.ascontiguousarray(pts[..., 0]), np.ascontiguousarray(pts[..., 1])   # (B, R0) each
+    for a in (px, py):
+        sc = np.abs(a).max(axis=1, keepdims=True)
+        a /= np.where(sc > 0, sc, 1.0)
     # exact pre-filter: drop the points strictly inside the polygon of the extreme points in D
     # directions (they cannot be hull vertices), then scan only the few that are left
     D = 8
     th = np.linspace(0.0, 2.0 * np.pi, D + 1)[:-1]
-    px, py = pts[..., 0], pts[..., 1]
-    proj = px[..., None] * np.cos(th)
-    proj += py[..., None] * np.sin(th)
-    ext = np.argmax(proj, axis=1)                                                         # (B, D) CCW
-    vx = np.take_along_axis(px, ext, 1)
-    vy = np.take_along_axis(py, ext, 1)
+    proj = np.cos(th)[:, None] * px[:, None, :]                                           # (B, D, R0)
+    proj += np.sin(th)[:, None] * py[:, None, :]
+    ext = np.argmax(proj, axis=2)                                                         # (B, D) CCW
+    pxf, pyf = px.ravel(), py.ravel()
+    ext += _rows(B, R0)
+    vx = pxf[ext]
+    vy = pyf[ext]
     # each point is tested against the edge of conv(extreme points) whose wedge (seen from the
     # origin, inside the hull) holds its polar angle
     phi = np.arctan2(vy, vx)
@@ -512,8 +520,12 @@ def _hull_ccw(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     k = np.searchsorted((phi + off).ravel(), (psi + off).ravel(), side="right").reshape(B, R0) - 1
     k = np.clip(k - np.arange(B)[:, None] * D, 0, D - 1)
     k2 = (k + 1) % D
-    ax_, ay_ = np.take_along_axis(vx, k, 1), np.take_along_axis(vy, k, 1)
-    ex, ey = np.take_along_axis(vx, k2, 1) - ax_, np.take_along_axis(vy, k2, 1) - ay_
+    offD = _rows(B, D)
+    k += offD
+    k2 += offD
+    vxf, vyf = vx.ravel(), vy.ravel()
+    ax_, ay_ = vxf[k], vyf[k]
+    ex, ey = vxf[k2] - ax_, vyf[k2] - ay_
     dx, dy = px - ax_, py - ay_
     crs = ex * dy - ey * dx
     e2 = ex * ex + ey * ey
@@ -521,20 +533,24 @@ def _hull_ccw(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     keep = ~inside
     kidx = np.argsort(~keep, axis=1, kind="stable")
     nk = keep.sum(axis=1)
-    return _monotone_chain(pts, kidx, nk)
+    return _monotone_chain(px, py, kidx, nk)
 
 
-def _monotone_chain(pts: np.ndarray, kidx: np.ndarray, nk: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Andrew's monotone chain on the first ``nk[b]`` points ``kidx[b]`` of every row of ``pts``."""
-    B = pts.shape[0]
+def _monotone_chain(px: np.ndarray, py: np.ndarray, kidx: np.ndarray, nk: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Andrew's monotone chain on the first ``nk[b]`` points ``kidx[b]`` of every row of ``(px, py)``."""
+    B = px.shape[0]
     R = int(nk.max())
     kidx = kidx[:, :R]
     kidx = np.where(np.arange(R)[None, :] < nk[:, None], kidx, kidx[:, :1])   # pad with a duplicate
-    sub = np.take_along_axis(pts, kidx[..., None], 1)
-    order = np.lexsort((sub[..., 1], sub[..., 0]), axis=-1)
-    X = np.take_along_axis(sub[..., 0], order, axis=1)
-    Y = np.take_along_axis(sub[..., 1], order, axis=1)
-    order = np.take_along_axis(kidx, order, 1)
+    kflat = kidx + _rows(B, px.shape[1])                      # into the flat (B*R0) points
+    sub_x = px.ravel()[kflat]
+    sub_y = py.ravel()[kflat]
+    order = np.lexsort((sub_y, sub_x), axis=-1)
+    order += _rows(B, R)
+    X = sub_x.ravel()[order]
+    Y = sub_y.ravel()[order]
+    order = kidx.ravel()[order]
     ar = np.arange(R)
 
     def peel(Xs: np.ndarray, Ys: np.ndarray) -> np.ndarray:
@@ -546,15 +562,19 @@ def _monotone_chain(pts: np.ndarray, kidx: np.ndarray, nk: np.ndarray) -> tuple[
         act = np.arange(B)
         for _ in range(R):
             al, Xa, Ya = alive[act], Xs[act], Ys[act]
+            off = _rows(act.size, R)
+            Xaf, Yaf = Xa.ravel(), Ya.ravel()
             prv = np.maximum.accumulate(np.where(al, ar, -1), axis=1)
             prv = np.concatenate([np.full((act.size, 1), -1), prv[:, :-1]], axis=1)
             nxt = np.minimum.accumulate(np.where(al, ar, R)[:, ::-1], axis=1)[:, ::-1]
             nxt = np.concatenate([nxt[:, 1:], np.full((act.size, 1), R)], axis=1)
             inner = al & (prv >= 0) & (nxt < R)
             pa = np.clip(prv, 0, R - 1)
+            pa += off
             pc = np.clip(nxt, 0, R - 1)
-            ax_, ay_ = np.take_along_axis(Xa, pa, 1), np.take_along_axis(Ya, pa, 1)
-            cx_, cy_ = np.take_along_axis(Xa, pc, 1), np.take_along_axis(Ya, pc, 1)
+            pc += off
+            ax_, ay_ = Xaf[pa], Yaf[pa]
+            cx_, cy_ = Xaf[pc], Yaf[pc]
             e1x, e1y, e2x, e2y = Xa - ax_, Ya - ay_, cx_ - Xa, cy_ - Ya
             cr = e1x * e2y - e1y * e2x
             bad_ = inner & ((cr <= 0) | (cr * cr <= 1e-24 * (e1x * e1x + e1y * e1y) * (e2x * e2x + e2y * e2y)))
@@ -875,45 +895,59 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
         xall = lev * lev
     # --- windows (closed form): the feasible x_k of level j at node i form [L(x_j), R(x_j)] ------
     xj = xall[1:]
-    q = (xj / prob.xn[:, None] + 3.0 * np.arange(n - 1)[:, None]).ravel()
+    q = xj / prob.xn[:, None]
+    q += 3.0 * np.arange(n - 1)[:, None]
+    q = q.ravel()
     ub = np.interp(q, prob.rq, prob.rk).reshape(n - 1, M)
     lb = np.interp(q, prob.lq, prob.lk).reshape(n - 1, M)
-    ok = (xj >= prob.xjb[:, None]) & (xj <= prob.xjt[:, None]) & (ub >= lb) & (ub >= 0)
+    ok = xj >= prob.xjb[:, None]
+    ok &= xj <= prob.xjt[:, None]
+    ok &= ub >= lb
+    ok &= ub >= 0
     ok[degenerate[1:], 1:] = False
     if square:
         pk_lo = np.maximum(lb, 0.0)
         pk_hi = ub
     else:
-        pk_lo = np.sqrt(np.maximum(lb, 0.0))
-        pk_hi = np.sqrt(np.maximum(ub, 0.0))
+        pk_lo = np.sqrt(np.maximum(lb, 0.0, out=lb), out=lb)
+        pk_hi = np.sqrt(np.maximum(ub, 0.0, out=ub), out=ub)
     lo_p = plo[:-1, None]
     sp_p = np.where(degenerate[:-1], 1.0, span[:-1])[:, None]
-    ylo = (pk_lo - lo_p) / sp_p                               # fraction of the span
-    yhi = (pk_hi - lo_p) / sp_p
-    # index of the first level >= / last level <= a fraction, through a lookup table whose bins
-    # hold at most one level each (the estimate is then exact or one off; corrected below)
+    # index of the first level >= / last level <= a fraction of the span, through a lookup table
+    # whose bins hold at most one level each (the estimate is then exact or one off; corrected below)
     nb = int(2.0 / max(float(np.min(np.diff(frac))), 1e-9)) + 2
     edges = np.arange(nb + 1) / nb
-    t_lo = np.searchsorted(frac, edges[:-1], side="left").astype(float)
-    t_hi = np.searchsorted(frac, edges[1:], side="right") - 1.0
-    klo = t_lo[np.clip((ylo * nb).astype(np.int64), 0, nb - 1)]
-    khi = t_hi[np.clip((yhi * nb).astype(np.int64), 0, nb - 1)]
+    t_lo = np.searchsorted(frac, edges[:-1], side="left")
+    t_hi = np.searchsorted(frac, edges[1:], side="right") - 1
+    y = pk_lo - lo_p
+    y /= sp_p                                                 # fraction of the span
+    y *= nb
+    klo = t_lo[np.clip(y.astype(np.int64), 0, nb - 1)]
+    np.subtract(pk_hi, lo_p, out=y)
+    y /= sp_p
+    y *= nb
+    khi = t_hi[np.clip(y.astype(np.int64), 0, nb - 1)]
     # exact correction against the actual level values (the index maps are only rounded)
-    rowp = (np.arange(n - 1) * M)[:, None]
+    rowp = np.arange(0, (n - 1) * M, M, dtype=np.int64)[:, None]
     levp = lev.ravel() if not square else xall.ravel()
-    kli = np.minimum(klo, M - 1).astype(np.int64)
-    klo = np.where((klo <= M - 1) & (levp[rowp + kli] < pk_lo), klo + 1, klo)
-    khi_i = np.maximum(khi, 0).astype(np.int64)
-    khi = np.where((khi >= 0) & (levp[rowp + khi_i] > pk_hi), khi - 1, khi)
+    kix = np.minimum(klo, M - 1)
+    kix += rowp
+    klo += (klo <= M - 1) & (levp[kix] < pk_lo)
+    np.maximum(khi, 0, out=kix)
+    kix += rowp
+    khi -= (khi >= 0) & (levp[kix] > pk_hi)
     degp = degenerate[:-1]
     if degp.any():
         inside = (lo_p[degp] >= pk_lo[degp]) & (lo_p[degp] <= pk_hi[degp])
-        klo[degp] = 0.0
-        khi[degp] = np.where(inside, 0.0, -1.0)
-    cnt = np.where(ok, khi - klo + 1.0, 0.0)
-    bad = cnt <= 0
-    cnt_eff = np.where(bad, 1, cnt).astype(np.int64)                       # (N-1, M)
-    klo_i = np.where(bad, 0.0, klo).astype(np.int64)
+        klo[degp] = 0
+        khi[degp] = np.where(inside, 0, -1)
+    cnt_eff = khi - klo
+    cnt_eff += 1
+    cnt_eff[~ok] = 0
+    bad = cnt_eff <= 0
+    cnt_eff[bad] = 1                                                     # (N-1, M)
+    klo[bad] = 0
+    klo_i = klo
     # --- forward pass, in chunks of whole intervals of <= _CHUNK candidates ----------------------
     # Each candidate's cost has its position w in the window written into the low 12 bits of its
     # float64 pattern (costs are >= 0, so the integer order is the float order): one integer
@@ -938,7 +972,14 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
     uniform_h = bool(np.ptp(h) <= 1e-12 * h.max())
     kq_h = Kq / (h * h)
     ar_all = np.arange(_CHUNK + int(per_int.max()), dtype=np.int64)
-    def build(i0: int, i1: int) -> tuple:
+    # work buffers, one set per chunk parity (the next chunk may be built while this one is used)
+    t_max = min(int(per_int.sum()), _CHUNK + int(per_int.max()))
+    bufs: list[tuple[np.ndarray, ...] | None] = [None, None]
+
+    def build(i0: int, i1: int, par: int = 0) -> tuple:
+        if bufs[par] is None:
+            bufs[par] = (np.empty(t_max), np.empty(t_max), np.empty(t_max), np.empty(t_max, np.int64))
+        b_vk, b_ssum, b_cost, b_glow = bufs[par]
         ni = i1 - i0
         ce = cnt_eff[i0:i1].ravel()
         st = np.zeros(ce.size + 1, np.int64)
@@ -948,15 +989,15 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
         base = (np.arange(i0, i1, dtype=np.int64) * M)[:, None] + klo_i[i0:i1]
         G = np.repeat(base.ravel() - st[:-1], ce)
         G += ar_all[:T]
-        glow = G & _LOMASK
-        vk = levf[G]
+        glow = np.bitwise_and(G, _LOMASK, out=b_glow[:T])
+        vk = np.take(levf, G, out=b_vk[:T], mode="clip")       # G is in range; "clip" is unbuffered
         vj = np.repeat(levf[(i0 + 1) * M:(i1 + 1) * M], ce)
-        ssum = vk + vj
+        ssum = np.add(vk, vj, out=b_ssum[:T])
         vj -= vk
         diff = vj
         if uniform_h:
             with np.errstate(divide="ignore"):
-                cost = np.divide(two_h[i0], ssum)
+                cost = np.divide(two_h[i0], ssum, out=b_cost[:T])
             if K > 0:
                 diff *= ssum
                 diff *= diff
@@ -965,7 +1006,7 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
         else:
             per = ce.reshape(ni, M).sum(axis=1)
             with np.errstate(divide="ignore"):
-                cost = np.repeat(two_h[i0:i1], per) / ssum
+                cost = np.divide(np.repeat(two_h[i0:i1], per), ssum, out=b_cost[:T])
             if K > 0:
                 diff *= ssum
                 diff *= diff
@@ -980,12 +1021,12 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
 
     chunks = list(zip(bounds[:-1], bounds[1:]))
     pool = _pool() if len(chunks) > 1 and _threads_wanted() else None
-    fut = pool.submit(build, *chunks[0]) if pool is not None else None
+    fut = pool.submit(build, *chunks[0], 0) if pool is not None else None
     for c, (i0, i1) in enumerate(chunks):
         if pool is not None:
             G, glow, cost, segl, starts0, ends = fut.result()
             if c + 1 < len(chunks):
-                fut = pool.submit(build, *chunks[c + 1])       # build the next chunk meanwhile
+                fut = pool.submit(build, *chunks[c + 1], (c + 1) % 2)   # build the next chunk meanwhile
         else:
             G, glow, cost, segl, starts0, ends = build(i0, i1)
         ni = i1 - i0
