@@ -33,6 +33,11 @@ def _timed(fn, repeat: int):
     return out, statistics.median(walls), statistics.median(cpus)
 
 
+def _cpu(fn, repeat: int = 5) -> float:
+    """Median process CPU time (s) of ``fn()``."""
+    return _timed(fn, repeat)[2]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="fewer repeats")
@@ -73,6 +78,26 @@ def main() -> None:
     arr, w_arr, c_arr = _timed(lambda: run(replace(lim, levels=1100, accel_check="arrival"), "dp"), 1)
     row("DP M=1100 arrival chk", arr, w_arr, c_arr)
 
+    print()
+    print("where the time of the tube run goes (CPU, median of 5):")
+    for M in (80, 100):
+        lm = replace(lim, levels=M)
+        prep = _cpu(lambda lm=lm: tp._prepare(s, X, dX, ddX, lm))
+        prob = tp._prepare(s, X, dX, ddX, lm)
+        lo, hi = tp._bounds_check(prob)
+        nominal = _cpu(lambda prob=prob, lo=lo, hi=hi, M=M: tp._dp(prob, lo, hi, M))
+        law = results[M][0]
+        it = law.iterations[2]
+        tube_pass = _cpu(lambda prob=prob, it=it, M=M: tp._dp(prob, it.lower, it.upper, M, cluster=lim.tube_cluster))
+        tube = _cpu(lambda prob=prob: tp._tube(prob, None))
+        report = _cpu(lambda prob=prob, law=law: (tp.evaluate_limits(prob, law.sdot),
+                                                  tp.curvature_energy(law.t, law.sdot),
+                                                  tp.curvature_energy(law.t, law.sdot, speed_unit=1.0)))
+        n_dp = len(law.iterations)
+        print(f"  M = {M}: set-up (quintic, hull, chains, reachable speeds) {prep * 1e3:5.1f} ms; "
+              f"{n_dp} DP passes + tube bookkeeping {tube * 1e3:5.1f} ms (nominal pass {nominal * 1e3:4.1f}, "
+              f"a tube pass {tube_pass * 1e3:4.1f}); report (limit ratios, energies) {report * 1e3:4.1f} ms; "
+              f"sum {(prep + tube + report) * 1e3:5.1f} ms")
     print()
     print("iteration log of the tube run, M = 100 (the paper's Fig. 2):")
     for it in tube100.iterations:

@@ -503,9 +503,13 @@ def _hull_ccw(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     # directions (they cannot be hull vertices), then scan only the few that are left
     D = 8
     th = np.linspace(0.0, 2.0 * np.pi, D + 1)[:-1]
-    proj = np.cos(th)[:, None] * px[:, None, :]                                           # (B, D, R0)
-    proj += np.sin(th)[:, None] * py[:, None, :]
-    ext = np.argmax(proj, axis=2)                                                         # (B, D) CCW
+    ext = np.empty((B, D), np.intp)                                                       # (B, D) CCW
+    proj = np.empty_like(px)
+    tmp = np.empty_like(px)
+    for d, (cd, sd) in enumerate(zip(np.cos(th), np.sin(th))):
+        np.multiply(px, cd, out=proj)
+        proj += np.multiply(py, sd, out=tmp)
+        ext[:, d] = proj.argmax(axis=1)
     pxf, pyf = px.ravel(), py.ravel()
     ext += _rows(B, R0)
     vx = pxf[ext]
