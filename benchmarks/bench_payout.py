@@ -1,8 +1,10 @@
 """Payout stage benchmark: laws side by side on the example vessel, and the (13)–(15) solve times.
 
-Run: ``.venv/bin/python benchmarks/bench_payout.py [--points 4000] [--qp-time-limit 60]``.
+Run: ``.venv/bin/python benchmarks/bench_payout.py [--points 1000 4000] [--solver fast highs] [--qp-time-limit 60]``.
 Prints, for k = 0 and k = 1, the pull-speed band of every law (the min-range law must have the
-smallest range) and the wall time of each technological problem at the given grid size.
+smallest range) and the wall time of each technological problem at the given grid sizes, for the
+fast path (interval propagation + interior-point QP, the default) and/or the HiGHS formulations
+(the reference; ``--solver highs``), with the optimum values so the two can be compared.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ def main() -> None:
     ap.add_argument("--points", type=int, nargs="*", default=[1000, 4000])
     ap.add_argument("--compare-points", type=int, default=1000)
     ap.add_argument("--qp-time-limit", type=float, default=60.0)
+    ap.add_argument("--solver", nargs="*", default=["fast"], choices=["fast", "highs"])
     args = ap.parse_args()
     P._QP_TIME_LIMIT = args.qp_time_limit
     job = load_job(JOB)
@@ -52,15 +55,26 @@ def main() -> None:
         print(f"   min-range range / best geometric range = {ranges['min-range'] / best:.3f}"
               if best > 1e-12 else f"   min-range range {ranges['min-range']:.2e} (a geometric law is already flat)")
     print("\nTechnological problems (13), (14), (15): wall time in s")
-    print(f"{'points':>6} {'k':>2} {'(13)':>7} {'(14)':>7} {'(15)':>7} {'total':>7}  iterations  qp backend")
+    print(f"{'points':>6} {'k':>2} {'solver':>6} {'(13)':>7} {'(14)':>7} {'(15)':>7} {'total':>7} "
+          f"{'u_min (13)':>13} {'u_max (14)':>13} {'jerk (15)':>13}  iterations / qp backend")
+    totals: dict[tuple[int, int, str], float] = {}
     for n in args.points:
         for k in (0, 1):
-            spec = job.payout.model_copy(update={"impregnation_k": k, "grid_points": n})
-            e = P.min_range_law(circ, mandrel, spec)
-            sv = e.report["solver"]
-            s = sv["seconds"]
-            print(f"{e.x.size:6d} {k:>2} {s['13']:7.3f} {s['14']:7.3f} {s['15']:7.3f} {s['total']:7.3f}  "
-                  f"{sv['iterations']}  {sv['qp']}   range {e.report['u_range']:.4f} feasible {e.report['feasible']}")
+            for solver in args.solver:
+                spec = job.payout.model_copy(update={"impregnation_k": k, "grid_points": n})
+                e = P.min_range_law(circ, mandrel, spec, solver=solver)
+                sv = e.report["solver"]
+                s = sv["seconds"]
+                totals[(n, k, solver)] = s["total"]
+                fb = f" fallback {sv['fallback']}" if sv.get("fallback") else ""
+                print(f"{e.x.size:6d} {k:>2} {solver:>6} {s['13']:7.3f} {s['14']:7.3f} {s['15']:7.3f} "
+                      f"{s['total']:7.3f} {sv['u_min_13']:13.9f} {sv['u_max_14']:13.9f} {sv['jerk_15']:13.6f}  "
+                      f"{sv['iterations']} {sv['qp']}{fb}  feasible {e.report['feasible']}")
+    for n in args.points:
+        for k in (0, 1):
+            if (n, k, "fast") in totals and (n, k, "highs") in totals:
+                print(f"speed-up {n} points k = {k}: HiGHS / fast = "
+                      f"{totals[(n, k, 'highs')] / max(totals[(n, k, 'fast')], 1e-9):.1f}x")
     print("\ntarget: (13)+(14)+(15) at 4000 points under 1 s together")
 
 

@@ -1054,9 +1054,377 @@ def _solve_qp_stage(prob: _Problem, u_lo: float, u_hi: float, mu0: FloatArray, s
     return _Stage("jerk", mu, val, it, time.perf_counter() - t0), backend
 
 
+# ------------------------------------------------------------------------------------------------
+# Fast path: (13)/(14) by interval propagation along the cycle, (15) by an interior-point QP whose
+# Newton systems are cyclic tridiagonal.  Every answer is checked with the exact formulas; any
+# case the fast path cannot settle goes to the HiGHS formulations above (the reference).
+# ------------------------------------------------------------------------------------------------
+class _FastFail(Exception):
+    """The fast path cannot settle this case exactly: use the HiGHS formulations."""
+
+
+class _Tube:
+    """Step bounds of μ along the cycle (exact cyclic case only).
+
+    μ_{i+1} − μ_i ∈ [t·Δx_i − Δs_i, T·Δx_i − Δs_i] (u bounds) and μ_{i+1} >= g_i(μ_i), where g_i
+    (no sag, no reverse rotation) is nondecreasing in μ_i and evaluated exactly (closed forms).
+    The forward reachable set of μ_i from a start interval is an interval; its upper end is a
+    running minimum, its lower end a running maximum with the g_i terms found by a short
+    fixed-point iteration on the (slowly varying) increments g_i(μ) − μ.
+    """
+
+    def __init__(self, prob: _Problem) -> None:
+        geo, k = prob.geo, prob.k
+        self.prob, self.k = prob, k
+        L = geo.line
+        self.dx, self.ds = prob.dx, prob.ds
+        self.lo = prob.mu_lo.copy()
+        self.hi = prob.mu_hi.copy()
+        self.scale = max(1.0, float(np.abs(self.hi).max()), float(np.abs(self.lo).max()))
+        # geometry of the interval's first (f) and second (t) point
+        self.rf, self.af, self.bf, self.cf, self.vf = L.r[:-1], geo.a[:-1], geo.b[:-1], geo.c[:-1], L.v[:-1]
+        self.rt, self.at, self.bt, self.ct, self.vt = L.r[1:], geo.a[1:], geo.b[1:], geo.c[1:], L.v[1:]
+        self.sf, self.st = L.s[:-1], L.s[1:]
+        self.theta_t = np.arctan2(self.ct, self.at)  # sup of V − v over l >= 0 at the second point
+
+    # exact per-point maps --------------------------------------------------------------------
+    def _l_of_mu(self, mu: FloatArray, r: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
+        if not self.k:
+            return mu
+        B = mu + r * a
+        b2 = b * b
+        disc = np.sqrt(np.maximum(B * B - b2 * (mu * mu - r * r), 0.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            neg = (mu * mu - r * r) / (B - disc)
+            pos = (B + disc) / b2
+        return np.where(B <= 0, neg, pos)
+
+    def _mu_of_l(self, l: FloatArray, r: FloatArray, a: FloatArray, c: FloatArray) -> FloatArray:
+        if not self.k:
+            return l
+        with np.errstate(invalid="ignore"):
+            return np.where(np.isinf(l), np.inf, l - np.hypot(r + a * l, c * l))
+
+    def g(self, mu: FloatArray, idx: NDArray[np.int64] | slice = slice(None)) -> FloatArray:
+        """Smallest μ_{i+1} allowed by no sag and no reverse rotation given μ_i (nondecreasing in μ_i)."""
+        rf, af, cf, rt, at, ct = self.rf[idx], self.af[idx], self.cf[idx], self.rt[idx], self.at[idx], self.ct[idx]
+        l = self._l_of_mu(mu, rf, af, self.bf[idx])
+        l_sag = l - self.ds[idx]
+        phi = self.vf[idx] + np.arctan2(cf * l, rf + af * l) - self.vt[idx]
+        sp, cp = np.sin(phi), np.cos(phi)
+        den = ct * cp - at * sp
+        ok = (phi < self.theta_t[idx]) & (den > 0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            l_rot = np.where(phi <= 0, 0.0, np.where(ok, rt * sp / np.where(ok, den, 1.0), np.inf))
+        need = np.maximum(np.maximum(l_sag, l_rot), 0.0)
+        return self._mu_of_l(need, rt, at, ct)
+
+    def implied_hi(self, B: FloatArray) -> FloatArray | None:
+        """μ_hi tightened by the implied bound g_i(μ_i) <= μ_{i+1} <= μ_i + B_i (None: empty somewhere).
+
+        Where g_i(μ) − μ − B_i changes sign inside the band (found by bisection on those few points)
+        the larger μ_i cannot be continued; without this bound the fixed-point iteration would only
+        creep towards the contradiction.
+        """
+        hi = self.hi.copy()
+        tol = 1e-12 * self.scale
+        fh = self.g(hi[:-1]) - hi[:-1] - B
+        idx = np.flatnonzero(fh > tol)
+        if idx.size:
+            lo_i = self.lo[idx]
+            if (self.g(lo_i, idx) - lo_i - B[idx] > tol).any():
+                return None
+            a, b = lo_i.copy(), hi[idx].copy()
+            for _ in range(60):
+                mid = 0.5 * (a + b)
+                bad = self.g(mid, idx) - mid - B[idx] > 0
+                a, b = np.where(bad, a, mid), np.where(bad, mid, b)
+                if (b - a).max() <= tol:
+                    break
+            hi[idx] = a
+        hi[0] = hi[-1] = min(hi[0], hi[-1])
+        return hi
+
+    # propagation ------------------------------------------------------------------------------
+    @staticmethod
+    def _run_max(start: float, E: FloatArray, A: FloatArray) -> FloatArray:
+        """y_0 = start, y_{i+1} = max(E_{i+1}, y_i + A_i) (vectorised)."""
+        C = np.concatenate([[0.0], np.cumsum(A)])
+        w = np.concatenate([[start], E[1:]]) - C
+        return C + np.maximum.accumulate(w)
+
+    @staticmethod
+    def _run_min(start: float, E: FloatArray, B: FloatArray) -> FloatArray:
+        C = np.concatenate([[0.0], np.cumsum(B)])
+        w = np.concatenate([[start], E[1:]]) - C
+        return C + np.minimum.accumulate(w)
+
+    def forward(self, x: FloatArray, A: FloatArray, h: FloatArray) -> FloatArray | None:
+        """Forward closure y_0 = x_0, y_{i+1} = max(x_{i+1}, y_i + A_i, g_i(y_i)); None if y > μ_hi somewhere.
+
+        The recursion has one solution; it is found by running maxima with the increments
+        g_i(y) − y frozen at the previous iterate.  After each sweep the leading entries that satisfy
+        the recursion exactly are final (at least one more per sweep, usually all at once).
+        """
+        tol = 1e-12 * self.scale
+        y = np.minimum(self._run_max(x[0], x, A), h + 1.0)
+        for _ in range(80):
+            gv = self.g(y[:-1])
+            res = np.maximum(np.maximum(x[1:], y[:-1] + A), gv) - y[1:]
+            bad = np.flatnonzero(np.abs(res) > tol)
+            exact = y.size if not bad.size else int(bad[0]) + 1
+            if (y[:exact] > h[:exact] + tol).any():
+                return None
+            if not bad.size:
+                return y
+            if y[exact] + res[exact - 1] > h[exact] + tol:  # the next entry, exactly
+                return None
+            Ahat = np.maximum(A, np.where(np.isfinite(gv), gv, y[:-1] + 1e3 * self.scale) - y[:-1])
+            y = np.minimum(self._run_max(x[0], x, Ahat), h + 1.0)
+        raise _FastFail("forward propagation did not settle")
+
+    def solve(self, t: float | None, T: float | None, max_rounds: int = 200) -> FloatArray | None:
+        """The lowest cyclic μ with t <= u <= T (None: that side unbounded), or None if there is none.
+
+        Every constraint is a lower bound x_j >= φ(x_k) with φ nondecreasing (μ_{i+1} >= μ_i + A_i,
+        μ_{i+1} >= g_i(μ_i), μ_i >= μ_{i+1} − B_i, μ_0 = μ_{N−1}, μ >= μ_lo) except μ <= μ_hi, so the
+        set is non-empty iff the least fixed point (Kleene iteration from μ_lo: forward sweeps,
+        backward running maxima, closing the cycle) stays below μ_hi — and that point is feasible.
+        """
+        A = (t * self.dx - self.ds) if t is not None else np.full(self.dx.size, -1e3 * self.scale)
+        B = (T * self.dx - self.ds) if T is not None else None
+        tol = 1e-10 * self.scale
+        hi = self.hi if B is None else self.implied_hi(B)
+        if hi is None:
+            return None
+        x = self.lo.copy()
+        x[0] = x[-1] = max(x[0], x[-1])
+        for _ in range(max_rounds):
+            y = self.forward(x, A, hi)
+            if y is None:
+                return None
+            if B is not None:
+                C = np.concatenate([[0.0], np.cumsum(B)])
+                y = C + np.maximum.accumulate((y - C)[::-1])[::-1]
+            c = max(y[0], y[-1])
+            y[0] = y[-1] = c
+            if (y > hi + tol).any():
+                return None
+            if np.abs(y - x).max() <= 1e-13 * self.scale:
+                return self._polish(y, A, B, hi)
+            x = y
+        raise _FastFail("cyclic closure did not settle")
+
+    def _polish(self, y: FloatArray, A: FloatArray, B: FloatArray | None, hi: FloatArray) -> FloatArray | None:
+        """Push every entry up to its own lower bounds (exact, elementwise): removes the rounding of the
+        running sums, which matters where dl/dμ is large (turnarounds)."""
+        for _ in range(4):
+            y[1:] = np.maximum(y[1:], np.maximum(y[:-1] + A, self.g(y[:-1])))
+            if B is not None:
+                y[:-1] = np.maximum(y[:-1], y[1:] - B)
+            y[0] = y[-1] = max(y[0], y[-1])
+        if (y > hi + 1e-10 * self.scale).any():
+            return None
+        return y
+
+
+def _fast_check(prob: _Problem, mu: FloatArray, t: float | None, T: float | None, tol: float) -> bool:
+    """Exact check of a fast-path point: band, u bounds, no sag, no reverse rotation, cyclicity."""
+    u = prob.u(mu)
+    ok = bool((mu >= prob.mu_lo - 1e-9 * max(1.0, float(np.abs(prob.mu_lo).max()))).all()
+              and (mu <= prob.mu_hi + 1e-9 * max(1.0, float(np.abs(prob.mu_hi).max()))).all())
+    scale = max(1.0, float(np.abs(u).max()))
+    if t is not None:
+        ok &= bool(u.min() >= t - 1e-9 * scale)
+    if T is not None:
+        ok &= bool(u.max() <= T + 1e-9 * scale)
+    ok &= all(float(v.min()) >= -tol for v in prob.nonlinear_values(mu).values())
+    l = prob.l_of(mu)
+    return ok and abs(float(l[0] - l[-1])) <= tol
+
+
+def _bisect(feasible: Callable[[float], FloatArray | None], good: float, bad: float, rel: float = 1e-12
+            ) -> tuple[float, FloatArray]:
+    """Largest (or smallest, if bad < good) feasible parameter between good and bad; good must be feasible."""
+    mu = feasible(good)
+    if mu is None:
+        raise _FastFail("bracket start is not feasible")
+    scale = max(1.0, abs(good), abs(bad))
+    while abs(bad - good) > rel * scale:
+        mid = 0.5 * (good + bad)
+        m = feasible(mid)
+        if m is None:
+            bad = mid
+        else:
+            good, mu = mid, m
+    return good, mu
+
+
+def _fast_lp13(prob: _Problem, state: State | None, tol: float) -> _Stage:
+    """(13) by bisection on the lower u bound with the interval-propagation feasibility test."""
+    if not prob.exact_cyclic:
+        raise _FastFail("ends of the line differ (linearised cyclicity)")
+    tube = _Tube(prob)
+    U = prob.U
+    t0 = time.perf_counter()
+    calls = [0]
+
+    def f13(t: float) -> FloatArray | None:
+        calls[0] += 1
+        check_cancel(state) if calls[0] % 8 == 0 else None
+        return tube.solve(t, None)
+
+    if tube.solve(None, None) is None:
+        raise _diagnose_infeasible(prob)
+    # bracket: max min u <= mean u = U; go down until feasible
+    if f13(U) is not None:
+        t_star, mu13 = U, tube.solve(U, None)
+    else:
+        gap = 1.0
+        while f13(U - gap) is None:
+            gap *= 4.0
+            if gap > 1e7:
+                raise _FastFail("no finite lower pull-speed bound found")
+        t_star, mu13 = _bisect(f13, U - gap, U if gap == 1.0 else U - gap / 4.0)
+    assert mu13 is not None
+    if not _fast_check(prob, mu13, t_star - 1e-9, None, tol):
+        raise _FastFail("(13) point failed the exact check")
+    s13 = _Stage("maxmin", mu13, t_star, calls[0], time.perf_counter() - t0)
+    prob.update_rows(mu13, margin=10 * tol)
+    return s13
+
+
+def _fast_lp14(prob: _Problem, u_lo: float, mu13: FloatArray, state: State | None, tol: float) -> _Stage:
+    tube = _Tube(prob)
+    t0 = time.perf_counter()
+    calls = [0]
+
+    def f14(T: float) -> FloatArray | None:
+        calls[0] += 1
+        check_cancel(state) if calls[0] % 8 == 0 else None
+        return tube.solve(u_lo, T)
+
+    hi = float(prob.u(mu13).max())
+    hi = max(hi, prob.U) + 1e-9 * max(1.0, abs(hi))
+    if f14(prob.U) is not None:
+        T_star, mu = prob.U, tube.solve(u_lo, prob.U)
+    else:
+        T_star, mu = _bisect(f14, hi, prob.U)
+    assert mu is not None
+    if not _fast_check(prob, mu, u_lo, T_star + 1e-9, tol):
+        raise _FastFail("(14) point failed the exact check")
+    prob.update_rows(mu, margin=10 * tol)
+    return _Stage("minmax", mu, T_star, calls[0], time.perf_counter() - t0)
+
+
+def _ipm_qp(Q: Any, c: FloatArray, A: Any, b: FloatArray, x0: FloatArray, max_iter: int = 100
+            ) -> FloatArray | None:
+    """min ½xᵀQx + cᵀx s.t. A x >= b by a Mehrotra predictor–corrector interior-point method.
+
+    Q and AᵀA are cyclic tridiagonal here, so each Newton system is a sparse LU of that pattern.
+    Returns None when it does not converge (the caller then uses HiGHS).
+    """
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    m = A.shape[0]
+    At = A.T.tocsr()
+    x = np.asarray(x0, dtype=float).copy()
+    r0 = A @ x - b
+    s = np.maximum(r0, 1e-2)
+    z = np.ones(m)
+    bscale = 1.0 + float(np.abs(b).max())
+    cscale = 1.0 + float(np.abs(c).max())
+    for _ in range(max_iter):
+        Qx, Atz = Q @ x, At @ z
+        rd = Qx + c - Atz
+        rp = A @ x - s - b
+        gap = float(s @ z)
+        obj = abs(float(0.5 * x @ Qx + c @ x))
+        dscale = cscale + float(np.abs(Qx).max()) + float(np.abs(Atz).max())
+        if (np.abs(rp).max() <= 1e-9 * bscale and np.abs(rd).max() <= 1e-7 * dscale
+                and gap <= 1e-9 * max(1.0, obj)):
+            return x
+        d = z / s
+        M = (Q + At @ sp.diags(d) @ A).tocsc()
+        try:
+            lu = spla.splu(M)
+        except RuntimeError:
+            return None
+        rc = -s * z
+        dx = lu.solve(-rd + At @ ((rc - z * rp) / s))
+        dsl = A @ dx + rp
+        dz = (rc - z * dsl) / s
+
+        def step(v: FloatArray, dv: FloatArray) -> float:
+            neg = dv < 0
+            return min(1.0, float(np.min(-v[neg] / dv[neg]))) if neg.any() else 1.0
+
+        a_aff = min(step(s, dsl), step(z, dz))
+        mu_aff = float((s + a_aff * dsl) @ (z + a_aff * dz)) / m
+        sigma = (mu_aff / (gap / m)) ** 3 if gap > 0 else 0.0
+        rc = -s * z - dsl * dz + sigma * gap / m
+        dx = lu.solve(-rd + At @ ((rc - z * rp) / s))
+        dsl = A @ dx + rp
+        dz = (rc - z * dsl) / s
+        a = min(1.0, 0.995 * min(step(s, dsl), step(z, dz)))
+        x += a * dx
+        s += a * dsl
+        z += a * dz
+        if not (np.isfinite(x).all() and np.isfinite(z).all()):
+            return None
+    return None
+
+
+def _fast_qp_stage(prob: _Problem, u_lo: float, u_hi: float, mu0: FloatArray, state: State | None,
+                   tol: float, max_iter: int = 40) -> tuple[_Stage, str]:
+    """(15) with the same cutting-plane loop as the HiGHS path, each QP by :func:`_ipm_qp` over μ_0..μ_{N−2}."""
+    import scipy.sparse as sp
+
+    t0 = time.perf_counter()
+    n = prob.n
+    W = sp.diags(1.0 / prob.dx)
+    D = prob.D
+    Qf = (2.0 * (D.T @ W @ D)).tocsc()
+    rhs = prob.ds - prob.U * prob.dx
+    cf = 2.0 * (D.T @ (rhs / prob.dx))
+    const = float(np.sum(rhs * rhs / prob.dx))
+    mu = mu0
+    if u_hi - u_lo <= 1e-6 * max(1.0, abs(u_hi)):
+        val = float(0.5 * mu @ (Qf @ mu) + cf @ mu) + const
+        return _Stage("jerk", mu, val, 0, time.perf_counter() - t0), "none (band of zero width)"
+    # cyclic: μ_{N−1} = μ_0, variables y = μ_0..μ_{N−2}
+    P = sp.vstack([sp.identity(n - 1, format="csr"), sp.csr_matrix(([1.0], ([0], [0])), shape=(1, n - 1))],
+                  format="csr")
+    Q = (P.T @ Qf @ P).tocsc()
+    c = P.T @ cf
+    lo = prob.mu_lo[:-1].copy()
+    hi = prob.mu_hi[:-1].copy()
+    lo[0], hi[0] = max(lo[0], prob.mu_lo[-1]), min(hi[0], prob.mu_hi[-1])
+    I = sp.identity(n - 1, format="csr")
+    DP = (D @ P).tocsr()
+    it = 0
+    for it in range(1, max_iter + 1):  # noqa: B007 - reported below
+        check_cancel(state)
+        G, h = prob.cut_rows(mu)
+        A = sp.vstack([I, -I, DP, -DP, (G @ P).tocsr()], format="csr")
+        b = np.concatenate([lo, -hi, u_lo * prob.dx - prob.ds, prob.ds - u_hi * prob.dx, h])
+        y = _ipm_qp(Q, c, A, b, mu[:-1])
+        if y is None:
+            raise _FastFail("interior-point QP did not converge")
+        y = np.clip(y, lo, hi)
+        sol = P @ y
+        worst = prob.update_rows(sol, margin=10 * tol)
+        mu = sol
+        if worst <= tol:
+            break
+    val = float(0.5 * mu @ (Qf @ mu) + cf @ mu) + const
+    return _Stage("jerk", mu, val, it, time.perf_counter() - t0), "interior point (cyclic tridiagonal KKT)"
+
+
 def min_range_law(line: Any, mandrel: Any, spec: Any = None, workspace: Workspace | None = None,
                   state: State | None = None, *, k: int | None = None, parameter: str | None = None,
-                  grid_points: int | None = None) -> EyePath:
+                  grid_points: int | None = None, solver: str = "fast") -> EyePath:
     """The technological law (13)–(15): the free length with the narrowest, smoothest pull speed.
 
     Solves, on ``spec.grid_points`` points of x: (13) max min u → u_min*; (14) min max u with
@@ -1081,7 +1449,17 @@ def min_range_law(line: Any, mandrel: Any, spec: Any = None, workspace: Workspac
     # start: the lower envelope (admissible), made cyclic by the larger end value
     mu0 = prob.mu_lo.copy()
     t_start = time.perf_counter()
-    s13 = _solve_lp_stage(prob, "maxmin", None, mu0, state, tol)
+    if solver not in ("fast", "highs"):
+        raise InputError(f"solver must be 'fast' or 'highs', got {solver!r}")
+    fallback: list[str] = []
+    s13: _Stage | None = None
+    if solver == "fast":
+        try:
+            s13 = _fast_lp13(prob, state, tol)
+        except _FastFail as exc:
+            fallback.append(f"(13): {exc}")
+    if s13 is None:
+        s13 = _solve_lp_stage(prob, "maxmin", None, mu0, state, tol)
     u13 = s13.value
     if state is not None:
         state.progress(0.45, "(13) max min u")
@@ -1094,11 +1472,25 @@ def min_range_law(line: Any, mandrel: Any, spec: Any = None, workspace: Workspac
             f"limited at x = {0.5 * (geo.x[i] + geo.x[i + 1]):.6g} (z = {geo.line.z[i]:.5g} mm)",
             field="payout.u_min")
     u_lo = u13 - 1e-7 * max(1.0, abs(u13))
-    s14 = _solve_lp_stage(prob, "minmax", u_lo, s13.mu, state, tol)
+    s14: _Stage | None = None
+    if solver == "fast" and not fallback:
+        try:
+            s14 = _fast_lp14(prob, u_lo, s13.mu, state, tol)
+        except _FastFail as exc:
+            fallback.append(f"(14): {exc}")
+    if s14 is None:
+        s14 = _solve_lp_stage(prob, "minmax", u_lo, s13.mu, state, tol)
     if state is not None:
         state.progress(0.7, "(14) min max u")
     u_hi = s14.value + 1e-7 * max(1.0, abs(s14.value))
-    s15, backend = _solve_qp_stage(prob, u_lo, u_hi, s14.mu, state, tol)
+    s15: _Stage | None = None
+    if solver == "fast" and prob.exact_cyclic:
+        try:
+            s15, backend = _fast_qp_stage(prob, u_lo, u_hi, s14.mu, state, tol)
+        except _FastFail as exc:
+            fallback.append(f"(15): {exc}")
+    if s15 is None:
+        s15, backend = _solve_qp_stage(prob, u_lo, u_hi, s14.mu, state, tol)
     solve_s = time.perf_counter() - t_start
     if state is not None:
         state.progress(0.95, "(15) jerk")
@@ -1106,7 +1498,10 @@ def min_range_law(line: Any, mandrel: Any, spec: Any = None, workspace: Workspac
     eye = _build(geo, l, k, parameter, "min-range", env)
     rep = _report(geo, eye, env, u_floor, extra={
         "solver": {
-            "lp": "scipy.optimize.linprog (HiGHS)",
+            "lp": ("interval propagation + bisection (exact nonlinear no-sag/rotation bounds)"
+                   if solver == "fast" and not any(f.startswith(("(13)", "(14)")) for f in fallback)
+                   else "scipy.optimize.linprog (HiGHS)"),
+            "fallback": fallback,
             "qp": backend,
             "variables": "mu = l - k*R(l) (exact), nonlinear rows by cutting planes",
             "iterations": {"13": s13.iterations, "14": s14.iterations, "15": s15.iterations},
