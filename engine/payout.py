@@ -1183,21 +1183,22 @@ class _Tube:
             y = np.minimum(self._run_max(x[0], x, Ahat), h + 1.0)
         raise _FastFail("forward propagation did not settle")
 
-    def solve(self, t: float | None, T: float | None, max_rounds: int = 200) -> FloatArray | None:
+    def solve(self, t: float | None, T: float | None, max_rounds: int = 200,
+              below: FloatArray | None = None) -> FloatArray | None:
         """The lowest cyclic μ with t <= u <= T (None: that side unbounded), or None if there is none.
 
         Every constraint is a lower bound x_j >= φ(x_k) with φ nondecreasing (μ_{i+1} >= μ_i + A_i,
         μ_{i+1} >= g_i(μ_i), μ_i >= μ_{i+1} − B_i, μ_0 = μ_{N−1}, μ >= μ_lo) except μ <= μ_hi, so the
         set is non-empty iff the least fixed point (Kleene iteration from μ_lo: forward sweeps,
         backward running maxima, closing the cycle) stays below μ_hi — and that point is feasible.
+        ``below``: a known lower bound of that point (the solution for looser bounds) to start from.
         """
-        A = (t * self.dx - self.ds) if t is not None else np.full(self.dx.size, -1e3 * self.scale)
-        B = (T * self.dx - self.ds) if T is not None else None
+        A, B = self._steps(t, T)
         tol = 1e-10 * self.scale
         hi = self.hi if B is None else self.implied_hi(B)
         if hi is None:
             return None
-        x = self.lo.copy()
+        x = self.lo.copy() if below is None else np.maximum(self.lo, below)
         x[0] = x[-1] = max(x[0], x[-1])
         for _ in range(max_rounds):
             y = self.forward(x, A, hi)
@@ -1215,14 +1216,22 @@ class _Tube:
             x = y
         raise _FastFail("cyclic closure did not settle")
 
-    def _polish(self, y: FloatArray, A: FloatArray, B: FloatArray | None, hi: FloatArray) -> FloatArray | None:
+    def _steps(self, t: float | None, T: float | None) -> tuple[FloatArray, FloatArray | None]:
+        A = (t * self.dx - self.ds) if t is not None else np.full(self.dx.size, -1e3 * self.scale)
+        return A, ((T * self.dx - self.ds) if T is not None else None)
+
+    def _polish(self, y: FloatArray, A: FloatArray, B: FloatArray | None, hi: FloatArray,
+                passes: int = 4) -> FloatArray | None:
         """Push every entry up to its own lower bounds (exact, elementwise): removes the rounding of the
-        running sums, which matters where dl/dμ is large (turnarounds)."""
-        for _ in range(4):
+        running sums and the recursion tolerance, which matter where dl/dμ is large (turnarounds)."""
+        for _ in range(passes):
+            old = y.copy()
             y[1:] = np.maximum(y[1:], np.maximum(y[:-1] + A, self.g(y[:-1])))
             if B is not None:
                 y[:-1] = np.maximum(y[:-1], y[1:] - B)
             y[0] = y[-1] = max(y[0], y[-1])
+            if np.array_equal(old, y):
+                break
         if (y > hi + 1e-10 * self.scale).any():
             return None
         return y
@@ -1269,10 +1278,16 @@ def _fast_lp13(prob: _Problem, state: State | None, tol: float) -> _Stage:
     t0 = time.perf_counter()
     calls = [0]
 
+    warm: list[FloatArray | None] = [None]
+
     def f13(t: float) -> FloatArray | None:
+        # the least solution grows with t: the last feasible one (smaller t) is a valid start
         calls[0] += 1
         check_cancel(state) if calls[0] % 8 == 0 else None
-        return tube.solve(t, None)
+        mu = tube.solve(t, None, below=warm[0])
+        if mu is not None:
+            warm[0] = mu
+        return mu
 
     if tube.solve(None, None) is None:
         raise _diagnose_infeasible(prob)
@@ -1288,7 +1303,11 @@ def _fast_lp13(prob: _Problem, state: State | None, tol: float) -> _Stage:
         t_star, mu13 = _bisect(f13, U - gap, U if gap == 1.0 else U - gap / 4.0)
     assert mu13 is not None
     if not _fast_check(prob, mu13, t_star - 1e-9, None, tol):
-        raise _FastFail("(13) point failed the exact check")
+        # the warm-started fixed point can keep a recursion residual that the turnarounds' large
+        # dl/dμ magnify: solve once more from μ_lo
+        mu13 = tube.solve(t_star - 1e-9 * max(1.0, abs(t_star)), None)
+        if mu13 is None or not _fast_check(prob, mu13, t_star - 1e-9, None, tol):
+            raise _FastFail("(13) point failed the exact check")
     s13 = _Stage("maxmin", mu13, t_star, calls[0], time.perf_counter() - t0)
     prob.update_rows(mu13, margin=10 * tol)
     return s13
@@ -1299,10 +1318,16 @@ def _fast_lp14(prob: _Problem, u_lo: float, mu13: FloatArray, state: State | Non
     t0 = time.perf_counter()
     calls = [0]
 
+    warm: list[FloatArray | None] = [None]
+
     def f14(T: float) -> FloatArray | None:
+        # the least solution grows as T falls: the last feasible one (larger T) is a valid start
         calls[0] += 1
         check_cancel(state) if calls[0] % 8 == 0 else None
-        return tube.solve(u_lo, T)
+        mu = tube.solve(u_lo, T, below=warm[0])
+        if mu is not None:
+            warm[0] = mu
+        return mu
 
     hi = float(prob.u(mu13).max())
     hi = max(hi, prob.U) + 1e-9 * max(1.0, abs(hi))
@@ -1312,13 +1337,85 @@ def _fast_lp14(prob: _Problem, u_lo: float, mu13: FloatArray, state: State | Non
         T_star, mu = _bisect(f14, hi, prob.U)
     assert mu is not None
     if not _fast_check(prob, mu, u_lo, T_star + 1e-9, tol):
-        raise _FastFail("(14) point failed the exact check")
+        mu = tube.solve(u_lo, T_star)  # as in (13): once more from μ_lo
+        if mu is None or not _fast_check(prob, mu, u_lo, T_star + 1e-9, tol):
+            raise _FastFail("(14) point failed the exact check")
     prob.update_rows(mu, margin=10 * tol)
     return _Stage("minmax", mu, T_star, calls[0], time.perf_counter() - t0)
 
 
-def _ipm_qp(Q: Any, c: FloatArray, A: Any, b: FloatArray, x0: FloatArray, max_iter: int = 100
-            ) -> FloatArray | None:
+class _CyclicKKT:
+    """Newton matrices Q + Aᵀ·diag(d)·A of the cyclic (15) problem: symmetric cyclic tridiagonal.
+
+    Every row of A has at most two entries, on neighbouring variables (i, i + 1 mod m); the matrix is
+    assembled from them with ``np.bincount`` and solved by a banded Cholesky (LAPACK pbtrf/pbtrs) plus a
+    Sherman–Morrison correction for the corner entry — O(m) per Newton step.
+    """
+
+    def __init__(self, Q: Any, A: Any) -> None:
+        import scipy.sparse as sp
+
+        m = Q.shape[0]
+        self.m = m
+        A = sp.csr_matrix(A)
+        A.sort_indices()
+        cnt = np.diff(A.indptr)
+        if m < 4 or cnt.max() > 2:
+            raise _FastFail("constraint rows are not pairs of neighbours")
+        rows = A.shape[0]
+        j1 = np.zeros(rows, dtype=np.int64)
+        j2 = np.zeros(rows, dtype=np.int64)
+        w1 = np.zeros(rows)
+        w2 = np.zeros(rows)
+        first = A.indptr[:-1]
+        has = cnt >= 1
+        j1[has] = A.indices[first[has]]
+        w1[has] = A.data[first[has]]
+        two = cnt == 2
+        j2[two] = A.indices[first[two] + 1]
+        w2[two] = A.data[first[two] + 1]
+        # a pair (0, m-1) is the wrap-around interval m-1: order it as (m-1, 0)
+        wrap = two & (j1 == 0) & (j2 == m - 1)
+        j1[wrap], j2[wrap] = m - 1, 0
+        w1[wrap], w2[wrap] = w2[wrap].copy(), w1[wrap].copy()
+        if not ((~two) | wrap | (j2 == j1 + 1)).all():
+            raise _FastFail("constraint rows are not pairs of neighbours")
+        self.j1, self.j2, self.w1, self.w2 = j1, j2, w1, w2
+        self.iv = np.where(two, j1, 0)
+        self.pair = two
+        Qc = sp.csr_matrix(Q)
+        self.qd = Qc.diagonal().copy()
+        idx = np.arange(m)
+        self.qo = np.asarray(Qc[idx, (idx + 1) % m]).ravel()
+
+    def factor(self, d: FloatArray) -> Callable[[FloatArray], FloatArray]:
+        from scipy.linalg import cho_solve_banded, cholesky_banded
+
+        m = self.m
+        dg = self.qd + np.bincount(self.j1, d * self.w1 * self.w1, m) + np.bincount(self.j2, d * self.w2 * self.w2, m)
+        off = self.qo + np.bincount(self.iv, np.where(self.pair, d * self.w1 * self.w2, 0.0), m)
+        c = off[-1]  # M[m-1, 0]
+        g = -dg[0]
+        ab = np.zeros((2, m))
+        ab[0] = dg
+        ab[0, 0] -= g
+        ab[0, -1] -= c * c / g
+        ab[1, :-1] = off[:-1]
+        cb = cholesky_banded(ab, lower=True)
+        u = np.zeros(m)
+        u[0], u[-1] = g, c
+        zu = cho_solve_banded((cb, True), u)
+        denom = 1.0 + (u @ zu) / g
+
+        def solve(rhs: FloatArray) -> FloatArray:
+            x = cho_solve_banded((cb, True), rhs)
+            return x - zu * ((u @ x) / g / denom)
+
+        return solve
+
+
+def _ipm_qp(Q: Any, c: FloatArray, A: Any, b: FloatArray, x0: FloatArray, max_iter: int = 100,
+            kkt: _CyclicKKT | None = None) -> FloatArray | None:
     """min ½xᵀQx + cᵀx s.t. A x >= b by a Mehrotra predictor–corrector interior-point method.
 
     Q and AᵀA are cyclic tridiagonal here, so each Newton system is a sparse LU of that pattern.
@@ -1346,13 +1443,15 @@ def _ipm_qp(Q: Any, c: FloatArray, A: Any, b: FloatArray, x0: FloatArray, max_it
                 and gap <= 1e-9 * max(1.0, obj)):
             return x
         d = z / s
-        M = (Q + At @ sp.diags(d) @ A).tocsc()
         try:
-            lu = spla.splu(M)
-        except RuntimeError:
+            if kkt is not None:
+                solve = kkt.factor(d)
+            else:
+                solve = spla.splu((Q + At @ sp.diags(d) @ A).tocsc()).solve
+        except (RuntimeError, np.linalg.LinAlgError, ValueError):
             return None
         rc = -s * z
-        dx = lu.solve(-rd + At @ ((rc - z * rp) / s))
+        dx = solve(-rd + At @ ((rc - z * rp) / s))
         dsl = A @ dx + rp
         dz = (rc - z * dsl) / s
 
@@ -1364,7 +1463,7 @@ def _ipm_qp(Q: Any, c: FloatArray, A: Any, b: FloatArray, x0: FloatArray, max_it
         mu_aff = float((s + a_aff * dsl) @ (z + a_aff * dz)) / m
         sigma = (mu_aff / (gap / m)) ** 3 if gap > 0 else 0.0
         rc = -s * z - dsl * dz + sigma * gap / m
-        dx = lu.solve(-rd + At @ ((rc - z * rp) / s))
+        dx = solve(-rd + At @ ((rc - z * rp) / s))
         dsl = A @ dx + rp
         dz = (rc - z * dsl) / s
         a = min(1.0, 0.995 * min(step(s, dsl), step(z, dz)))
@@ -1409,7 +1508,11 @@ def _fast_qp_stage(prob: _Problem, u_lo: float, u_hi: float, mu0: FloatArray, st
         G, h = prob.cut_rows(mu)
         A = sp.vstack([I, -I, DP, -DP, (G @ P).tocsr()], format="csr")
         b = np.concatenate([lo, -hi, u_lo * prob.dx - prob.ds, prob.ds - u_hi * prob.dx, h])
-        y = _ipm_qp(Q, c, A, b, mu[:-1])
+        try:
+            kkt: _CyclicKKT | None = _CyclicKKT(Q, A)
+        except _FastFail:
+            kkt = None
+        y = _ipm_qp(Q, c, A, b, mu[:-1], kkt=kkt)
         if y is None:
             raise _FastFail("interior-point QP did not converge")
         y = np.clip(y, lo, hi)
