@@ -28,7 +28,10 @@ The pull speed is made exactly linear by optimising over ``μ = l − k·R(l)`` 
 inverse, so the bounds map exactly and ``u`` is a linear function of ``μ``.  The two constraints
 that are then nonlinear (no sag for k = 1, no reverse rotation) are handled by a cutting-plane
 loop: rows are added where the exact constraint is violated or nearly active, re-linearised at
-each solution, until the exact (nonlinear) check passes.  LPs: ``scipy.optimize.linprog`` (HiGHS);
+each solution, until the exact (nonlinear) check passes.  Default solver (``solver="fast"``): (13)/(14)
+by bisection on the u bounds with an exact monotone interval-propagation feasibility test (the no-sag
+and rotation bounds enter exactly), (15) by an interior-point QP with O(N) cyclic tridiagonal Newton
+systems; the HiGHS formulations are the reference and the fallback.  LPs: ``scipy.optimize.linprog`` (HiGHS);
 QP: HiGHS through ``highspy`` or, if that is not installed, the HiGHS build vendored in SciPy
 (``scipy.optimize._highspy``); ``trust-constr`` only as a last resort.  See docs/payout.md.
 
