@@ -44,7 +44,6 @@ mandrel axis in degrees with ``sign = -1`` counts up while the mandrel winds (th
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -52,6 +51,7 @@ from typing import Any
 import numpy as np
 
 from engine.errors import InfeasibleError, InputError
+from engine.resources import find_named, list_named, read_toml
 from engine.state import State, check_cancel
 
 MACHINES_DIR = Path(__file__).resolve().parents[1] / "resources" / "machines"
@@ -260,8 +260,7 @@ class MachineTemplate:
 
 def list_machines(directory: str | Path | None = None) -> list[str]:
     """Names of the shipped (or ``directory``'s) machine templates, sorted."""
-    d = Path(directory) if directory is not None else MACHINES_DIR
-    return sorted(p.stem for p in d.glob("*.toml"))
+    return list_named(Path(directory) if directory is not None else MACHINES_DIR)
 
 
 def _need(data: dict, key: str, typ: type | tuple[type, ...], file: str, prefix: str = "") -> Any:
@@ -429,19 +428,8 @@ def load_machine(name_or_path: str | Path) -> MachineTemplate:
     InputError
         Unknown name, unreadable file, bad TOML or an invalid field (the message names file and field).
     """
-    p = Path(name_or_path)
-    if p.suffix != ".toml":
-        p = MACHINES_DIR / f"{name_or_path}.toml"
-        if not p.exists():
-            raise InputError(f"unknown machine {str(name_or_path)!r}; known: {', '.join(list_machines())}",
-                             field="machine")
-    try:
-        with open(p, "rb") as fh:
-            data = tomllib.load(fh)
-    except FileNotFoundError:
-        raise InputError("machine template file not found", file=p) from None
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"not valid TOML: {exc}", file=p) from None
+    p = find_named(MACHINES_DIR, name_or_path, "machine", "machine")
+    data = read_toml(p, "machine template file")
     return parse_machine(data, file=str(p), name=p.stem)
 
 

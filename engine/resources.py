@@ -9,8 +9,13 @@ to ``<bundle>/<package>/<module>.pyc``); new code should call :func:`resource_pa
 
 from __future__ import annotations
 
+import re
 import sys
+import tomllib
 from pathlib import Path
+from typing import Any
+
+from engine.errors import InputError
 
 
 def resources_root() -> Path:
@@ -35,3 +40,48 @@ def resource_path(*parts: str) -> Path:
         The absolute path (not checked for existence).
     """
     return resources_root().joinpath(*parts)
+
+
+def read_toml(path: str | Path, what: str = "file") -> dict[str, Any]:
+    """Parse a TOML data file; :class:`~engine.errors.InputError` naming the file (and line) otherwise.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    what : str
+        What the file is, for the not-found message (``"machine template file"``).
+    """
+    p = Path(path)
+    try:
+        with open(p, "rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise InputError(f"{what} not found", file=p) from None
+    except IsADirectoryError:
+        raise InputError(f"{what} expected, found a folder", file=p) from None
+    except UnicodeDecodeError:
+        raise InputError("not a UTF-8 text file", file=p) from None
+    except tomllib.TOMLDecodeError as exc:
+        m = re.search(r"line (\d+)", str(exc))
+        raise InputError(f"not valid TOML: {exc}", file=p, line=int(m.group(1)) if m else None) from None
+
+
+def list_named(directory: Path) -> list[str]:
+    """Stems of the ``*.toml`` files in ``directory``, sorted (shipped machines, controllers, ...)."""
+    return sorted(p.stem for p in Path(directory).glob("*.toml"))
+
+
+def find_named(directory: Path, name_or_path: str | Path, what: str, field: str) -> Path:
+    """A path given as such (``*.toml``), or the shipped file ``directory/<name>.toml``.
+
+    Raises :class:`~engine.errors.InputError` naming the known names when a name is unknown.
+    """
+    p = Path(name_or_path)
+    if p.suffix == ".toml":
+        return p
+    p = Path(directory) / f"{name_or_path}.toml"
+    if not p.exists():
+        raise InputError(f"unknown {what} {str(name_or_path)!r}; known: {', '.join(list_named(directory))}",
+                         field=field)
+    return p

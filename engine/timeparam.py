@@ -67,7 +67,6 @@ import bisect
 import math
 import os
 import time
-import tomllib
 from collections.abc import Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -77,6 +76,7 @@ from typing import Any
 import numpy as np
 
 from engine.errors import InfeasibleError, InputError
+from engine.resources import read_toml
 from engine.state import State, check_cancel
 
 __all__ = [
@@ -366,13 +366,7 @@ def limits_from_mapping(d: Mapping[str, Any], file: str | None = None) -> TimeLi
 def limits_from_toml(path: str | Path) -> TimeLimits:
     """Read a LIMITS.toml file (see :func:`limits_from_mapping`)."""
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError("file not found", file=path) from None
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"not valid TOML: {exc}", file=path) from None
-    return limits_from_mapping(data, file=str(path))
+    return limits_from_mapping(read_toml(path), file=str(path))
 
 
 def load_path_npz(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

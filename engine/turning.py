@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import itertools
 import math
-import tomllib
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -33,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from engine.errors import InfeasibleError, InputError
+from engine.resources import read_toml
 from engine.state import State, check_cancel
 
 __all__ = [
@@ -108,14 +108,7 @@ def example_case_path(name: str) -> Path:
 
 # ================================================================================== data loading
 def _read_toml(path: Path) -> dict[str, Any]:
-    try:
-        with open(path, "rb") as fh:
-            return tomllib.load(fh)
-    except FileNotFoundError:
-        raise InputError("file not found", file=path) from None
-    except tomllib.TOMLDecodeError as exc:
-        line = getattr(exc, "lineno", None)
-        raise InputError(f"not valid TOML: {exc}", file=path, line=line) from None
+    return read_toml(path)
 
 
 @dataclass(frozen=True)

@@ -37,3 +37,19 @@ def test_input_error_names_place() -> None:
     assert str(err) == "a.csv, line 3, field 'r': radius must be > 0, got -1"
     err2 = InputError("bad").at(file="job.toml", field="mandrel.radius")
     assert str(err2) == "job.toml, field 'mandrel.radius': bad"
+
+
+def test_read_toml_names_file_and_line(tmp_path) -> None:
+    from engine.resources import find_named, read_toml, resource_path
+
+    bad = tmp_path / "bad.toml"
+    bad.write_text("a = 1\nb = [\n")
+    with pytest.raises(InputError) as info:
+        read_toml(bad)
+    assert info.value.location.file == str(bad) and info.value.location.line is not None
+    with pytest.raises(InputError) as info:
+        read_toml(tmp_path / "none.toml", "machine template file")
+    assert "machine template file not found" in str(info.value)
+    with pytest.raises(InputError) as info:
+        find_named(resource_path("machines"), "no_such_machine", "machine", "machine")
+    assert "lathe2" in info.value.message and info.value.location.field == "machine"

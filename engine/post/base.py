@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -14,6 +13,7 @@ import numpy as np
 from engine.blocks import Blocks
 from engine.errors import InputError
 from engine.kinematics import MachineTemplate
+from engine.resources import find_named, list_named, read_toml
 
 CONTROLLERS_DIR = Path(__file__).resolve().parents[2] / "resources" / "controllers"
 LINE_ENDINGS = {"lf": "\n", "crlf": "\r\n"}
@@ -71,8 +71,7 @@ class ControllerProfile:
 
 def list_controllers(directory: str | Path | None = None) -> list[str]:
     """Names of the shipped controller profiles, sorted."""
-    d = Path(directory) if directory is not None else CONTROLLERS_DIR
-    return sorted(p.stem for p in d.glob("*.toml"))
+    return list_named(Path(directory) if directory is not None else CONTROLLERS_DIR)
 
 
 def parse_controller(data: dict, file: str = "<controller>", name: str | None = None) -> ControllerProfile:
@@ -130,19 +129,8 @@ def parse_controller(data: dict, file: str = "<controller>", name: str | None = 
 
 def load_controller(name_or_path: str | Path) -> ControllerProfile:
     """Load a controller profile by shipped name (``"linuxcnc"``) or path to a ``.toml`` file."""
-    p = Path(name_or_path)
-    if p.suffix != ".toml":
-        p = CONTROLLERS_DIR / f"{name_or_path}.toml"
-        if not p.exists():
-            raise InputError(f"unknown controller {str(name_or_path)!r}; known: "
-                             f"{', '.join(list_controllers())}", field="controller")
-    try:
-        with open(p, "rb") as fh:
-            data = tomllib.load(fh)
-    except FileNotFoundError:
-        raise InputError("controller profile not found", file=p) from None
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"not valid TOML: {exc}", file=p) from None
+    p = find_named(CONTROLLERS_DIR, name_or_path, "controller", "controller")
+    data = read_toml(p, "controller profile")
     return parse_controller(data, file=str(p), name=p.stem)
 
 
