@@ -43,10 +43,10 @@ def test_read_toml_names_file_and_line(tmp_path) -> None:
     from engine.resources import find_named, read_toml, resource_path
 
     bad = tmp_path / "bad.toml"
-    bad.write_text("a = 1\nb = [\n")
+    bad.write_text("a = 1\nb = = 2\nc = 3\n")
     with pytest.raises(InputError) as info:
         read_toml(bad)
-    assert info.value.location.file == str(bad) and info.value.location.line is not None
+    assert info.value.location.file == str(bad) and info.value.location.line == 2
     with pytest.raises(InputError) as info:
         read_toml(tmp_path / "none.toml", "machine template file")
     assert "machine template file not found" in str(info.value)
