@@ -59,6 +59,7 @@ LAWS = (*GEOMETRIC_LAWS, "min-range")
 
 _SCAN = 97  # samples of l when bracketing roots / envelope edges
 _BISECT = 36  # bisection steps after bracketing (interval / 2**36)
+_ENV_CHUNK = 256  # grid points per chunk of the envelope scan (a cancellation poll between chunks)
 CHECK_TOL = 1e-6  # tolerance of the exact constraint check (mm, rad, or speed units)
 _QP_LOG = False
 _LP_METHOD = "highs"
@@ -182,12 +183,13 @@ class _Geo:
     def n(self) -> int:
         return self.x.size
 
-    def eye(self, l: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        """Z, R, V, d of the eye at free length l (broadcasts over trailing axes)."""
+    def eye(self, l: FloatArray, rows: slice = slice(None)
+            ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Z, R, V, d of the eye at free length l (broadcasts over trailing axes) at grid ``rows``."""
         L = self.line
         sh = (-1,) + (1,) * (np.ndim(l) - 1)
-        z, r, v = L.z.reshape(sh), L.r.reshape(sh), L.v.reshape(sh)
-        a, b, c = self.a.reshape(sh), self.b.reshape(sh), self.c.reshape(sh)
+        z, r, v = L.z[rows].reshape(sh), L.r[rows].reshape(sh), L.v[rows].reshape(sh)
+        a, b, c = self.a[rows].reshape(sh), self.b[rows].reshape(sh), self.c[rows].reshape(sh)
         d = r + a * l
         q = c * l
         return z + b * l, np.hypot(d, q), v + np.arctan2(q, d), d
@@ -297,8 +299,17 @@ class _Contour:
         self.z, self.r = np.asarray(z, float), np.asarray(r, float)
         self.tree = cKDTree(np.column_stack([self.z, self.r]))
         self.z_min, self.z_max = float(self.z[0]), float(self.z[-1])
+        self.r_max = float(self.r.max())
 
-    def distance(self, Z: FloatArray, R: FloatArray) -> FloatArray:
+    def distance(self, Z: FloatArray, R: FloatArray, far: float | None = None) -> FloatArray:
+        """Signed distance (mm); with ``far``, points provably at least ``far`` away (beyond the
+        bounding box of the generatrix grown by ``far``) skip the KD-tree and get +inf."""
+        if far is not None:
+            out = np.full(np.shape(Z), np.inf)
+            near = (R < self.r_max + far) & (Z > self.z_min - far) & (Z < self.z_max + far)
+            if near.any():
+                out[near] = self.distance(np.asarray(Z)[near], np.asarray(R)[near])
+            return out
         Zf, Rf = np.ravel(Z), np.ravel(R)
         _, j = self.tree.query(np.column_stack([Zf, Rf]))
         best = np.full(Zf.shape, np.inf)
@@ -336,17 +347,23 @@ class Envelope:
 
 
 def envelope(geo: _Geo, contour: _Contour, clearance: float, l_cap: float,
-             workspace: Workspace | None = None) -> Envelope:
+             workspace: Workspace | None = None, state: State | None = None) -> Envelope:
     """The first admissible interval of l at each grid point (scan + vectorised bisection).
 
     Admissible: the eye is at least ``clearance`` mm from the mandrel, inside ``workspace`` and
-    ``l <= l_cap``.  Raises InfeasibleError naming the first point with no admissible l.
+    ``l <= l_cap``.  Raises InfeasibleError naming the first point with no admissible l.  Polls
+    ``state`` for cancellation between chunks of the scan and at every bisection step.
     """
     ls = np.linspace(0.0, l_cap, _SCAN)
 
-    L = np.broadcast_to(ls, (geo.n, _SCAN))
-    Zs, Rs, _, _ = geo.eye(L)
-    dist_s = contour.distance(Zs, Rs)
+    Zs = np.empty((geo.n, _SCAN))
+    Rs = np.empty((geo.n, _SCAN))
+    dist_s = np.empty((geo.n, _SCAN))
+    for i0 in range(0, geo.n, _ENV_CHUNK):
+        check_cancel(state)
+        sl = slice(i0, min(i0 + _ENV_CHUNK, geo.n))
+        Zs[sl], Rs[sl], _, _ = geo.eye(np.broadcast_to(ls, (sl.stop - sl.start, _SCAN)), sl)
+        dist_s[sl] = contour.distance(Zs[sl], Rs[sl], far=max(clearance, 0.01))
     ok = dist_s >= clearance
     if workspace is not None:
         ok &= workspace.contains(Zs, Rs)
@@ -382,6 +399,7 @@ def envelope(geo: _Geo, contour: _Contour, clearance: float, l_cap: float,
     needs = first > 0
     a, b = np.where(needs, ls[np.maximum(first - 1, 0)], lo), lo.copy()
     for _ in range(_BISECT):
+        check_cancel(state)
         mid = 0.5 * (a + b)
         good = ok_at_rows(geo, contour, clearance, workspace, mid)
         a, b = np.where(good, a, mid), np.where(good, mid, b)
@@ -390,6 +408,7 @@ def envelope(geo: _Geo, contour: _Contour, clearance: float, l_cap: float,
     needs = last < _SCAN - 1
     a, b = hi.copy(), np.where(needs, ls[np.minimum(last + 1, _SCAN - 1)], hi)
     for _ in range(_BISECT):
+        check_cancel(state)
         mid = 0.5 * (a + b)
         good = ok_at_rows(geo, contour, clearance, workspace, mid)
         a, b = np.where(good, mid, a), np.where(good, b, mid)
@@ -401,7 +420,7 @@ def ok_at_rows(geo: _Geo, contour: _Contour, clearance: float, workspace: Worksp
                l: FloatArray) -> NDArray[np.bool_]:
     """Admissibility of one l per grid point."""
     Z, R, _, _ = geo.eye(l)
-    good = contour.distance(Z, R) >= clearance
+    good = contour.distance(Z, R, far=max(clearance, 0.01)) >= clearance
     if workspace is not None:
         good &= workspace.contains(Z, R)
     return good
@@ -749,7 +768,7 @@ def _prepare(line: Any, mandrel: Any, spec: Any, parameter: str, grid_points: in
         workspace = BoxWorkspace(spec.workspace_z_mm, spec.workspace_r_mm)
     check_cancel(state)
     contour = _Contour(mandrel)
-    env = envelope(geo, contour, spec.clearance_mm, spec.free_length_max_mm, workspace)
+    env = envelope(geo, contour, spec.clearance_mm, spec.free_length_max_mm, workspace, state)
     if state is not None:
         state.progress(0.2, "clearance envelope")
     check_cancel(state)
@@ -998,6 +1017,7 @@ def _solve_lp_stage(prob: _Problem, kind: str, u_lo: float | None, mu0: FloatArr
         A_eq = sp.csr_matrix(np.append(cyc, 0.0)[None, :])
         bounds = np.column_stack([np.append(prob.mu_lo, -np.inf), np.append(prob.mu_hi, np.inf)])
         res = _linprog(cost, A, b, A_eq, np.array([e]), bounds)
+        check_cancel(state)  # a HiGHS solve cannot be interrupted: stop right after it
         if res.status == 2:
             raise _diagnose_infeasible(prob)
         if res.status != 0:
@@ -1035,6 +1055,7 @@ def _solve_qp_stage(prob: _Problem, u_lo: float, u_hi: float, mu0: FloatArray, s
         row_lo = np.concatenate([u_lo * prob.dx - prob.ds, h, [e]])
         row_hi = np.concatenate([u_hi * prob.dx - prob.ds, np.full(h.size, np.inf), [e]])
         sol, status, backend = _qp_highs(Q, c, A, row_lo, row_hi, prob.mu_lo, prob.mu_hi)
+        check_cancel(state)
         if sol is None:
             if status == "unavailable":
                 sol = _qp_trust_constr(Q, c, A, row_lo, row_hi, prob.mu_lo, prob.mu_hi, mu)
@@ -1079,6 +1100,7 @@ class _Tube:
     def __init__(self, prob: _Problem) -> None:
         geo, k = prob.geo, prob.k
         self.prob, self.k = prob, k
+        self.state: State | None = None  # polled for cancellation once per round of :meth:`solve`
         L = geo.line
         self.dx, self.ds = prob.dx, prob.ds
         self.lo = prob.mu_lo.copy()
@@ -1204,6 +1226,7 @@ class _Tube:
         x = self.lo.copy() if below is None else np.maximum(self.lo, below)
         x[0] = x[-1] = max(x[0], x[-1])
         for _ in range(max_rounds):
+            check_cancel(self.state)
             y = self.forward(x, A, hi)
             if y is None:
                 return None
@@ -1277,6 +1300,7 @@ def _fast_lp13(prob: _Problem, state: State | None, tol: float) -> _Stage:
     if not prob.exact_cyclic:
         raise _FastFail("ends of the line differ (linearised cyclicity)")
     tube = _Tube(prob)
+    tube.state = state
     U = prob.U
     t0 = time.perf_counter()
     calls = [0]
@@ -1286,7 +1310,7 @@ def _fast_lp13(prob: _Problem, state: State | None, tol: float) -> _Stage:
     def f13(t: float) -> FloatArray | None:
         # the least solution grows with t: the last feasible one (smaller t) is a valid start
         calls[0] += 1
-        check_cancel(state) if calls[0] % 8 == 0 else None
+        check_cancel(state)
         mu = tube.solve(t, None, below=warm[0])
         if mu is not None:
             warm[0] = mu
@@ -1318,6 +1342,7 @@ def _fast_lp13(prob: _Problem, state: State | None, tol: float) -> _Stage:
 
 def _fast_lp14(prob: _Problem, u_lo: float, mu13: FloatArray, state: State | None, tol: float) -> _Stage:
     tube = _Tube(prob)
+    tube.state = state
     t0 = time.perf_counter()
     calls = [0]
 
@@ -1326,7 +1351,7 @@ def _fast_lp14(prob: _Problem, u_lo: float, mu13: FloatArray, state: State | Non
     def f14(T: float) -> FloatArray | None:
         # the least solution grows as T falls: the last feasible one (larger T) is a valid start
         calls[0] += 1
-        check_cancel(state) if calls[0] % 8 == 0 else None
+        check_cancel(state)
         mu = tube.solve(u_lo, T, below=warm[0])
         if mu is not None:
             warm[0] = mu
@@ -1408,17 +1433,23 @@ class _CyclicKKT:
         u = np.zeros(m)
         u[0], u[-1] = g, c
         zu = cho_solve_banded((cb, True), u)
-        denom = 1.0 + (u @ zu) / g
+        denom = 1.0 + (g * zu[0] + c * zu[-1]) / g
 
         def solve(rhs: FloatArray) -> FloatArray:
             x = cho_solve_banded((cb, True), rhs)
-            return x - zu * ((u @ x) / g / denom)
+            return x - zu * ((g * x[0] + c * x[-1]) / g / denom)
 
         return solve
 
 
+def _vdot(a: FloatArray, b: FloatArray) -> float:
+    """Dot product without BLAS: OpenBLAS threads its ddot above 10⁴ entries, and those threads
+    spin-wait — on a busy 2-core machine one (15) QP at 4000 points went from 0.06 s to 0.6 s."""
+    return float(np.add.reduce(a * b))
+
+
 def _ipm_qp(Q: Any, c: FloatArray, A: Any, b: FloatArray, x0: FloatArray, max_iter: int = 100,
-            kkt: _CyclicKKT | None = None) -> FloatArray | None:
+            kkt: _CyclicKKT | None = None, state: State | None = None) -> FloatArray | None:
     """min ½xᵀQx + cᵀx s.t. A x >= b by a Mehrotra predictor–corrector interior-point method.
 
     Q and AᵀA are cyclic tridiagonal here, so each Newton system is a sparse LU of that pattern.
@@ -1436,11 +1467,12 @@ def _ipm_qp(Q: Any, c: FloatArray, A: Any, b: FloatArray, x0: FloatArray, max_it
     bscale = 1.0 + float(np.abs(b).max())
     cscale = 1.0 + float(np.abs(c).max())
     for _ in range(max_iter):
+        check_cancel(state)
         Qx, Atz = Q @ x, At @ z
         rd = Qx + c - Atz
         rp = A @ x - s - b
-        gap = float(s @ z)
-        obj = abs(float(0.5 * x @ Qx + c @ x))
+        gap = _vdot(s, z)
+        obj = abs(0.5 * _vdot(x, Qx) + _vdot(c, x))
         dscale = cscale + float(np.abs(Qx).max()) + float(np.abs(Atz).max())
         if (np.abs(rp).max() <= 1e-9 * bscale and np.abs(rd).max() <= 1e-7 * dscale
                 and gap <= 1e-9 * max(1.0, obj)):
@@ -1463,7 +1495,7 @@ def _ipm_qp(Q: Any, c: FloatArray, A: Any, b: FloatArray, x0: FloatArray, max_it
             return min(1.0, float(np.min(-v[neg] / dv[neg]))) if neg.any() else 1.0
 
         a_aff = min(step(s, dsl), step(z, dz))
-        mu_aff = float((s + a_aff * dsl) @ (z + a_aff * dz)) / m
+        mu_aff = _vdot(s + a_aff * dsl, z + a_aff * dz) / m
         sigma = (mu_aff / (gap / m)) ** 3 if gap > 0 else 0.0
         rc = -s * z - dsl * dz + sigma * gap / m
         dx = solve(-rd + At @ ((rc - z * rp) / s))
@@ -1515,7 +1547,7 @@ def _fast_qp_stage(prob: _Problem, u_lo: float, u_hi: float, mu0: FloatArray, st
             kkt: _CyclicKKT | None = _CyclicKKT(Q, A)
         except _FastFail:
             kkt = None
-        y = _ipm_qp(Q, c, A, b, mu[:-1], kkt=kkt)
+        y = _ipm_qp(Q, c, A, b, mu[:-1], kkt=kkt, state=state)
         if y is None:
             raise _FastFail("interior-point QP did not converge")
         y = np.clip(y, lo, hi)
