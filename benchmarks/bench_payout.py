@@ -82,7 +82,7 @@ def main() -> None:
     print(f"\ntarget: (13)+(14)+(15) at 4000 points under 1 s together (times: median of {max(1, args.repeat)})")
     print("\nCancel latency: longest time between two cancellation polls of the whole payout stage")
     print("(min_range_law on the job's first circuit: envelope + (13)–(15); start and end count as polls)")
-    for n in [job.payout.grid_points, *args.points]:
+    for n in dict.fromkeys([job.payout.grid_points, *args.points]):
         for solver in args.solver:
             spec_n = job.payout.model_copy(update={"grid_points": n})
             st = PollTimer()
@@ -93,7 +93,7 @@ def main() -> None:
             worst = max(gaps)
             where = st.messages[gaps.index(worst)]
             print(f"{n:6d} points {solver:>5}: {len(st.times) - 1:5d} polls in {st.times[-1] - t0:6.3f} s, "
-                  f"max gap {worst * 1e3:7.1f} ms (after progress {where!r})")
+                  f"max gap {worst * 1e3:7.1f} ms (ending in phase {where!r})")
     print("target: well under 500 ms")
 
 
