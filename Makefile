@@ -14,7 +14,7 @@ SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 APT_PKGS := libgl1 libegl1 libglu1-mesa libgl1-mesa-dri libosmesa6 libxkbcommon0 libxkbcommon-x11-0 \
   libfontconfig1 libdbus-1-3 libxrender1 libxi6 libxcb-cursor0 libxcb-icccm4 libxcb-image0 \
   libxcb-keysyms1 libxcb-randr0 libxcb-render-util0 libxcb-shape0 libxcb-xinerama0 libxcb-xfixes0 \
-  libxcb-xkb1 xvfb xauth x11-utils linuxcnc-uspace
+  libxcb-xkb1 xvfb xauth x11-utils linuxcnc-uspace python3-venv
 
 EXAMPLE := resources/examples/pressure_vessel.toml
 
@@ -35,7 +35,7 @@ sysdeps:
 	if [ -n "$$missing" ]; then \
 	  echo "Installing Debian packages:" $$missing; \
 	  $(SUDO) apt-get update -qq && \
-	  DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends $$missing; \
+	  $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $$missing; \
 	fi
 
 venv: $(STAMP)
