@@ -67,11 +67,25 @@ class PipelineResult:
     axes: Any = None
     blocks: Any = None
     timelaw: dict[str, Any] | None = None
+    timelaw_laws: tuple[Any, ...] = ()
+    """The :class:`engine.timeparam.TimeLaw` objects of the blocks stage (method tube/dp/toppra), empty
+    with method "blocks"; :attr:`timelaw_labels` names them, :func:`timelaw_path` gives each one's problem."""
+    timelaw_labels: tuple[str, ...] = ()
+    timelaw_paths: tuple[Any, ...] = ()
+    """One :class:`TimeLawPath` per law of :attr:`timelaw_laws`."""
     nc_text: str | None = None
     post_name: str | None = None
     extension: str = ".nc"
     stage_times: dict[str, float] = field(default_factory=dict)
     reused: tuple[str, ...] = ()
+
+    @property
+    def timelaw_main(self) -> int:
+        """Index of the job's main law in :attr:`timelaw_laws` (the repeated circuit, else the only law);
+        -1 when the blocks stage ran without a time law."""
+        if not self.timelaw_laws:
+            return -1
+        return self.timelaw_labels.index(LAW_REPEATED) if LAW_REPEATED in self.timelaw_labels else 0
 
     @property
     def violations(self) -> list[Any]:
@@ -298,12 +312,13 @@ _STAGE_FIELDS = {
     "winding": ("line",),
     "payout": ("eye_circuit", "eye"),
     "axes": ("machine", "axes"),
-    "blocks": ("blocks", "timelaw"),
+    "blocks": ("blocks", "timelaw", "timelaw_laws", "timelaw_labels", "timelaw_paths"),
     "nc": ("nc_text", "post_name", "extension"),
 }
 
 
-_OPTIONAL_FIELDS = ("timelaw",)   # None when the stage ran without it (method "blocks")
+# None / empty when the stage ran without a time law (method "blocks")
+_OPTIONAL_FIELDS = ("timelaw", "timelaw_laws", "timelaw_labels", "timelaw_paths")
 
 
 def _has(res: PipelineResult, stage: str) -> bool:
@@ -344,9 +359,12 @@ def _run_stage(res: PipelineResult, stage: str, state: State | None) -> Pipeline
         )
         if job.timelaw.method == "blocks":
             blocks = optimise_block_times(blocks, res.machine, state=SubState(state, 0.5, 1.0) if state else None)
-            return replace(res, blocks=blocks, timelaw=None)
-        blocks, info = _time_law_blocks(res, blocks, SubState(state, 0.5, 1.0) if state is not None else None)
-        return replace(res, blocks=blocks, timelaw=info)
+            return replace(res, blocks=blocks, timelaw=None, timelaw_laws=(), timelaw_labels=(), timelaw_paths=())
+        kept: list[tuple[str, Any, TimeLawPath]] = []
+        blocks, info = _time_law_blocks(res, blocks, SubState(state, 0.5, 1.0) if state is not None else None,
+                                        keep=kept)
+        return replace(res, blocks=blocks, timelaw=info, timelaw_laws=tuple(k[1] for k in kept),
+                       timelaw_labels=tuple(k[0] for k in kept), timelaw_paths=tuple(k[2] for k in kept))
     if stage == "nc":
         from engine.post import get_post, load_controller
 
@@ -365,6 +383,75 @@ _TL_TOL_ACCEL = 0.10    # node refinement: |X''_nodes - X''_path| / A at the axi
 _TL_STRIDE = 16         # initial node spacing (path points) before the refinement
 _TL_SPLIT_ROUNDS = 24   # block-splitting rounds for the speed-jump limits
 _TL_VB_SHARE = 0.5      # share of the local speed cap used as the circuit boundary speed (halved if infeasible)
+
+
+LAW_WHOLE = "whole program"
+LAW_REPEATED = "circuit (repeated)"
+LAW_FIRST = "first circuit ramp"
+LAW_LAST = "last circuit ramp"
+
+
+@dataclass(frozen=True)
+class TimeLawPath:
+    """The problem one time law of the blocks stage solved: its nodes and limits.
+
+    Attributes
+    ----------
+    s, X, dX, ddX:
+        Nodes: path length (mm, from 0), internal axis positions, dX/ds and d²X/ds² (per mm).
+    limits:
+        :class:`engine.timeparam.TimeLimits` (boundary speeds included).
+    iteration_s_offset:
+        Path length (mm) to add to the ``s`` of the law's iteration log to place it on ``s`` (non-zero
+        for the last circuit's ramp, whose iterations run on the ramp only).
+    """
+
+    s: np.ndarray
+    X: np.ndarray
+    dX: np.ndarray
+    ddX: np.ndarray
+    limits: Any
+    iteration_s_offset: float = 0.0
+
+
+def timelaw_path(result: PipelineResult, index: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                                            np.ndarray, Any]:
+    """``(s, X, dX, ddX, limits)`` of the time law ``index`` of ``result`` (default: the main law), to
+    re-run :func:`engine.timeparam.parametrize` with another method on the same path and limits.
+
+    Raises
+    ------
+    InputError
+        When the blocks stage ran without a time law or ``index`` is out of range.
+    """
+    if not result.timelaw_paths:
+        raise InputError("the pipeline kept no time law (run the blocks stage with [timelaw].method tube, dp "
+                         "or toppra)", field="timelaw.method")
+    i = result.timelaw_main if index is None else int(index)
+    if not 0 <= i < len(result.timelaw_paths):
+        raise InputError(f"time law index {i} out of range 0..{len(result.timelaw_paths) - 1}", field="index")
+    p = result.timelaw_paths[i]
+    return p.s, p.X, p.dX, p.ddX, p.limits
+
+
+def compare_time_laws(result: PipelineResult, index: int | None = None, methods: tuple[str, ...] = ("dp", "toppra"),
+                      state: State | None = None) -> dict[str, Any]:
+    """The time law ``index`` of ``result`` re-computed by each of ``methods`` on the same path and limits.
+
+    The law itself is re-used for its own method.  Returns ``{method: TimeLaw}``.
+    """
+    i = result.timelaw_main if index is None else int(index)
+    nodes = timelaw_path(result, i)
+    own = result.timelaw_laws[i]
+    out: dict[str, Any] = {}
+    for k, m in enumerate(methods):
+        check_cancel(state)
+        if m == own.method and result.timelaw_labels[i] not in (LAW_FIRST, LAW_LAST):
+            out[m] = own
+            continue
+        sub = SubState(state, k / len(methods), (k + 1) / len(methods)) if state is not None else None
+        out[m] = _parametrize(m, nodes[:4], nodes[4], sub)
+    return out
 
 
 class _NoPartial:
@@ -561,8 +648,11 @@ def _end_law(method: str, nodes: tuple[np.ndarray, ...], mid: tuple[np.ndarray, 
     return _parametrize(method, nodes, limits, state)
 
 
-def _time_law_blocks(res: PipelineResult, blocks: Any, state: State | None) -> tuple[Any, dict[str, Any]]:
-    """Block times from a time law s(t) of the whole program (see docs/timeparam.md, "NC output")."""
+def _time_law_blocks(res: PipelineResult, blocks: Any, state: State | None,
+                     keep: list[tuple[str, Any, TimeLawPath]] | None = None) -> tuple[Any, dict[str, Any]]:
+    """Block times from a time law s(t) of the whole program (see docs/timeparam.md, "NC output").
+
+    ``keep`` (optional) receives ``(label, TimeLaw, TimeLawPath)`` of every law computed."""
     from dataclasses import replace as dc_replace
 
     from engine.errors import InfeasibleError
@@ -599,6 +689,8 @@ def _time_law_blocks(res: PipelineResult, blocks: Any, state: State | None) -> t
         laws = [_parametrize(spec.method, nodes, limits, state)]
         n_nodes = nodes[0].size
         piece_law = [0]
+        if keep is not None:
+            keep.append((LAW_WHOLE, laws[0], TimeLawPath(*nodes, limits)))
     else:
         first = _piece_arrays(s, X, *pieces[0], V, A)
         mid = _piece_arrays(s, X, *pieces[1], V, A)
@@ -633,6 +725,13 @@ def _time_law_blocks(res: PipelineResult, blocks: Any, state: State | None) -> t
                     raise
                 v_b = 0.0 if v_b < 1e-3 else 0.5 * v_b     # a lower boundary speed, at last rest
         piece_law = [0] + [1] * (len(pieces) - 2) + [2]
+        if keep is not None:
+            its = laws[2].iterations
+            # the last circuit's ramp law logs its iterations on the ramp's own s (from 0)
+            off = float(laws[2].s[-1] - its[-1].s[-1]) if its else 0.0
+            keep += [(LAW_FIRST, laws[0], TimeLawPath(*first, dc_replace(limits, sdot_end=v_b))),
+                     (LAW_REPEATED, laws[1], TimeLawPath(*mid, dc_replace(limits, sdot_start=v_b, sdot_end=v_b))),
+                     (LAW_LAST, laws[2], TimeLawPath(*last, dc_replace(limits, sdot_start=v_b), off))]
     # time at every path point: law of its piece, shifted by the time of the pieces before
     n = s.size
     T = np.empty(n)

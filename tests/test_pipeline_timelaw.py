@@ -258,3 +258,53 @@ def test_winder_run_subprocess_prints_stage_times(tmp_path: Path) -> None:
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "stages: mandrel" in proc.stderr and "blocks " in proc.stderr
     assert (tmp_path / "p.ngc").read_text().count("G1 ") > 100
+
+
+def test_result_keeps_the_time_laws_and_reuse_keeps_the_objects(runs) -> None:
+    """PipelineResult.timelaw_laws: the TimeLaw objects of the blocks stage, with labels and problems; the
+    summary agrees with them, stage re-use keeps the very objects, method "blocks" keeps none."""
+    from engine.pipeline import compare_time_laws, timelaw_path
+    from engine.timeparam import TimeLaw
+
+    name, b18, res = runs
+    assert b18.timelaw_laws == () and b18.timelaw_main == -1
+    laws = res.timelaw_laws
+    assert laws and all(isinstance(lw, TimeLaw) for lw in laws)
+    assert len(laws) == len(res.timelaw_labels) == len(res.timelaw_paths) == res.timelaw["laws_computed"]
+    assert res.timelaw["iterations"] == sum(len(lw.iterations) for lw in laws)
+    if res.timelaw["pieces"] == 1:
+        assert res.timelaw_labels == ("whole program",)
+        assert laws[0].total_time_s == pytest.approx(res.timelaw["total_time_s"], rel=1e-12)
+    else:
+        assert res.timelaw_labels == ("first circuit ramp", "circuit (repeated)", "last circuit ramp")
+        n = res.timelaw["pieces"]
+        total = laws[0].total_time_s + (n - 2) * laws[1].total_time_s + laws[2].total_time_s
+        assert total == pytest.approx(res.timelaw["total_time_s"], rel=1e-12)
+    main = res.timelaw_main
+    s, X, dX, ddX, lim = timelaw_path(res)
+    assert s[-1] == pytest.approx(laws[main].s[-1]) and X.shape == dX.shape == ddX.shape == (s.size, X.shape[1])
+    # the iteration logs lie on the law's path
+    for lw, p in zip(laws, res.timelaw_paths, strict=True):
+        for g in lw.iterations:
+            assert g.s[0] + p.iteration_s_offset >= -1e-9 and g.s[-1] + p.iteration_s_offset <= lw.s[-1] + 1e-9
+    # re-running the law's own method on the kept problem reproduces it (the path and limits are complete)
+    again = compare_time_laws(res, main, ("toppra", "tube"))
+    assert again["tube"] is laws[main]
+    assert again["toppra"].total_time_s <= laws[main].total_time_s * 1.005
+    other = res.job.replace(post={**res.job.post.model_dump(), "post": "fanuc"})
+    res2 = run_pipeline(other, EXAMPLES / f"{name}.toml", previous=res)
+    assert "blocks" in res2.reused
+    assert res2.timelaw_laws is res.timelaw_laws and res2.timelaw_paths is res.timelaw_paths
+    assert all(a is b for a, b in zip(res2.timelaw_laws, laws, strict=True))
+    assert res2.timelaw_labels == res.timelaw_labels
+
+
+def test_timelaw_path_without_a_law_is_an_input_error(runs) -> None:
+    from engine.errors import InputError
+    from engine.pipeline import timelaw_path
+
+    _name, b18, res = runs
+    with pytest.raises(InputError, match="no time law"):
+        timelaw_path(b18)
+    with pytest.raises(InputError, match="out of range"):
+        timelaw_path(res, len(res.timelaw_laws))
