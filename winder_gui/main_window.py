@@ -113,6 +113,34 @@ class BuildResult:
     data: MandrelViewData
 
 
+@dataclass(frozen=True)
+class JobTimeLawResult:
+    """One of the job's own time laws (``PipelineResult.timelaw_laws[index]``) with the classical DP
+    and TOPP-RA laws on the same path and limits."""
+
+    source: str
+    index: int
+    law: Any
+    dp: Any
+    toppra: Any
+    s_offset: float
+    key: str
+
+
+def job_timelaw_task(result: Any, index: int, *, state: Any) -> JobTimeLawResult:
+    """:func:`engine.pipeline.compare_time_laws` of the job's law ``index`` (DP and TOPP-RA)."""
+    from engine.pipeline import compare_time_laws
+
+    state.progress(0.0, "time law: DP and TOPP-RA on the job's path")
+    cmp = compare_time_laws(result, index, ("dp", "toppra"), state=state)
+    state.progress(1.0, "")
+    law = result.timelaw_laws[index]
+    n = int(result.timelaw_paths[index].s.size)
+    return JobTimeLawResult(f"job: {result.timelaw_labels[index]} ({law.method}, N = {n})", index, law,
+                            cmp["dp"], cmp["toppra"], float(result.timelaw_paths[index].iteration_s_offset),
+                            str(result.keys.get("blocks", "")))
+
+
 def mandrel_io_available() -> bool:
     """True when :mod:`engine.mandrel_io` (CSV/DXF/STEP import, STEP/STL export) is installed."""
     return importlib.util.find_spec("engine.mandrel_io") is not None
@@ -303,6 +331,10 @@ class MainWindow(QMainWindow):
         """Latest :class:`engine.pipeline.PipelineResult` (possibly partial, after a cancel or error)."""
         self.laws: dict[str, Any] | None = None
         self.timelaw: Any = None
+        """The paper example's time laws (Time law step, "paper example")."""
+        self.job_timelaw: JobTimeLawResult | None = None
+        """The chosen job time law with its DP / TOPP-RA comparison (Time law step, "job: …")."""
+        self._tl_laws: tuple[Any, ...] = ()
         self.auto_run = True
         """Re-run the pipeline after every edit once it has run for this job."""
         self._partial: Any = None
@@ -425,6 +457,7 @@ class MainWindow(QMainWindow):
             panel.job_edited.connect(lambda job, k=key: self._on_job_edited(job, k))
             panel.validity_changed.connect(lambda _m: self._update_run_state())
         self.timelaw_panel.compute_requested.connect(self.compute_timelaw)
+        self.timelaw_plot.law_selected.connect(lambda _i: self._show_chosen_law())
         self.nc_panel.run_requested.connect(self.run_pipeline_now)
         self.nc_panel.cancel_requested.connect(self.cancel_run)
         self.nc_panel.export_requested.connect(self._action_export_nc)
@@ -946,6 +979,7 @@ class MainWindow(QMainWindow):
             f"{float(info.get('total_time_s', 0.0)):.2f} s, {info.get('iterations', 0)} iterations"
             if isinstance(info, dict) else
             f"Program block times: (17)/(18), {res.blocks.total:.2f} s" if res.blocks is not None else "")
+        self._offer_job_laws(res)
         eye_key = res.keys.get("payout", "")
         if eye_key != self._laws_key and res.eye_circuit is not None:
             self._laws_key = eye_key
@@ -1002,6 +1036,9 @@ class MainWindow(QMainWindow):
         self.pull_plot.set_message("No data yet: run the pipeline (F5).")
         self.nc_panel.set_result(None)
         self.view3d.set_paths(None)
+        self._tl_laws = ()
+        self.job_timelaw = None
+        self.timelaw_plot.set_law_choices([], -1)
 
     def _show_result(self, res: Any) -> None:
         """Update the views of every stage of ``res`` that changed since they were last drawn.
@@ -1048,8 +1085,41 @@ class MainWindow(QMainWindow):
         self._view_timer.start()
 
     # -- time law ------------------------------------------------------------------------------------
+    def _offer_job_laws(self, res: Any) -> None:
+        """Offer the job's time laws of ``res`` in the Law chooser (default: the main law); the chosen
+        law is shown at once when the Time law step is open."""
+        laws = tuple(getattr(res, "timelaw_laws", ()) or ())
+        if len(laws) == len(self._tl_laws) and all(a is b for a, b in zip(laws, self._tl_laws, strict=True)):
+            return
+        self._tl_laws = laws
+        self.timelaw_plot.set_law_choices(res.timelaw_labels if laws else [], res.timelaw_main if laws else -1)
+        if laws and self.steps.current_step() == "timelaw":
+            self._show_chosen_law()
+
+    def _show_chosen_law(self) -> None:
+        """Show the law of the chooser: a job law is (re-)computed unless shown already."""
+        i = self.timelaw_plot.selected_law()
+        if i < 0:
+            if self.timelaw is not None:
+                self._on_timelaw_done(self.timelaw)
+            return
+        jt = self.job_timelaw
+        if (jt is not None and jt.index == i and self.result is not None and i < len(self.result.timelaw_laws)
+                and jt.law is self.result.timelaw_laws[i]):
+            self._on_timelaw_done(jt)
+            return
+        self.compute_timelaw()
+
     def compute_timelaw(self) -> None:
-        """Run the time parametrization (tube, DP, TOPP-RA) on the paper example in the worker."""
+        """Run the time parametrization (tube, DP, TOPP-RA) of the chosen law in the worker: the paper
+        example, or the job's law with the classical DP and TOPP-RA on its path and limits."""
+        i = self.timelaw_plot.selected_law()
+        res = self.result
+        if i >= 0 and res is not None and i < len(getattr(res, "timelaw_laws", ())):
+            self.timelaw_panel.summary.setText("computing…")
+            self.tl_runner.submit(job_timelaw_task, res, i)
+            self._status("Computing DP and TOPP-RA on the job's time-law path…")
+            return
         if self.timelaw_panel.errors():
             self._status(f"Time law: {self.timelaw_panel.errors()}", error=True)
             return
@@ -1060,6 +1130,17 @@ class MainWindow(QMainWindow):
         self._status("Computing the time law…")
 
     def _on_timelaw_done(self, r: Any) -> None:
+        if isinstance(r, JobTimeLawResult):
+            self.job_timelaw = r
+            name = f"job {r.law.method}"
+            self._view_queue.extend(self.timelaw_plot.updates(r.law, r.dp, r.toppra, r.source, name, r.s_offset))
+            self._view_timer.start()
+            self.timelaw_panel.summary.setText(
+                f"{r.source}: {r.law.method} {r.law.total_time_s:.3f} s in {len(r.law.iterations)} iterations; "
+                f"single DP {r.dp.total_time_s:.3f} s; TOPP-RA bound {r.toppra.total_time_s:.3f} s")
+            self._status("Time law comparison computed")
+            self._view_queue.append(lambda: self.timelaw_done.emit(r))
+            return
         self.timelaw = r
         self._view_queue.extend(self.timelaw_plot.updates(r.tube, r.dp, r.toppra, r.source))
         self._view_timer.start()
@@ -1410,6 +1491,10 @@ class MainWindow(QMainWindow):
         tab = self.tabs.get(STEP_TABS.get(key, ""))
         if tab is not None:
             self.plot_tabs.setCurrentWidget(tab)
+        if key == "timelaw" and self.timelaw_plot.selected_law() >= 0 and not self.tl_runner.is_busy():
+            jt = self.job_timelaw
+            if jt is None or self.result is None or not any(jt.law is x for x in self.result.timelaw_laws):
+                self._show_chosen_law()
 
     def screenshot(self) -> QImage:
         """The window as an image, with the GL-drawn 3D view composed in (for docs and tests)."""
