@@ -1159,16 +1159,35 @@ class _Tube:
             lo_i = self.lo[idx]
             if (self.g(lo_i, idx) - lo_i - B[idx] > tol).any():
                 return None
-            a, b = lo_i.copy(), hi[idx].copy()
-            for _ in range(60):
-                mid = 0.5 * (a + b)
-                bad = self.g(mid, idx) - mid - B[idx] > 0
-                a, b = np.where(bad, a, mid), np.where(bad, mid, b)
-                if (b - a).max() <= tol:
-                    break
-            hi[idx] = a
+            hi[idx] = self._edge(idx, lo_i.copy(), hi[idx].copy(), B[idx], tol)
         hi[0] = hi[-1] = min(hi[0], hi[-1])
         return hi
+
+    def _edge(self, idx: NDArray[np.int64], a: FloatArray, b: FloatArray, B: FloatArray, tol: float) -> FloatArray:
+        """Largest μ in [a, b] with φ(μ) = g_i(μ) − μ − B_i <= 0 (φ(a) <= 0 < φ(b)), to ``tol``.
+
+        Illinois (regula falsi with the stale end's value halved; superlinear, ~10 steps instead of
+        bisection's ~45), every third step a bisection step so the bracket shrinks at least geometrically;
+        non-finite values (no reverse rotation impossible) fall back to bisection.
+        """
+        fa = self.g(a, idx) - a - B
+        fb = self.g(b, idx) - b - B
+        last = np.zeros(a.size)  # +1: b moved last step, −1: a moved
+        for it in range(200):
+            w = b - a
+            if w.max() <= tol:
+                break
+            with np.errstate(invalid="ignore", divide="ignore"):
+                m = a - fa * w / (fb - fa)
+            ok = np.isfinite(m) & (it % 3 != 2)
+            m = np.where(ok, np.clip(m, a + 0.25 * tol, b - 0.25 * tol), 0.5 * (a + b))
+            fm = self.g(m, idx) - m - B
+            bad = fm > 0
+            fa = np.where(bad & (last > 0), 0.5 * fa, np.where(bad, fa, fm))
+            fb = np.where(~bad & (last < 0), 0.5 * fb, np.where(bad, fm, fb))
+            a, b = np.where(bad, a, m), np.where(bad, m, b)
+            last = np.where(bad, 1.0, -1.0)
+        return a
 
     # propagation ------------------------------------------------------------------------------
     @staticmethod
