@@ -283,10 +283,12 @@ def test_result_keeps_the_time_laws_and_reuse_keeps_the_objects(runs) -> None:
     main = res.timelaw_main
     s, X, dX, ddX, lim = timelaw_path(res)
     assert s[-1] == pytest.approx(laws[main].s[-1]) and X.shape == dX.shape == ddX.shape == (s.size, X.shape[1])
-    # the iteration logs lie on the law's path
+    # the iteration logs lie on the law's path; the last one is the law there (ramps: spliced on the s offset)
     for lw, p in zip(laws, res.timelaw_paths, strict=True):
         for g in lw.iterations:
             assert g.s[0] + p.iteration_s_offset >= -1e-9 and g.s[-1] + p.iteration_s_offset <= lw.s[-1] + 1e-9
+        g = lw.iterations[-1]
+        np.testing.assert_allclose(np.interp(g.s + p.iteration_s_offset, lw.s, lw.sdot), g.sdot, atol=1e-9)
     # re-running the law's own method on the kept problem reproduces it (the path and limits are complete)
     again = compare_time_laws(res, main, ("toppra", "tube"))
     assert again["tube"] is laws[main]
