@@ -1,8 +1,8 @@
 """Properties pages of the Time law and NC steps.
 
 Time law: the job's ``[timelaw]`` fields plus a button that runs :func:`engine.timeparam.parametrize`
-(tube, single DP and TOPP-RA) on the paper's 7-axis example in a worker; the plots show the tube
-iterations and the three final laws.
+(tube, single DP and TOPP-RA) in a worker on the law chosen above the plot — the paper's 7-axis
+example, or one of the job's own laws; the plots show the tube iterations and the three final laws.
 
 NC: Run / Cancel of the whole pipeline, the program summary (post, blocks, program time), the
 warnings of every stage, a preview of the program text and the export button (the window asks
@@ -41,10 +41,10 @@ class TimeLawPanel(SectionPanel):
         super().__init__("Time law", TIMELAW_FIELDS)
         box = QGroupBox("Tube iterations")
         v = QVBoxLayout(box)
-        note = QLabel("Runs the DP tube algorithm, a single DP and the TOPP-RA bound on the paper's 7-axis "
-                      "example path (Tables 4–5 limits) with the levels, penalty, tube share and stop "
-                      "criterion above. The method above sets the NC program's block times: (17)/(18) "
-                      "('blocks') or a time law over the job's axis path.")
+        note = QLabel("Runs the DP tube algorithm, a single DP and the TOPP-RA bound on the law chosen above "
+                      "the plot: the paper's 7-axis example (Tables 4–5 limits), or one of the job's own laws "
+                      "(after a run with method tube/dp/toppra). The method above sets the NC program's block "
+                      "times: a time law over the job's axis path (tube, the default) or (17)/(18) ('blocks').")
         note.setWordWrap(True)
         note.setStyleSheet("color: #555;")
         v.addWidget(note)
