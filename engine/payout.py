@@ -183,7 +183,7 @@ class _Geo:
     def n(self) -> int:
         return self.x.size
 
-    def eye(self, l: FloatArray, rows: slice = slice(None)
+    def eye(self, l: FloatArray, rows: slice | NDArray[np.int64] = slice(None)
             ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         """Z, R, V, d of the eye at free length l (broadcasts over trailing axes) at grid ``rows``."""
         L = self.line
@@ -396,30 +396,30 @@ def envelope(geo: _Geo, contour: _Contour, clearance: float, l_cap: float,
             f"{clearance:g} mm", field="payout.workspace")
     lo = ls[first].copy()
     # refine the lower edge: (ls[first-1], ls[first]] where ok flips False -> True
-    needs = first > 0
-    a, b = np.where(needs, ls[np.maximum(first - 1, 0)], lo), lo.copy()
+    rows = np.flatnonzero(first > 0)  # only rows whose edge lies inside the scan are refined
+    a, b = ls[first[rows] - 1], lo[rows]
     for _ in range(_BISECT):
         check_cancel(state)
         mid = 0.5 * (a + b)
-        good = ok_at_rows(geo, contour, clearance, workspace, mid)
+        good = ok_at_rows(geo, contour, clearance, workspace, mid, rows)
         a, b = np.where(good, a, mid), np.where(good, mid, b)
-    lo = np.where(needs, b, lo)
+    lo[rows] = b
     hi = ls[last].copy()
-    needs = last < _SCAN - 1
-    a, b = hi.copy(), np.where(needs, ls[np.minimum(last + 1, _SCAN - 1)], hi)
+    rows = np.flatnonzero(last < _SCAN - 1)
+    a, b = hi[rows], ls[last[rows] + 1]
     for _ in range(_BISECT):
         check_cancel(state)
         mid = 0.5 * (a + b)
-        good = ok_at_rows(geo, contour, clearance, workspace, mid)
+        good = ok_at_rows(geo, contour, clearance, workspace, mid, rows)
         a, b = np.where(good, mid, a), np.where(good, b, mid)
-    hi = np.where(needs, a, hi)
+    hi[rows] = a
     return Envelope(lo, hi, clearance, l_cap, workspace.describe() if workspace is not None else "unlimited")
 
 
 def ok_at_rows(geo: _Geo, contour: _Contour, clearance: float, workspace: Workspace | None,
-               l: FloatArray) -> NDArray[np.bool_]:
-    """Admissibility of one l per grid point."""
-    Z, R, _, _ = geo.eye(l)
+               l: FloatArray, rows: slice | NDArray[np.int64] = slice(None)) -> NDArray[np.bool_]:
+    """Admissibility of one l per grid point (of the grid points ``rows``)."""
+    Z, R, _, _ = geo.eye(l, rows)
     good = contour.distance(Z, R, far=max(clearance, 0.01)) >= clearance
     if workspace is not None:
         good &= workspace.contains(Z, R)
