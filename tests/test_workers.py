@@ -48,3 +48,13 @@ def test_new_job_supersedes_old(qtbot) -> None:
     assert results == [3]
     assert runner.wait(2000)
     assert time.monotonic() - t0 < 2.0  # the superseded job stopped at its next poll
+
+
+def test_warm_engine_imports_loads_the_stage_modules() -> None:
+    import subprocess
+    import sys
+
+    code = ("import sys; from winder_gui.tasks import ENGINE_MODULES, warm_engine_imports; "
+            "warm_engine_imports(); print(all(m in sys.modules for m in ENGINE_MODULES))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "True"

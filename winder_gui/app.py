@@ -81,6 +81,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         window.auto_run = False
         _arm_selftest(app, window, quit_when, QTimer)
     window.show()
+    import threading
+
+    from winder_gui.tasks import warm_engine_imports
+
+    threading.Thread(target=warm_engine_imports, name="winder-warm-imports", daemon=True).start()
     if not quit_when:
         QTimer.singleShot(0, window.offer_autosaves)
     return app.exec()

@@ -119,3 +119,25 @@ def write_task(result: Any, path: Path, force: bool, *, state: Any) -> Path:
 
     state.progress(0.0, f"writing {path.name}")
     return write_program(result, path, force=force)
+
+
+ENGINE_MODULES: tuple[str, ...] = (
+    "scipy.interpolate", "scipy.optimize", "scipy.spatial", "scipy.linalg",
+    "engine.pipeline", "engine.winding", "engine.payout", "engine.kinematics", "engine.blocks",
+    "engine.timeparam", "engine.post",
+)
+
+
+def warm_engine_imports() -> None:
+    """Import the engine's heavy modules ahead of the first run (call from a background thread).
+
+    An import cannot be cancelled: done lazily inside the first pipeline run, scipy.spatial alone
+    would hold a Cancel for 0.5–1 s.  Errors are left for the real run to report.
+    """
+    import importlib
+
+    for name in ENGINE_MODULES:
+        try:
+            importlib.import_module(name)
+        except Exception:  # noqa: BLE001 - the run that needs the module reports the problem
+            pass
