@@ -85,7 +85,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     from winder_gui.tasks import warm_engine_imports
 
-    threading.Thread(target=warm_engine_imports, name="winder-warm-imports", daemon=True).start()
+    # after the first mandrel is on screen, so the imports do not compete with start-up for the GIL
+    QTimer.singleShot(
+        3000, lambda: threading.Thread(target=warm_engine_imports, name="winder-warm-imports", daemon=True).start()
+    )
     if not quit_when:
         QTimer.singleShot(0, window.offer_autosaves)
     return app.exec()
