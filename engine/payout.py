@@ -1350,6 +1350,30 @@ def _bisect(feasible: Callable[[float], FloatArray | None], good: float, bad: fl
     return good, mu
 
 
+class _WarmProbe:
+    """Feasibility probe of one pull-speed bound for the bisections of (13) and (14).
+
+    ``bounds(x) -> (u_lo, u_hi)`` places the probed value; each call polls cancellation, counts, and
+    warm-starts the propagation from the last feasible least solution (valid because the bisection
+    only moves towards the optimum, where the least solution grows).
+    """
+
+    def __init__(self, tube: Any, state: State | None,
+                 bounds: Callable[[float], tuple[float | None, float | None]]) -> None:
+        self.tube, self.state, self.bounds = tube, state, bounds
+        self.calls = 0
+        self.warm: FloatArray | None = None
+
+    def __call__(self, x: float) -> FloatArray | None:
+        self.calls += 1
+        check_cancel(self.state)
+        lo, hi = self.bounds(x)
+        mu = self.tube.solve(lo, hi, below=self.warm)
+        if mu is not None:
+            self.warm = mu
+        return mu
+
+
 def _fast_lp13(prob: _Problem, state: State | None, tol: float) -> _Stage:
     """(13) by bisection on the lower u bound with the interval-propagation feasibility test."""
     if not prob.exact_cyclic:
@@ -1358,18 +1382,8 @@ def _fast_lp13(prob: _Problem, state: State | None, tol: float) -> _Stage:
     tube.state = state
     U = prob.U
     t0 = time.perf_counter()
-    calls = [0]
-
-    warm: list[FloatArray | None] = [None]
-
-    def f13(t: float) -> FloatArray | None:
-        # the least solution grows with t: the last feasible one (smaller t) is a valid start
-        calls[0] += 1
-        check_cancel(state)
-        mu = tube.solve(t, None, below=warm[0])
-        if mu is not None:
-            warm[0] = mu
-        return mu
+    # the least solution grows with t: the last feasible one (smaller t) is a valid start
+    f13 = _WarmProbe(tube, state, lambda t: (t, None))
 
     if tube.solve(None, None) is None:
         raise _diagnose_infeasible(prob)
@@ -1390,7 +1404,7 @@ def _fast_lp13(prob: _Problem, state: State | None, tol: float) -> _Stage:
         mu13 = tube.solve(t_star - 1e-9 * max(1.0, abs(t_star)), None)
         if mu13 is None or not _fast_check(prob, mu13, t_star - 1e-9, None, tol):
             raise _FastFail("(13) point failed the exact check")
-    s13 = _Stage("maxmin", mu13, t_star, calls[0], time.perf_counter() - t0)
+    s13 = _Stage("maxmin", mu13, t_star, f13.calls, time.perf_counter() - t0)
     prob.update_rows(mu13, margin=10 * tol)
     return s13
 
@@ -1399,18 +1413,8 @@ def _fast_lp14(prob: _Problem, u_lo: float, mu13: FloatArray, state: State | Non
     tube = _Tube(prob)
     tube.state = state
     t0 = time.perf_counter()
-    calls = [0]
-
-    warm: list[FloatArray | None] = [None]
-
-    def f14(T: float) -> FloatArray | None:
-        # the least solution grows as T falls: the last feasible one (larger T) is a valid start
-        calls[0] += 1
-        check_cancel(state)
-        mu = tube.solve(u_lo, T, below=warm[0])
-        if mu is not None:
-            warm[0] = mu
-        return mu
+    # the least solution grows as T falls: the last feasible one (larger T) is a valid start
+    f14 = _WarmProbe(tube, state, lambda T: (u_lo, T))
 
     hi = float(prob.u(mu13).max())
     hi = max(hi, prob.U) + 1e-9 * max(1.0, abs(hi))
@@ -1424,7 +1428,7 @@ def _fast_lp14(prob: _Problem, u_lo: float, mu13: FloatArray, state: State | Non
         if mu is None or not _fast_check(prob, mu, u_lo, T_star + 1e-9, tol):
             raise _FastFail("(14) point failed the exact check")
     prob.update_rows(mu, margin=10 * tol)
-    return _Stage("minmax", mu, T_star, calls[0], time.perf_counter() - t0)
+    return _Stage("minmax", mu, T_star, f14.calls, time.perf_counter() - t0)
 
 
 class _CyclicKKT:
