@@ -1,10 +1,13 @@
 """Properties page of the Machine step: kinematic template, its axes and limits, post-processor, controller.
 
-The template list is ``resources/machines/*.toml`` (:func:`engine.kinematics.list_machines`).  The
-axes table shows each axis's name, type, units, travel limits and speed/acceleration/jump limits
-(controller units: mm or deg, per s).  The limit cells are editable: a value different from the
-template's becomes an override in the job (``[machine.axes.<name>]``); a blank cell restores the
-template's value.  Post-processor (:func:`engine.post.list_posts`) and controller profile
+The template list is ``resources/machines/*.toml`` (:func:`engine.kinematics.list_machines`).  Under
+it, a schematic of the template's kinematic chain (:class:`winder_gui.views.machine_schematic.MachineSchematic`,
+drawn from the engine's forward kinematics; each axis in the colour of its table row, the selected
+row's axis drawn bold; clicking an axis in the drawing selects its row).  The axes table shows each
+axis's name, type, units, travel limits and speed/acceleration/jump limits (controller units: mm or
+deg, per s).  The limit cells are editable: a value different from the template's becomes an override
+in the job (``[machine.axes.<name>]``); a blank cell restores the template's value.  Post-processor
+(:func:`engine.post.list_posts`) and controller profile
 (:func:`engine.post.list_controllers`) are chosen below.
 """
 
@@ -14,11 +17,12 @@ import math
 from typing import Any
 
 from PySide6.QtCore import Qt
-from PySide6.QtGui import QBrush, QColor
+from PySide6.QtGui import QBrush, QColor, QIcon, QPixmap
 from PySide6.QtWidgets import QComboBox, QFormLayout, QGroupBox, QHeaderView, QLabel, QTableWidget, QTableWidgetItem
 
 from engine.job import Job
 from winder_gui.panels.section_panel import Field, SectionPanel, fmt
+from winder_gui.views.machine_schematic import MachineSchematic, axis_colour
 
 LIMIT_COLUMNS: tuple[tuple[str, str], ...] = (
     ("min", "min"),
@@ -54,10 +58,14 @@ class MachinePanel(SectionPanel):
         self.title_label.setWordWrap(True)
         self.title_label.setStyleSheet("color: #555;")
         form.addRow(self.title_label)
+        self.schematic = MachineSchematic()
+        form.addRow(self.schematic)
         self.table = QTableWidget(0, 3 + len(LIMIT_COLUMNS))
         self.table.setObjectName("machine.axes")
         self.table.setHorizontalHeaderLabels(["axis", "type", "units", *[h for _, h in LIMIT_COLUMNS]])
         self.table.verticalHeader().hide()
+        self.table.setSelectionBehavior(QTableWidget.SelectionBehavior.SelectRows)
+        self.table.setSelectionMode(QTableWidget.SelectionMode.SingleSelection)
         self.table.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
         self.table.setMinimumHeight(150)
         self.table.setToolTip("Limits in controller units (mm or deg, per s). Blank: the template's value.")
@@ -88,6 +96,9 @@ class MachinePanel(SectionPanel):
         self.post_combo.activated.connect(lambda _i: self._on_edited())
         self.controller_combo.activated.connect(lambda _i: self._on_edited())
         self.table.itemChanged.connect(lambda _it: self._on_edited())
+        self.table.itemChanged.connect(lambda _it: self._update_schematic_limits())
+        self.table.itemSelectionChanged.connect(self._on_row_selected)
+        self.schematic.axis_clicked.connect(self.select_axis)
 
     # -- loading ---------------------------------------------------------------------------------
     def load_extra(self, job: Job) -> None:
@@ -114,13 +125,19 @@ class MachinePanel(SectionPanel):
                 self.template = None
                 self.table.setRowCount(0)
                 self.title_label.setText(exc.message)
+                self.schematic.set_machine(None, str(exc))
                 return
+            self.schematic.set_machine(shown)
             self.title_label.setText(f"{self.template.title} ({self.template.kind})")
             self.table.setRowCount(len(shown.axes))
             for i, (ax, base) in enumerate(zip(shown.axes, self.template.axes, strict=True)):
                 for j, text in enumerate((ax.name, ax.type, ax.units)):
                     it = QTableWidgetItem(text)
-                    it.setFlags(Qt.ItemFlag.ItemIsEnabled)
+                    it.setFlags(Qt.ItemFlag.ItemIsEnabled | Qt.ItemFlag.ItemIsSelectable)
+                    if j == 0:   # the axis's colour in the schematic and the axis plots
+                        pm = QPixmap(10, 10)
+                        pm.fill(QColor(axis_colour(i)))
+                        it.setIcon(QIcon(pm))
                     self.table.setItem(i, j, it)
                 for j, (key, _h) in enumerate(LIMIT_COLUMNS):
                     v = float(getattr(ax, key))
@@ -131,7 +148,9 @@ class MachinePanel(SectionPanel):
                         it.setToolTip(f"template: {fmt(float(getattr(base, key)))}")
                     self.table.setItem(i, 3 + j, it)
         finally:
+            self.table.clearSelection()
             self.table.blockSignals(False)
+            self.schematic.set_highlight(None)
 
     # -- API for tests and the window -------------------------------------------------------------
     def set_cell(self, axis: str, key: str, text: str) -> None:
@@ -144,6 +163,35 @@ class MachinePanel(SectionPanel):
         """The table as shown: one dict per axis, column key -> text."""
         keys = ["name", "type", "units", *[k for k, _ in LIMIT_COLUMNS]]
         return [{k: self.table.item(i, j).text() for j, k in enumerate(keys)} for i in range(self.table.rowCount())]
+
+    def select_axis(self, name: str) -> None:
+        """Select the table row of axis ``name`` (the schematic highlights that axis)."""
+        for i in range(self.table.rowCount()):
+            if self.table.item(i, 0).text() == name:
+                self.table.selectRow(i)
+                return
+
+    def _on_row_selected(self) -> None:
+        rows = {ix.row() for ix in self.table.selectedIndexes()}
+        row = min(rows) if rows else None
+        it = self.table.item(row, 0) if row is not None else None
+        self.schematic.set_highlight(it.text() if it is not None else None)
+
+    def _update_schematic_limits(self) -> None:
+        """Redraw the schematic with the travel limits typed in the table (valid cells only)."""
+        if self.template is None or self.table.rowCount() != len(self.template.axes):
+            return
+        from dataclasses import replace
+
+        axes = []
+        for i, ax in enumerate(self.template.axes):
+            lim = {}
+            for key in ("min", "max"):
+                it = self.table.item(i, 3 + [k for k, _ in LIMIT_COLUMNS].index(key))
+                text = it.text().strip().replace(",", ".") if it is not None else ""
+                lim[key] = float(text) if text and _num(text) else float(getattr(ax, key))
+            axes.append(replace(ax, **lim) if lim["min"] < lim["max"] else ax)
+        self.schematic.set_machine(replace(self.template, axes=tuple(axes)))
 
     def select_template(self, name: str) -> None:
         self.template_combo.setCurrentText(name)

@@ -1,0 +1,729 @@
+"""Kinematic schematic of a machine template, drawn from the engine's own machine model.
+
+The drawing is computed, never hand-made: every point comes from the engine's forward kinematics
+(:func:`engine.kinematics.eye_chain`, the right-hand side of eq. (16)) at a *neutral pose*
+(:func:`neutral_pose`), and every axis direction from the chain's derivative with respect to that
+axis (a central difference of the same forward kinematics).  So a user-added template is drawn by the
+same code as the shipped ones; there is no per-template code, only the engine's two machine kinds:
+
+* ``cartesian`` winders: the linear slides are drawn as a staircase in chain (program) order - each
+  slide carries the next one, drawn from the end of its travel farther from the mandrel axis (so a
+  carriage rail runs beside the mandrel and a cross slide reaches towards it); the eye rotations
+  (yaw, roll) are circular arrows about their axes through the eye;
+* ``robot`` cells: the track is an arrow at the robot base, the arm is its Denavit-Hartenberg link
+  chain (frames of the chain truncated after each joint), each joint a circular arrow about its axis.
+
+The mandrel is a schematic cylinder on the spindle axis (the machine frame's z axis); its size is
+nominal (the template does not know the part).  The payout eye is a dot at the end of the chain.
+
+Projection
+----------
+Cabinet oblique projection of the machine frame (mm): the mandrel axis z is drawn horizontal (to the
+right), the vertical y up and x (into the picture) receding up-right at 35 deg, half scale::
+
+    u = z + 0.5 cos(35 deg) x,   v = y + 0.5 sin(35 deg) x      (screen v up)
+
+:data:`PROJECTION` is that 2x3 matrix; :meth:`MachineSchematic.axis_glyphs` returns every axis's
+projected anchor, direction and label (tests check them against the forward kinematics).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from PySide6.QtCore import QPointF, QRectF, QSize, Qt, Signal
+from PySide6.QtGui import QBrush, QColor, QFont, QFontMetricsF, QPainter, QPainterPath, QPen, QPolygonF
+from PySide6.QtWidgets import QSizePolicy, QWidget
+
+from winder_gui.views.plots import AXIS_COLOURS
+
+VIEW_AZIMUTH_DEG = -40.0  # camera turned from the +x (eye side) towards the tail end (+z)
+VIEW_ELEVATION_DEG = 22.0
+
+
+def _view_matrix(az_deg: float, el_deg: float) -> np.ndarray:
+    """Orthographic view: rows are the screen's right and up unit vectors in the machine frame."""
+    az, el = math.radians(az_deg), math.radians(el_deg)
+    d = np.array([math.cos(el) * math.cos(az), math.sin(el), -math.cos(el) * math.sin(az)])   # to the camera
+    right = np.cross([0.0, 1.0, 0.0], d)
+    right /= np.linalg.norm(right)
+    up = np.cross(d, right)
+    return np.stack([right, up])
+
+
+PROJECTION = _view_matrix(VIEW_AZIMUTH_DEG, VIEW_ELEVATION_DEG)
+VIEW_DIR = np.cross(PROJECTION[0], PROJECTION[1])     # towards the camera
+UNLIMITED = 1e11          # templates write "no limit" as +-1e12
+MANDREL_COLOUR = "#9aa7b4"
+STRUCTURE_COLOUR = "#8a8a8a"
+EYE_COLOUR = "#d62728"
+
+
+def project(points: np.ndarray) -> np.ndarray:
+    """Machine-frame points (N,3) or (3,), mm -> drawing plane (N,2) or (2,), mm, v up."""
+    p = np.asarray(points, dtype=float)
+    return p @ PROJECTION.T
+
+
+def axis_colour(index: int) -> str:
+    """Colour of the template's ``index``-th axis (the axes table and the axis plots use the same)."""
+    return AXIS_COLOURS[index % len(AXIS_COLOURS)]
+
+
+# --------------------------------------------------------------------------------------------------
+# Geometry (pure numpy + engine; no Qt)
+# --------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class AxisGlyph:
+    """One axis as drawn.
+
+    Attributes
+    ----------
+    name, role, type: from the template (``type`` is ``"linear"`` or ``"rotary"``).
+    index: the axis's position in the template (colour index, table row).
+    label: text drawn next to it (name and travel in controller units).
+    origin3: machine frame, mm. Linear: the moved point at the neutral pose; rotary: a point on the
+        rotation axis (the arc's centre).
+    dir3: unit vector, machine frame: the motion direction for a growing controller value (linear)
+        or the rotation axis, right-hand rule for a growing controller value (rotary; the arc's arrow
+        head shows that sense).
+    ends3: (2,3) linear: the moved point at the axis's min and max (``None`` when unlimited: a nominal
+        arrow is drawn); rotary: ``None``.
+    radius: rotary arc radius, mm (0 for linear).
+    origin, direction: ``origin3`` projected (mm, v up) and ``dir3`` projected and normalised (for a
+        rotary axis seen end-on the direction is (0, 0)).
+    ends: ``ends3`` projected (2,2), or ``None``.
+    """
+
+    name: str
+    role: str
+    type: str
+    index: int
+    label: str
+    origin3: np.ndarray
+    dir3: np.ndarray
+    ends3: np.ndarray | None
+    radius: float
+    origin: np.ndarray
+    direction: np.ndarray
+    ends: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class Schematic:
+    """The whole drawing in the machine frame (mm) and projected.
+
+    ``q``: the neutral pose, controller units.  ``eye3``: eye position (FK of ``q``; the mandrel angle
+    is 0, so machine and mandrel frames coincide).  ``eye_axis3``: eye axis.  ``links3``: the
+    structure polyline (robot link chain / cartesian slide staircase ending at the eye).
+    ``mandrel_radius``, ``mandrel_z``: the nominal mandrel cylinder (radius; z of its two ends).
+    """
+
+    machine: Any
+    q: np.ndarray
+    eye3: np.ndarray
+    eye_axis3: np.ndarray
+    links3: np.ndarray
+    axes: tuple[AxisGlyph, ...]
+    mandrel_radius: float
+    mandrel_z: tuple[float, float]
+    size: float
+
+    @property
+    def eye(self) -> np.ndarray:
+        return project(self.eye3)
+
+    @property
+    def links(self) -> np.ndarray:
+        return project(self.links3)
+
+
+def _limited(lo: float, hi: float) -> bool:
+    return abs(lo) < UNLIMITED and abs(hi) < UNLIMITED
+
+
+def _internal_range(ax: Any) -> tuple[float, float] | None:
+    """The axis's travel in internal units (rad / mm), sorted, or ``None`` when unlimited."""
+    if not _limited(ax.min, ax.max):
+        return None
+    a, b = (ax.min - ax.offset) / ax.scale, (ax.max - ax.offset) / ax.scale
+    return (min(a, b), max(a, b))
+
+
+def _ends_internal(ax: Any) -> tuple[float, float] | None:
+    """Internal values (rad / mm) at the axis's controller min and max (in that order), or ``None``."""
+    if not _limited(ax.min, ax.max):
+        return None
+    return ((ax.min - ax.offset) / ax.scale, (ax.max - ax.offset) / ax.scale)
+
+
+def neutral_pose(machine: Any) -> np.ndarray:
+    """A pose to draw the machine in (internal units: rad, mm).
+
+    Rotary axes at their datum (internal 0) clamped into their travel, robot joints at the template's
+    home; linear axes at the middle of their travel (the datum when unlimited).  If the eye would then
+    sit closer than 150 mm to the mandrel axis, the first linear axis that moves it radially is set to
+    3/4 of its travel, on the side away from the axis.
+    """
+    from engine.kinematics import eye_pose
+
+    q = np.zeros(len(machine.axes))
+    for k, ax in enumerate(machine.axes):
+        rng = _internal_range(ax)
+        if ax.type == "linear":
+            q[k] = 0.5 * (rng[0] + rng[1]) if rng else 0.0
+        elif rng:
+            q[k] = min(max(0.0, rng[0]), rng[1])
+    if machine.kind == "robot":
+        for j, h in enumerate(machine.home):
+            q[machine.axis_index(f"joint{j + 1}")] = h
+    p0 = eye_pose(machine, q)[0][0]
+    if math.hypot(p0[0], p0[1]) < 150.0:
+        for k, ax in enumerate(machine.axes):
+            rng = _internal_range(ax)
+            if ax.type != "linear" or rng is None:
+                continue
+            d = _linear_dir(machine, q, k)
+            if math.hypot(d[0], d[1]) < 0.5:
+                continue
+            hi = q.copy()
+            hi[k] = rng[0] + 0.75 * (rng[1] - rng[0])
+            lo = q.copy()
+            lo[k] = rng[0] + 0.25 * (rng[1] - rng[0])
+            ph, pl = eye_pose(machine, hi)[0][0], eye_pose(machine, lo)[0][0]
+            q = hi if math.hypot(ph[0], ph[1]) >= math.hypot(pl[0], pl[1]) else lo
+            break
+    return q
+
+
+def _frame(machine: Any, q_int: np.ndarray) -> np.ndarray:
+    from engine.kinematics import eye_chain
+
+    return eye_chain(machine, q_int[None, :])[0]
+
+
+def _linear_dir(machine: Any, q_int: np.ndarray, k: int, h: float = 1.0) -> np.ndarray:
+    """Unit motion direction of linear axis ``k`` (d eye / d q_k, central difference)."""
+    a, b = q_int.copy(), q_int.copy()
+    a[k] -= h
+    b[k] += h
+    d = _frame(machine, b)[:3, 3] - _frame(machine, a)[:3, 3]
+    n = np.linalg.norm(d)
+    return d / n if n > 1e-12 else np.zeros(3)
+
+
+def _rotary_axis(machine: Any, q_int: np.ndarray, k: int, h: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+    """Rotation axis (unit) of rotary axis ``k`` and the point on it nearest the eye.
+
+    From ``dR/dq R^T = [w]x`` and ``dp/dq = w x (p - c)``: ``c_perp = p + w x dp/dq`` (|w| = 1).
+    """
+    a, b = q_int.copy(), q_int.copy()
+    a[k] -= h
+    b[k] += h
+    Ta, Tb, T0 = _frame(machine, a), _frame(machine, b), _frame(machine, q_int)
+    W = (Tb[:3, :3] - Ta[:3, :3]) / (2 * h) @ T0[:3, :3].T
+    w = np.array([W[2, 1] - W[1, 2], W[0, 2] - W[2, 0], W[1, 0] - W[0, 1]]) * 0.5
+    n = np.linalg.norm(w)
+    if n < 1e-9:
+        return np.zeros(3), T0[:3, 3].copy()
+    w /= n
+    v = (Tb[:3, 3] - Ta[:3, 3]) / (2 * h) / n
+    return w, T0[:3, 3] + np.cross(w, v)
+
+
+def _screen_distance(p3: np.ndarray) -> float:
+    """Distance of a point's projection from the projected mandrel axis, mm."""
+    a = PROJECTION[:, 2] / np.linalg.norm(PROJECTION[:, 2])
+    v = project(p3)
+    return float(abs(v[0] * a[1] - v[1] * a[0]))
+
+
+def _robot_links(machine: Any, q_int: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
+    """Robot link polyline and, per joint, its axis and origin: frames of the truncated chain.
+
+    ``eye_chain`` of the template with the DH rows cut after joint k and no tool is the frame after
+    joint k (standard DH: joint k+1 turns about that frame's z axis through its origin).
+    """
+    pts: list[np.ndarray] = []
+    zs: list[np.ndarray] = []
+    os_: list[np.ndarray] = []
+    for k in range(len(machine.dh) + 1):
+        F = _frame(replace(machine, dh=machine.dh[:k], tool=np.eye(4)), q_int)
+        if k < len(machine.dh):
+            zs.append(F[:3, 2].copy())
+            os_.append(F[:3, 3].copy())
+            pts.append(F[:3, 3].copy())
+            d = machine.dh[k].d
+            if d and machine.dh[k].a:          # the offset along z first, then the common normal
+                pts.append(F[:3, 3] + d * F[:3, 2])
+        else:
+            pts.append(F[:3, 3].copy())        # the flange
+    pts.append(_frame(machine, q_int)[:3, 3].copy())   # the eye
+    return pts, zs, os_
+
+
+def _range_text(ax: Any) -> str:
+    if not _limited(ax.min, ax.max):
+        return ax.name
+    return f"{ax.name} {ax.min:g}…{ax.max:g} {ax.units}"
+
+
+def build_schematic(machine: Any) -> Schematic:
+    """The schematic of ``machine`` (an :class:`engine.kinematics.MachineTemplate`)."""
+    q_int = neutral_pose(machine)
+    T = _frame(machine, q_int)
+    eye, eye_axis = T[:3, 3].copy(), T[:3, 2].copy()
+    mi = machine.axis_index("mandrel")
+    lin = [k for k, ax in enumerate(machine.axes) if ax.type == "linear"]
+    origins: dict[int, np.ndarray] = {}
+    ends: dict[int, np.ndarray | None] = {}
+    dirs: dict[int, np.ndarray] = {}
+    rot_centres: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    links: list[np.ndarray]
+    if machine.kind == "robot":
+        links, zs, os_ = _robot_links(machine, q_int)
+        base_track = links[0]
+        for k in lin:      # the track carries the base: its locus is the base origin's
+            dirs[k] = _linear_dir(machine, q_int, k)
+            origins[k] = base_track
+            rng = _ends_internal(machine.axes[k])
+            ends[k] = (np.array([base_track + (r - q_int[k]) * dirs[k] for r in rng]) if rng else None)
+        for j in range(len(machine.dh)):
+            rot_centres[machine.axis_index(f"joint{j + 1}")] = (zs[j], os_[j])
+    else:
+        # staircase of slides in chain order: slide j is drawn with the later slides at the end of their
+        # travel drawn farther from the mandrel axis (so the slides do not cross the mandrel)
+        far = q_int.copy()
+        for k in lin[1:]:
+            rng = _internal_range(machine.axes[k])
+            if rng is None:
+                continue
+            cand = []
+            for r in (rng[1], rng[0]):
+                qq = q_int.copy()
+                qq[k] = r
+                cand.append((_screen_distance(_frame(machine, qq)[:3, 3]), r))
+            far[k] = max(cand, key=lambda c: c[0] + 1e-9 * (c[1] == rng[1]))[1]
+        links = []
+        for j, k in enumerate(lin):
+            qq = q_int.copy()
+            for kk in lin[j + 1:]:
+                qq[kk] = far[kk]
+            p = _frame(machine, qq)[:3, 3].copy()
+            dirs[k] = _linear_dir(machine, qq, k)
+            origins[k] = p
+            rng = _ends_internal(machine.axes[k])
+            ends[k] = np.array([p + (r - q_int[k]) * dirs[k] for r in rng]) if rng else None
+            links.append(p)
+        links.append(eye)
+    # nominal mandrel: radius from the eye's distance to the axis, length from the travel along it
+    r_eye = math.hypot(eye[0], eye[1])
+    radius = float(np.clip(0.4 * r_eye, 40.0, 250.0))
+    along = [k for k in lin if abs(dirs[k][2]) > 0.9 and ends[k] is not None]
+    if along:
+        span = float(np.ptp(ends[along[0]][:, 2]))
+        half = 0.5 * min(max(0.55 * span, 4 * radius), 2000.0)
+    else:
+        half = 3.0 * radius
+    zc = float(eye[2]) if machine.kind == "robot" else 0.0
+    mandrel_z = (zc - half, zc + half)
+    pts = [eye, *links, np.array([radius, radius, mandrel_z[0]]), np.array([-radius, -radius, mandrel_z[1]])]
+    for e in ends.values():
+        if e is not None:
+            pts.extend(e)
+    size = float(np.ptp(project(np.array(pts)), axis=0).max()) or 500.0
+    # rotary axes: mandrel at the headstock; eye rotations through the eye; robot joints at their origins
+    glyphs: list[AxisGlyph] = []
+    used: list[np.ndarray] = []
+    for k, ax in enumerate(machine.axes):
+        label = _range_text(ax)
+        if ax.type == "linear":
+            d = ax.sign * dirs[k]
+            if ends[k] is None:
+                e3 = None
+                nominal = 0.15 * size
+                o3 = origins[k]
+                ends3 = np.array([o3 - nominal * d, o3 + nominal * d])
+            else:
+                e3 = ends3 = ends[k]
+            o3 = origins[k]
+            g2 = project(ends3[1]) - project(ends3[0])
+            glyphs.append(AxisGlyph(ax.name, ax.role, ax.type, k, label, o3, d, e3, 0.0, project(o3),
+                                    _unit2(g2), project(e3) if e3 is not None else None))
+            continue
+        if k == mi:
+            w = np.array([0.0, 0.0, 1.0])             # p_W = Rz(theta) p_M: the spindle is the z axis
+            c = np.array([0.0, 0.0, mandrel_z[0] - 0.12 * size])
+            r = 1.25 * radius
+        elif k in rot_centres:
+            w, c = rot_centres[k]
+            r = 0.045 * size
+        else:
+            w, c = _rotary_axis(machine, q_int, k)
+            r = 0.045 * size
+        c = c.copy()
+        for u in used:                               # two axes through one point: shift along the axis
+            if np.linalg.norm(u - c) < 0.05 * size:
+                c = c + 0.09 * size * w
+        if k != mi and np.linalg.norm(c - eye) < 0.05 * size:
+            c = c + 0.09 * size * w
+        used.append(c)
+        w = ax.sign * w
+        glyphs.append(AxisGlyph(ax.name, ax.role, ax.type, k, label, c, w, None, r, project(c),
+                                _unit2(project(w)), None))
+    return Schematic(machine, machine.to_controller(q_int), eye, eye_axis, np.array(links), tuple(glyphs),
+                     radius, mandrel_z, size)
+
+
+def _alpha(colour: str, a: int) -> QColor:
+    c = QColor(colour)
+    c.setAlpha(a)
+    return c
+
+
+def _unit2(v: np.ndarray) -> np.ndarray:
+    n = float(np.linalg.norm(v))
+    return v / n if n > 1e-9 else np.zeros(2)
+
+
+def _hull(points: np.ndarray) -> np.ndarray:
+    """Convex hull (monotone chain) of 2-D points, counter-clockwise."""
+    pts = sorted(map(tuple, np.round(points, 9)))
+    if len(pts) < 3:
+        return np.array(pts)
+
+    def cross(o: tuple, a: tuple, b: tuple) -> float:
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+    lower: list[tuple] = []
+    for p in pts:
+        while len(lower) >= 2 and cross(lower[-2], lower[-1], p) <= 0:
+            lower.pop()
+        lower.append(p)
+    upper: list[tuple] = []
+    for p in reversed(pts):
+        while len(upper) >= 2 and cross(upper[-2], upper[-1], p) <= 0:
+            upper.pop()
+        upper.append(p)
+    return np.array(lower[:-1] + upper[:-1])
+
+
+def _circle3(c: np.ndarray, w: np.ndarray, r: float, a0: float, a1: float, n: int = 48) -> np.ndarray:
+    """Points of an arc of radius ``r`` about axis ``w`` through ``c`` from angle a0 to a1 (rad)."""
+    ref = np.array([0.0, 1.0, 0.0]) if abs(w[1]) < 0.9 else np.array([0.0, 0.0, 1.0])
+    e1 = np.cross(w, ref)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(w, e1)
+    t = np.linspace(a0, a1, n)
+    return c + r * (np.cos(t)[:, None] * e1 + np.sin(t)[:, None] * e2)
+
+
+# --------------------------------------------------------------------------------------------------
+# Widget
+# --------------------------------------------------------------------------------------------------
+class MachineSchematic(QWidget):
+    """The selected template's kinematic scheme (QPainter, oblique projection; works offscreen).
+
+    ``set_machine(template)`` or ``set_template(name_or_path)`` shows a template; a template that
+    fails to load shows its message instead.  ``set_highlight(axis_name)`` draws that axis bold.
+    ``axis_clicked(name)`` is emitted when the user clicks near an axis.
+    """
+
+    axis_clicked = Signal(str)
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.setObjectName("machine.schematic")
+        self.setMinimumSize(260, 180)
+        self.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Expanding)
+        self.schematic: Schematic | None = None
+        self.message = ""
+        self.highlighted: str | None = None
+        self._map: tuple[float, float, float] = (1.0, 0.0, 0.0)    # scale, x0, y0
+        self.setToolTip("Kinematic scheme of the template (oblique view, mandrel axis horizontal); "
+                        "the travel of each axis in controller units")
+
+    def sizeHint(self) -> QSize:
+        return QSize(360, 240)
+
+    # -- API ---------------------------------------------------------------------------------------
+    def set_machine(self, machine: Any | None, message: str = "") -> None:
+        """Show ``machine`` (a MachineTemplate); ``None`` shows ``message`` instead."""
+        self.schematic = None
+        self.message = message
+        if machine is not None:
+            try:
+                self.schematic = build_schematic(machine)
+            except Exception as exc:     # noqa: BLE001 - a drawing must never take the panel down
+                self.message = f"cannot draw the scheme of {getattr(machine, 'name', 'the machine')}: {exc}"
+        if self.schematic is not None and self.highlighted not in self.labels():
+            self.highlighted = None
+        self.update()
+
+    def set_template(self, name_or_path: str | Path) -> None:
+        """Load a template by name or path and show it (or the loader's message)."""
+        from engine.errors import InputError
+        from engine.kinematics import load_machine
+
+        try:
+            self.set_machine(load_machine(name_or_path))
+        except InputError as exc:
+            self.set_machine(None, str(exc))
+
+    def set_highlight(self, name: str | None) -> None:
+        self.highlighted = name
+        self.update()
+
+    def labels(self) -> list[str]:
+        """Axis names drawn, in template order."""
+        return [g.name for g in self.schematic.axes] if self.schematic else []
+
+    def axis_glyphs(self) -> list[AxisGlyph]:
+        """Per-axis drawing data (3-D and projected anchors, directions, ends, labels)."""
+        return list(self.schematic.axes) if self.schematic else []
+
+    def eye_point(self) -> np.ndarray | None:
+        """The eye as drawn, projected (mm, v up)."""
+        return self.schematic.eye if self.schematic else None
+
+    def to_pixels(self, p2: np.ndarray) -> QPointF:
+        """Drawing-plane point (mm, v up) -> widget pixels, for the current size."""
+        s, x0, y0 = self._map
+        return QPointF(x0 + s * float(p2[0]), y0 - s * float(p2[1]))
+
+    # -- painting ----------------------------------------------------------------------------------
+    def _fit(self, sch: Schematic) -> None:
+        pts = [sch.links, sch.eye[None, :], project(self._mandrel_points(sch))]
+        for g in sch.axes:
+            if g.type == "linear":
+                pts.append(project(self._linear_ends(g, sch)))
+            else:
+                pts.append(project(_circle3(g.origin3, g.dir3, g.radius, 0, 2 * math.pi, 16)))
+        allp = np.vstack(pts)
+        lo, hi = allp.min(axis=0), allp.max(axis=0)
+        span = np.maximum(hi - lo, 1.0)
+        mx, my = 46.0, 22.0   # room for the labels
+        w, h = max(self.width() - 2 * mx, 10.0), max(self.height() - 2 * my, 10.0)
+        s = min(w / span[0], h / span[1])
+        x0 = mx + 0.5 * (w - s * span[0]) - s * lo[0]
+        y0 = my + 0.5 * (h - s * span[1]) + s * hi[1]
+        self._map = (s, x0, y0)
+
+    @staticmethod
+    def _mandrel_points(sch: Schematic, n: int = 40) -> np.ndarray:
+        t = np.linspace(0, 2 * math.pi, n, endpoint=False)
+        ring = np.stack([sch.mandrel_radius * np.cos(t), sch.mandrel_radius * np.sin(t), np.zeros(n)], axis=1)
+        a, b = ring.copy(), ring.copy()
+        a[:, 2], b[:, 2] = sch.mandrel_z
+        return np.vstack([a, b])
+
+    @staticmethod
+    def _linear_ends(g: AxisGlyph, sch: Schematic) -> np.ndarray:
+        if g.ends3 is not None:
+            return g.ends3
+        return np.array([g.origin3 - 0.15 * sch.size * g.dir3, g.origin3 + 0.15 * sch.size * g.dir3])
+
+    def _poly(self, pts3: np.ndarray) -> QPolygonF:
+        return QPolygonF([self.to_pixels(p) for p in project(pts3)])
+
+    def paintEvent(self, _ev: Any) -> None:  # noqa: N802 - Qt API
+        p = QPainter(self)
+        p.setRenderHint(QPainter.RenderHint.Antialiasing)
+        p.fillRect(self.rect(), QColor("#fbfbfb"))
+        p.setPen(QPen(QColor("#d0d0d0")))
+        p.drawRect(self.rect().adjusted(0, 0, -1, -1))
+        sch = self.schematic
+        if sch is None:
+            p.setPen(QColor("#c01010") if self.message else QColor("#777"))
+            p.drawText(QRectF(self.rect()).adjusted(8, 8, -8, -8),
+                       Qt.AlignmentFlag.AlignCenter | Qt.TextFlag.TextWordWrap,
+                       self.message or "no machine template")
+            p.end()
+            return
+        self._fit(sch)
+        font = QFont(self.font())
+        font.setPointSizeF(max(7.0, min(9.0, self.height() / 26.0)))
+        p.setFont(font)
+        self._draw_mandrel(p, sch)
+        self._draw_structure(p, sch)
+        order = sorted(sch.axes, key=lambda g: g.name == self.highlighted)   # the highlighted one last
+        boxes: list[QRectF] = []
+        for g in order:
+            self._draw_axis(p, sch, g, boxes)
+        # the eye
+        e = self.to_pixels(sch.eye)
+        tip = self.to_pixels(project(sch.eye3 + 0.06 * sch.size * sch.eye_axis3))
+        p.setPen(QPen(QColor(EYE_COLOUR), 1.2, Qt.PenStyle.DashLine))
+        p.drawLine(e, tip)
+        p.setPen(QPen(QColor("#7a1010"), 1.0))
+        p.setBrush(QBrush(QColor(EYE_COLOUR)))
+        p.drawEllipse(e, 4.5, 4.5)
+        p.setPen(QColor(EYE_COLOUR))
+        self._label(p, "eye", QPointF(e.x() + 6, e.y() + 12), boxes, QColor(EYE_COLOUR))
+        p.end()
+
+    def _draw_mandrel(self, p: QPainter, sch: Schematic) -> None:
+        pts = self._mandrel_points(sch)
+        z0, z1 = sch.mandrel_z
+        s = 1.3 * sch.mandrel_radius
+        zh = z0 - 0.04 * sch.size
+        box = np.array([[-s, -s, zh], [s, -s, zh], [s, s, zh], [-s, s, zh]])
+        behind = float(VIEW_DIR[2]) > 0          # the headstock (low z) is the far end
+
+        def headstock() -> None:
+            p.setPen(QPen(QColor("#777"), 1.0))
+            p.setBrush(QBrush(QColor("#d9d9d9")))
+            p.drawPolygon(self._poly(box))
+
+        if behind:
+            headstock()
+        hull = _hull(project(pts))
+        p.setPen(QPen(QColor("#6c7a88"), 1.0))
+        p.setBrush(QBrush(_alpha(MANDREL_COLOUR, 170)))
+        p.drawPolygon(QPolygonF([self.to_pixels(q) for q in hull]))
+        n = pts.shape[0] // 2
+        p.setBrush(QBrush(_alpha(MANDREL_COLOUR, 220)))
+        p.drawPolygon(self._poly(pts[n:] if behind else pts[:n]))
+        if not behind:
+            headstock()
+        # spindle centre line (dash-dot) beyond both ends
+        ext = 0.16 * sch.size
+        p.setPen(QPen(QColor("#555"), 0.9, Qt.PenStyle.DashDotLine))
+        p.drawLine(self.to_pixels(project(np.array([0, 0, z0 - ext]))),
+                   self.to_pixels(project(np.array([0, 0, z1 + 0.5 * ext]))))
+        p.setPen(QColor("#666"))
+        c = self.to_pixels(project(np.array([0, -sch.mandrel_radius, 0.5 * (z0 + z1)])))
+        p.drawText(QPointF(c.x() - 22, c.y() + 14), "mandrel")
+
+    def _draw_structure(self, p: QPainter, sch: Schematic) -> None:
+        if sch.machine.kind == "robot":
+            pen = QPen(QColor(STRUCTURE_COLOUR), 5.0)
+            pen.setCapStyle(Qt.PenCapStyle.RoundCap)
+            pen.setJoinStyle(Qt.PenJoinStyle.RoundJoin)
+            p.setPen(pen)
+            p.setBrush(Qt.BrushStyle.NoBrush)
+            p.drawPolyline(QPolygonF([self.to_pixels(q) for q in sch.links]))
+            p.setPen(QPen(QColor("#555"), 1.0))
+            p.setBrush(QBrush(QColor("#cfcfcf")))
+            b = self.to_pixels(sch.links[0])
+            p.drawRect(QRectF(b.x() - 9, b.y() - 3, 18, 6))
+        else:
+            # the carriage rail: a light bar under the first slide
+            pass
+
+    def _draw_axis(self, p: QPainter, sch: Schematic, g: AxisGlyph, boxes: list[QRectF]) -> None:
+        hl = g.name == self.highlighted
+        col = QColor(axis_colour(g.index))
+        width = 3.4 if hl else 1.8
+        if hl:   # a soft halo first
+            halo = QPen(QColor(col.red(), col.green(), col.blue(), 70), 10.0)
+            halo.setCapStyle(Qt.PenCapStyle.RoundCap)
+            p.setPen(halo)
+            p.setBrush(Qt.BrushStyle.NoBrush)
+            self._axis_path(p, sch, g)
+        pen = QPen(col, width)
+        pen.setCapStyle(Qt.PenCapStyle.RoundCap)
+        p.setPen(pen)
+        p.setBrush(Qt.BrushStyle.NoBrush)
+        anchor = self._axis_path(p, sch, g, heads=True, colour=col, width=width)
+        f = QFont(p.font())
+        f.setBold(hl)
+        p.setFont(f)
+        self._label(p, g.label, anchor, boxes, col)
+        f.setBold(False)
+        p.setFont(f)
+
+    def _axis_path(self, p: QPainter, sch: Schematic, g: AxisGlyph, heads: bool = False,
+                   colour: QColor | None = None, width: float = 1.8) -> QPointF:
+        """Draw the axis's line/arc (and arrow heads); return where its label goes."""
+        if g.type == "linear":
+            e = self._linear_ends(g, sch)
+            a, b = self.to_pixels(project(e[0])), self.to_pixels(project(e[1]))
+            p.drawLine(a, b)
+            if heads:
+                self._head(p, a, b, colour, width)
+                self._head(p, b, a, colour, width)
+                o = self.to_pixels(g.origin)
+                p.setBrush(QBrush(colour))
+                p.drawEllipse(o, 2.2, 2.2)
+                p.setBrush(Qt.BrushStyle.NoBrush)
+            return b
+        arc = _circle3(g.origin3, g.dir3, g.radius, 0.0, 1.6 * math.pi)
+        poly = self._poly(arc)
+        p.drawPolyline(poly)
+        if heads:
+            self._head(p, poly[-1], poly[-4], colour, width)
+            # the rotation axis itself, dash-dot, through the arc
+            ax = np.array([g.origin3 - 1.5 * g.radius * g.dir3, g.origin3 + 1.5 * g.radius * g.dir3])
+            pen = QPen(colour, 0.9, Qt.PenStyle.DashDotLine)
+            p.save()
+            p.setPen(pen)
+            p.drawPolyline(self._poly(ax))
+            p.restore()
+        top = max(range(poly.size()), key=lambda i: -poly[i].y())
+        return QPointF(poly[top].x(), poly[top].y() - 2)
+
+    @staticmethod
+    def _head(p: QPainter, tip: QPointF, frm: QPointF, colour: QColor | None, width: float) -> None:
+        dx, dy = tip.x() - frm.x(), tip.y() - frm.y()
+        n = math.hypot(dx, dy)
+        if n < 1e-6 or colour is None:
+            return
+        ux, uy = dx / n, dy / n
+        size = 6.0 + width
+        path = QPainterPath(tip)
+        path.lineTo(tip.x() - size * ux + 0.5 * size * uy, tip.y() - size * uy - 0.5 * size * ux)
+        path.lineTo(tip.x() - size * ux - 0.5 * size * uy, tip.y() - size * uy + 0.5 * size * ux)
+        path.closeSubpath()
+        p.save()
+        p.setPen(Qt.PenStyle.NoPen)
+        p.setBrush(QBrush(colour))
+        p.drawPath(path)
+        p.restore()
+
+    def _label(self, p: QPainter, text: str, at: QPointF, boxes: list[QRectF], colour: QColor) -> None:
+        """Text near ``at``, nudged so it overlaps no earlier label and stays inside the widget."""
+        fm = QFontMetricsF(p.font())
+        w, h = fm.horizontalAdvance(text) + 4, fm.height()
+        cands = [(4, -4), (4, 4), (-w - 4, -4), (-w - 4, 4), (-w / 2, -h - 2), (-w / 2, h + 2)]
+        rect = None
+        for dx, dy in cands + [(dx, dy + s * h) for s in (1, -1, 2, -2) for dx, dy in cands[:4]]:
+            r = QRectF(at.x() + dx, at.y() + dy - h / 2, w, h)
+            r.moveLeft(min(max(r.left(), 1.0), self.width() - w - 1))
+            r.moveTop(min(max(r.top(), 1.0), self.height() - h - 1))
+            if not any(r.intersects(b) for b in boxes):
+                rect = r
+                break
+        if rect is None:
+            rect = QRectF(at.x() + 4, at.y() - h / 2, w, h)
+        boxes.append(rect)
+        p.save()
+        p.setPen(Qt.PenStyle.NoPen)
+        p.setBrush(QBrush(QColor(255, 255, 255, 200)))
+        p.drawRect(rect)
+        p.setPen(colour.darker(115))
+        p.drawText(rect, Qt.AlignmentFlag.AlignCenter, text)
+        p.restore()
+
+    def mousePressEvent(self, ev: Any) -> None:  # noqa: N802 - Qt API
+        if self.schematic is None:
+            return
+        pos = ev.position()
+        best, dist = None, 14.0
+        for g in self.schematic.axes:
+            if g.type == "linear":
+                e = self._linear_ends(g, self.schematic)
+                pts = project(np.linspace(e[0], e[1], 20))
+            else:
+                pts = project(_circle3(g.origin3, g.dir3, g.radius, 0, 2 * math.pi, 24))
+            for q in pts:
+                px = self.to_pixels(q)
+                d = math.hypot(px.x() - pos.x(), px.y() - pos.y())
+                if d < dist:
+                    best, dist = g.name, d
+        if best is not None:
+            self.axis_clicked.emit(best)
