@@ -1,10 +1,17 @@
-"""Properties panel of the Mandrel step: template kind and its parameters.
+"""Properties panel of the Mandrel step: template kind and its parameters, or the sketch table.
 
 Each kind has its own page of fields (units in the labels); only the current kind's page is shown
 and enabled, and the dome axis ratio only for elliptical domes.  Every keystroke is checked at
 once: a bad value shows a red message right under its field and nothing is emitted; a valid set
 of values is emitted as a new mandrel spec (:attr:`MandrelPanel.spec_edited`).  Errors found later,
 when the mandrel is built, come back through :meth:`MandrelPanel.show_error`.
+
+A sketched mandrel (kind ``points``) shows its points in a numeric table
+(:class:`winder_gui.panels.points_table.PointsTable`): a valid table is emitted as a
+:class:`~engine.job.PointsSpec` through the same :attr:`MandrelPanel.spec_edited`, a bad cell is red
+with its message and the message also goes to :attr:`MandrelPanel.status`, which is what blocks Run
+(the window reads it as the mandrel's problem).  A template offers "Convert to sketch", which asks the
+window (:attr:`MandrelPanel.points_requested`) to replace it by points sampled from its curve.
 """
 
 from __future__ import annotations
@@ -23,12 +30,15 @@ from PySide6.QtWidgets import (
     QLabel,
     QLineEdit,
     QPushButton,
+    QSizePolicy,
     QStackedWidget,
     QVBoxLayout,
     QWidget,
 )
 
 from engine.job import BottleSpec, ConeSpec, FileSpec, PipeSpec, PointsSpec, VesselSpec
+from winder_gui.panels.points_table import PointsTable
+from winder_gui.panels.points_table import fmt as table_fmt
 
 KINDS: tuple[tuple[str, str], ...] = (
     ("vessel", "Vessel — cylinder + two domes"),
@@ -156,9 +166,13 @@ class MandrelPanel(QWidget):
                 form.addRow(label, cell)
                 form.addRow(row.error)  # full width under its field; hidden while the value is fine
             if kind == "points":
+                box.setTitle("Points")
                 self.points_info = QLabel("")
                 self.points_info.setWordWrap(True)
+                self.points_info.setStyleSheet("color: #666;")
                 form.addRow(self.points_info)
+                self.points_table = PointsTable()
+                form.addRow(self.points_table)
             if kind == "file":
                 note = QLabel("The profile is read from the file each time the job is opened.")
                 note.setWordWrap(True)
@@ -166,12 +180,23 @@ class MandrelPanel(QWidget):
                 form.addRow(note)
             self.page_index[kind] = self.pages.addWidget(box)
         lay.addWidget(self.pages)
+        self.convert_button = QPushButton("Convert to sketch (editable points)")
+        self.convert_button.setObjectName("convertToSketch")
+        self.convert_button.setToolTip(
+            "Replace the template by a sketched generatrix through points sampled from it;\n"
+            "the points can then be edited in a table and on the r(z) plot (undo with Ctrl+Z)"
+        )
+        self.convert_button.clicked.connect(self.convert_to_sketch)
+        lay.addWidget(self.convert_button)
         self.status = QLabel("")
         self.status.setWordWrap(True)
         self.status.setStyleSheet("color: #c01010;")
         lay.addWidget(self.status)
-        lay.addStretch(1)
+        self._stretch = QWidget()  # takes the spare height, except for the sketch table which takes it itself
+        lay.addWidget(self._stretch, 1)
         self.kind_combo.activated.connect(self._on_kind_activated)
+        self.points_table.points_edited.connect(self._on_table_edited)
+        self.points_table.problem.connect(self._on_table_problem)
 
     def _make_row(self, kind: str, key: str) -> _Row:
         editor: QLineEdit | QComboBox
@@ -240,22 +265,35 @@ class MandrelPanel(QWidget):
                     row.shown = "" if v is None else (fmt(v) if isinstance(v, int | float) else str(v))
                     row.editor.setText(row.shown)
             if kind == "points":
-                z = spec.z_mm
-                self.points_info.setText(
-                    f"{len(z)} points, z from {min(z):.1f} to {max(z):.1f} mm.\n"
-                    "Edit them on the r(z) plot: drag to move, double-click to add, right-click or Delete to remove."
-                )
+                self.points_table.set_points(spec.z_mm, spec.r_mm)
+                self._update_points_info()
             self.clear_errors()
             self._show_page(kind)
         finally:
             self._loading = False
 
     def clear_errors(self) -> None:
-        """Hide every inline message."""
+        """Hide every inline message (a problem still in the sketch table stays: it blocks Run)."""
         for row in self.rows.values():
             row.error.hide()
             row.error.setText("")
-        self.status.setText("")
+        self._set_status(self._table_problem())
+
+    def convert_to_sketch(self) -> None:
+        """Ask the window to replace the template by editable points sampled from it."""
+        if self.spec is not None and self.spec.kind != "points":
+            self.points_requested.emit()
+
+    def attach_plot(self, plot: Any) -> None:
+        """Follow the r(z) plot (:class:`winder_gui.views.profile_plot.ProfilePlot`) live.
+
+        The table already follows the job (every applied plot edit comes back through
+        :meth:`set_spec`); attached, it also follows a drag in progress, and the selected point and
+        row highlight each other.
+        """
+        plot.points_moving.connect(self.points_table.show_points)
+        plot.point_selected.connect(self.points_table.select_row)
+        self.points_table.row_selected.connect(plot.select_point)
 
     def show_error(self, field: str | None, message: str) -> None:
         """Show an error of the built mandrel at its field (``mandrel.<name>``) or under the fields."""
@@ -271,7 +309,7 @@ class MandrelPanel(QWidget):
             row.error.setText(message)
             row.error.show()
         else:
-            self.status.setText(message)
+            self._set_status(message)
 
     # -- internals -------------------------------------------------------------------------------
     @staticmethod
@@ -287,8 +325,50 @@ class MandrelPanel(QWidget):
                 out[name] = v
         return out
 
+    def _set_status(self, text: str) -> None:
+        """The message under the fields (the window reads it as the mandrel's problem that blocks Run);
+        hidden when it only repeats the message shown under the sketch table."""
+        self.status.setText(text)
+        self.status.setVisible(bool(text) and text != self._table_problem())
+
+    def _table_problem(self) -> str:
+        msg = self.points_table.message if self.current_kind() == "points" else ""
+        return f"sketch table {msg}" if msg else ""
+
+    def _on_table_edited(self, z: Any, r: Any) -> None:
+        if self._loading:
+            return
+        try:
+            spec = PointsSpec(z_mm=[float(v) for v in z], r_mm=[float(v) for v in r])
+        except ValidationError as exc:  # cannot happen after the table's checks; never a traceback
+            self._set_status(f"sketch table: {exc.errors()[0]['msg']}")
+        else:
+            self.spec_edited.emit(spec)
+        self._update_points_info()
+        self.checked.emit()
+
+    def _on_table_problem(self, _msg: str) -> None:
+        if self._loading:
+            return
+        self._set_status(self._table_problem())
+        self.checked.emit()
+
+    def _update_points_info(self) -> None:
+        vals = self.points_table.values()
+        n = self.points_table.table.rowCount()
+        span = f", z from {table_fmt(vals[0][0])} to {table_fmt(vals[0][-1])} mm" if vals is not None else ""
+        self.points_info.setText(
+            f"{n} points{span}. C2 spline through them; concave zones are shaded on the plot. "
+            "Also editable on the r(z) plot (drag, double-click to add, right-click to remove)."
+        )
+
     def _show_page(self, kind: str) -> None:
         self.pages.setCurrentIndex(self.page_index[kind])
+        sketch = kind == "points"
+        self.convert_button.setVisible(not sketch)
+        self._stretch.setVisible(not sketch)
+        self.pages.setSizePolicy(QSizePolicy.Policy.Preferred,
+                                 QSizePolicy.Policy.Expanding if sketch else QSizePolicy.Policy.Maximum)
         for k, idx in self.page_index.items():
             self.pages.widget(idx).setEnabled(k == kind)
         if kind == "vessel":
@@ -376,7 +456,7 @@ class MandrelPanel(QWidget):
                 self.rows[(kind, key)].error.setText(msg)
                 self.rows[(kind, key)].error.show()
             else:
-                self.status.setText(msg)
+                self._set_status(msg)
 
     def _on_kind_activated(self, _index: int) -> None:
         kind = self.current_kind()

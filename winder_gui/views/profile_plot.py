@@ -6,6 +6,10 @@ Editing (on the r(z) plot):
 - double-click on empty plot space to add a point (inserted in order of z);
 - right-click a point, or select it (click) and press Delete, to remove it.
 
+Snap (the "Snap" toggle and its grid step in mm above the plot, kept in the settings): a dragged
+or added point lands on the grid, and its r snaps to the r of a neighbouring point within a few
+pixels (to draw cylindrical stretches).  z never snaps to another point's z: z must increase strictly.
+
 Every edit is checked at once (:func:`winder_gui.views.geometry.check_points`); an invalid
 point is drawn red with the message above the plot and the edit is *not* emitted, so the job
 never receives it.  Valid edits are emitted as :attr:`ProfilePlot.points_edited` (z, r arrays).
@@ -17,7 +21,7 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import QPointF, Qt, Signal
 from PySide6.QtGui import QKeySequence, QShortcut
-from PySide6.QtWidgets import QLabel, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QCheckBox, QDoubleSpinBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
 from winder_gui.views.geometry import FloatArray, MandrelViewData, check_points
 
@@ -26,6 +30,18 @@ _TEMPLATE_BRUSH = pg.mkBrush(255, 255, 255, 230)
 _SEL_BRUSH = pg.mkBrush(255, 170, 0, 255)
 _BAD_BRUSH = pg.mkBrush(220, 30, 30, 255)
 _CONCAVE_BRUSH = pg.mkBrush(230, 60, 60, 45)
+SNAP_STEP_MM = 1.0
+"""Default grid step of the snap (mm)."""
+SNAP_PIXELS = 6.0
+"""How close (screen pixels) r must come to a neighbour's r to take it."""
+HINT = "Drag a point to move it · double-click to add one · right-click or Delete to remove it"
+
+
+def snap_to_grid(v: float, step: float) -> float:
+    """``v`` rounded to the nearest multiple of ``step`` (mm); exact decimal for decimal steps."""
+    k = round(v / step)
+    digits = max(0, -int(np.floor(np.log10(step))) + 6)
+    return float(round(k * step, digits))
 
 
 class PointEditor(pg.ScatterPlotItem):
@@ -44,6 +60,8 @@ class PointEditor(pg.ScatterPlotItem):
     edited = Signal(object, object)
     problem = Signal(str)
     selected = Signal(int)
+    moving = Signal(object, object)
+    """The drawn points changed (z, r mm), also during a drag and for edits that are not applied."""
 
     def __init__(self) -> None:
         super().__init__(size=11, pen=pg.mkPen(20, 60, 140, width=1.5), hoverable=True, hoverSize=14)
@@ -58,6 +76,8 @@ class PointEditor(pg.ScatterPlotItem):
         self.sketch = True
         """False while the points only sample a template (dragging one converts it to a sketch)."""
         self.message = ""
+        self.snap_step = 0.0
+        """Grid step of the snap in mm; 0 = snap off."""
 
     # -- data ------------------------------------------------------------------------------------
     def set_points(self, z: FloatArray, r: FloatArray, sketch: bool) -> None:
@@ -95,20 +115,48 @@ class PointEditor(pg.ScatterPlotItem):
             self.message = msg
             self.problem.emit(msg)
 
+    # -- snap --------------------------------------------------------------------------------------
+    def snap(self, z: float, r: float, neighbours: tuple[int, ...] = ()) -> tuple[float, float]:
+        """(z, r) mm as the snap places them: on the grid, r on a neighbour's r when within a few pixels.
+
+        Returns (z, r) unchanged when the snap is off.  ``neighbours`` are indices of committed points.
+        """
+        if self.snap_step <= 0.0:
+            return z, r
+        zs, rs = snap_to_grid(z, self.snap_step), snap_to_grid(r, self.snap_step)
+        vb = self.getViewBox()
+        px = vb.viewPixelSize()[1] if vb is not None else 0.0
+        best = SNAP_PIXELS * px
+        for j in neighbours:
+            if 0 <= j < len(self._r) and abs(self._r[j] - r) <= best:
+                best, rs = abs(self._r[j] - r), float(self._r[j])
+        return zs, rs
+
     # -- edits (used by the mouse handlers and by tests) ------------------------------------------
     def move_point(self, i: int, z: float, r: float, finish: bool = True) -> str | None:
-        """Move point ``i`` to (z, r) mm; returns the problem message, or ``None`` if valid.
+        """Move point ``i`` to (z, r) mm (snapped when the snap is on); returns the problem message, or
+        ``None`` if valid.
 
         With ``finish`` a valid edit is emitted and an invalid one reverted to the committed points.
         """
+        z, r = self.snap(z, r, (i - 1, i + 1))
         wz, wr = self._z.copy(), self._r.copy()
         wz[i], wr[i] = z, r
         return self._try(wz, wr, finish, focus=i)
 
     def add_point(self, z: float, r: float) -> str | None:
-        """Insert a point at (z, r) mm in order of z."""
+        """Insert a point at (z, r) mm (snapped when the snap is on) in order of z."""
+        i = int(np.searchsorted(self._z, z))
+        z, r = self.snap(z, r, (i - 1, i))
         i = int(np.searchsorted(self._z, z))
         return self._try(np.insert(self._z, i, z), np.insert(self._r, i, r), True, focus=i)
+
+    def select(self, i: int) -> None:
+        """Highlight point ``i`` (-1: none) without emitting."""
+        i = i if 0 <= i < len(self._work_z) else -1
+        if i != self.selected_index:
+            self.selected_index = i
+            self._redraw()
 
     def delete_point(self, i: int) -> str | None:
         """Remove point ``i``."""
@@ -137,9 +185,11 @@ class PointEditor(pg.ScatterPlotItem):
             self._set_message("")
             self._set_message(f"Not applied: {msg}")
             self._redraw()
+            self.moving.emit(self._work_z.copy(), self._work_r.copy())
             return msg
         self._set_message(msg)
         self._redraw()
+        self.moving.emit(wz.copy(), wr.copy())
         return msg or None
 
     # -- mouse -----------------------------------------------------------------------------------
@@ -200,6 +250,12 @@ class ProfilePlot(QWidget):
 
     points_edited = Signal(object, object)
     message = Signal(str)
+    points_moving = Signal(object, object)
+    """The drawn points (mm) changed, also during a drag (for a table that follows live)."""
+    point_selected = Signal(int)
+    """A point was clicked (its index)."""
+    snap_changed = Signal(bool, float)
+    """The snap was switched or its grid step (mm) changed."""
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
@@ -211,11 +267,30 @@ class ProfilePlot(QWidget):
         self.message_label.setStyleSheet("color: #c01010; font-weight: bold;")
         self.message_label.setWordWrap(True)
         self.message_label.hide()
-        self.hint_label = QLabel(
-            "Drag a point to move it · double-click to add one · right-click or Delete to remove it"
-        )
+        self.hint_label = QLabel(HINT)
         self.hint_label.setStyleSheet("color: #666;")
-        lay.addWidget(self.hint_label)
+        self.hint_label.setWordWrap(True)
+        self.snap_check = QCheckBox("Snap")
+        self.snap_check.setObjectName("snapToggle")
+        self.snap_check.setToolTip(
+            "Dragged and added points land on a grid of this step;\n"
+            f"r also snaps to a neighbouring point's r within {SNAP_PIXELS:.0f} pixels"
+        )
+        self.snap_spin = QDoubleSpinBox()
+        self.snap_spin.setObjectName("snapStep")
+        self.snap_spin.setDecimals(2)
+        self.snap_spin.setRange(0.01, 1000.0)
+        self.snap_spin.setSingleStep(0.5)
+        self.snap_spin.setSuffix(" mm")
+        self.snap_spin.setValue(SNAP_STEP_MM)
+        self.snap_spin.setToolTip("Grid step of the snap")
+        self.snap_spin.setKeyboardTracking(False)
+        bar = QHBoxLayout()
+        bar.setContentsMargins(0, 0, 0, 0)
+        bar.addWidget(self.hint_label, 1)
+        bar.addWidget(self.snap_check)
+        bar.addWidget(self.snap_spin)
+        lay.addLayout(bar)
         lay.addWidget(self.message_label)
 
         self.graphics = pg.GraphicsLayoutWidget()
@@ -248,6 +323,11 @@ class ProfilePlot(QWidget):
 
         self.editor.edited.connect(self.points_edited)
         self.editor.problem.connect(self._on_problem)
+        self.editor.moving.connect(self.points_moving)
+        self.editor.selected.connect(self.point_selected)
+        self._load_snap()
+        self.snap_check.toggled.connect(lambda _on: self._on_snap_changed())
+        self.snap_spin.valueChanged.connect(lambda _v: self._on_snap_changed())
         self.plot_r.scene().sigMouseClicked.connect(self._on_scene_click)
         for key in (QKeySequence.StandardKey.Delete, QKeySequence(Qt.Key.Key_Backspace)):
             sc = QShortcut(key, self.graphics)
@@ -299,7 +379,59 @@ class ProfilePlot(QWidget):
         self.message_label.setText(msg)
         self.message_label.setVisible(bool(msg))
 
+    # -- snap --------------------------------------------------------------------------------------
+    def set_snap(self, on: bool, step_mm: float | None = None) -> None:
+        """Switch the snap and optionally set its grid step (mm), as the user would (persisted)."""
+        if step_mm is not None:
+            self.snap_spin.setValue(float(step_mm))
+        self.snap_check.setChecked(bool(on))
+        self._on_snap_changed()
+
+    @property
+    def snap_step(self) -> float:
+        """The grid step in force (mm); 0 when the snap is off."""
+        return self.editor.snap_step
+
+    def _apply_snap(self) -> None:
+        on = self.snap_check.isChecked()
+        step = float(self.snap_spin.value())
+        self.editor.snap_step = step if on else 0.0
+        self.snap_spin.setEnabled(on)
+        self.hint_label.setText(f"{HINT} · snap to a {step:g} mm grid" if on else HINT)
+
+    def _on_snap_changed(self) -> None:
+        before = self.editor.snap_step
+        self._apply_snap()
+        st = _settings()
+        if st is not None:
+            st.setValue("sketch/snap", self.snap_check.isChecked())
+            st.setValue("sketch/snap_step_mm", float(self.snap_spin.value()))
+        if before != self.editor.snap_step or self.snap_check.isChecked():
+            self.snap_changed.emit(self.snap_check.isChecked(), float(self.snap_spin.value()))
+
+    def _load_snap(self) -> None:
+        st = _settings()
+        if st is not None:
+            on = str(st.value("sketch/snap", False)).lower() in ("true", "1")
+            try:
+                step = float(st.value("sketch/snap_step_mm", SNAP_STEP_MM))
+            except (TypeError, ValueError):
+                step = SNAP_STEP_MM
+            if not (np.isfinite(step) and step > 0.0):
+                step = SNAP_STEP_MM
+            for w in (self.snap_check, self.snap_spin):
+                w.blockSignals(True)
+            self.snap_spin.setValue(step)
+            self.snap_check.setChecked(on)
+            for w in (self.snap_check, self.snap_spin):
+                w.blockSignals(False)
+        self._apply_snap()
+
     # -- interaction -----------------------------------------------------------------------------
+    def select_point(self, i: int) -> None:
+        """Highlight point ``i`` (e.g. the current row of the points table); -1: none."""
+        self.editor.select(i)
+
     def delete_selected(self) -> None:
         """Delete the selected point (Delete key)."""
         if self.editor.selected_index >= 0:
@@ -320,3 +452,12 @@ class ProfilePlot(QWidget):
         p = vb.mapSceneToView(ev.scenePos())
         ev.accept()
         self.editor.add_point(p.x(), p.y())
+
+
+def _settings():  # noqa: ANN202 - QSettings | None
+    """The application's settings (:func:`winder_gui.main_window.app_settings`), or ``None`` outside the app."""
+    try:
+        from winder_gui.main_window import app_settings  # the window imports this module: import late
+    except ImportError:
+        return None
+    return app_settings()
