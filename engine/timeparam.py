@@ -480,122 +480,132 @@ def _rows(B: int, R: int) -> np.ndarray:
     return np.arange(0, B * R, R, dtype=np.intp)[:, None]
 
 
-def _hull_ccw(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Convex hull vertices of every row of ``pts`` (B, R, 2), counter-clockwise.
+def _hull_sym(pts: np.ndarray, ipos: np.ndarray, ineg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Convex hull vertices of every row of ``pts`` (B, R0, 2), counter-clockwise.
 
-    Andrew's monotone chain, vectorised over the rows (the scan over the R points is the only
-    Python loop).  Collinear and duplicate points are dropped.  Returns ``(order, m)``:
-    ``order[b, :m[b]]`` are the indices of the hull vertices of row b in CCW order.
+    Every row is centrally symmetric -- ``pts[:, ineg] == -pts[:, ipos]`` (each constraint
+    ``|n·z| <= 1`` gives ``n`` and ``-n``) -- and the origin lies strictly inside its hull (the box
+    rows).  Then the hull is one chain of vertices with polar angles in ``[0, π)`` followed by their
+    mirror images, so only the half set is processed.  Vectorised over the rows:
+
+    1. each pair is oriented into the upper half-plane and sorted by angle (the farther of two
+       points on one ray first); zero rows are dropped;
+    2. exact pre-filter: points strictly inside the polygon of the extreme points in 2·D directions
+       cannot be hull vertices (Akl-Toussaint);
+    3. parallel Graham scan: every vertex that does not turn left (against its alive neighbours,
+       the mirror images across the ends of the half chain) is removed at once, until none is left
+       (a hull vertex always turns left in a star-shaped polygon around an interior point, so
+       simultaneous removal is safe).  Collinear and duplicate points are dropped (a vertex that is
+       collinear only within round-off waits a round if its predecessor goes too).
+
+    Returns ``(order, m)``: ``order[b, :m[b]]`` are the row indices (into R0) of the hull vertices
+    of row b in CCW order; entries past ``m[b]`` are 0.
     """
-    B, R0, _ = pts.shape
+    B = pts.shape[0]
+    ipos = np.asarray(ipos, np.intp)
+    ineg = np.asarray(ineg, np.intp)
+    H = pts[:, ipos]
+    R = H.shape[1]
+    px, py = np.ascontiguousarray(H[..., 0]), np.ascontiguousarray(H[..., 1])
     # hull membership is invariant under a per-row axis scaling: make every cloud round-ish first
-    px, py = np.ascontiguousarray(pts[..., 0]), np.ascontiguousarray(pts[..., 1])   # (B, R0) each
     for a in (px, py):
         sc = np.abs(a).max(axis=1, keepdims=True)
         a /= np.where(sc > 0, sc, 1.0)
-    # exact pre-filter: drop the points strictly inside the polygon of the extreme points in D
-    # directions (they cannot be hull vertices), then scan only the few that are left
-    D = 8
-    th = np.linspace(0.0, 2.0 * np.pi, D + 1)[:-1]
-    ext = np.empty((B, D), np.intp)                                                       # (B, D) CCW
-    proj = np.empty_like(px)
-    tmp = np.empty_like(px)
-    for d, (cd, sd) in enumerate(zip(np.cos(th), np.sin(th))):
-        np.multiply(px, cd, out=proj)
-        proj += np.multiply(py, sd, out=tmp)
-        ext[:, d] = proj.argmax(axis=1)
-    pxf, pyf = px.ravel(), py.ravel()
-    ext += _rows(B, R0)
-    vx = pxf[ext]
-    vy = pyf[ext]
-    # each point is tested against the edge of conv(extreme points) whose wedge (seen from the
-    # origin, inside the hull) holds its polar angle
-    phi = np.arctan2(vy, vx)
-    phi = np.mod(phi - phi[:, :1], 2.0 * np.pi)
-    phi = np.maximum.accumulate(phi, axis=1)               # guard against round-off
-    psi = np.mod(np.arctan2(py, px) - np.arctan2(vy[:, :1], vx[:, :1]), 2.0 * np.pi)
-    off = 10.0 * np.arange(B)[:, None]
-    k = np.searchsorted((phi + off).ravel(), (psi + off).ravel(), side="right").reshape(B, R0) - 1
-    k = np.clip(k - np.arange(B)[:, None] * D, 0, D - 1)
-    k2 = (k + 1) % D
-    offD = _rows(B, D)
-    k += offD
-    k2 += offD
-    vxf, vyf = vx.ravel(), vy.ravel()
-    ax_, ay_ = vxf[k], vyf[k]
-    ex, ey = vxf[k2] - ax_, vyf[k2] - ay_
-    dx, dy = px - ax_, py - ay_
-    crs = ex * dy - ey * dx
-    e2 = ex * ex + ey * ey
-    inside = (e2 > 0) & (crs > 0) & (crs * crs > 1e-18 * e2 * (dx * dx + dy * dy))
-    keep = ~inside
-    kidx = np.argsort(~keep, axis=1, kind="stable")
-    nk = keep.sum(axis=1)
-    return _monotone_chain(px, py, kidx, nk)
-
-
-def _monotone_chain(px: np.ndarray, py: np.ndarray, kidx: np.ndarray, nk: np.ndarray
-                    ) -> tuple[np.ndarray, np.ndarray]:
-    """Andrew's monotone chain on the first ``nk[b]`` points ``kidx[b]`` of every row of ``(px, py)``."""
-    B = px.shape[0]
-    R = int(nk.max())
-    kidx = kidx[:, :R]
-    kidx = np.where(np.arange(R)[None, :] < nk[:, None], kidx, kidx[:, :1])   # pad with a duplicate
-    kflat = kidx + _rows(B, px.shape[1])                      # into the flat (B*R0) points
-    sub_x = px.ravel()[kflat]
-    sub_y = py.ravel()[kflat]
-    order = np.lexsort((sub_y, sub_x), axis=-1)
+    flip = (py < 0) | ((py == 0) & (px < 0))
+    np.negative(px, out=px, where=flip)
+    np.negative(py, out=py, where=flip)
+    idx = np.where(flip, ineg[None, :], ipos[None, :])
+    ang = np.arctan2(py, px)
+    r2 = px * px + py * py
+    ang[r2 == 0] = 10.0                                     # zero rows: sorted last, dropped
+    order = np.lexsort((-r2, ang), axis=-1)
     order += _rows(B, R)
-    X = sub_x.ravel()[order]
-    Y = sub_y.ravel()[order]
-    order = kidx.ravel()[order]
+    X = px.ravel()[order]
+    Y = py.ravel()[order]
+    A = ang.ravel()[order]
+    idx = idx.ravel()[order]
+    alive = A < 5.0
+    alive[:, 1:] &= A[:, 1:] != A[:, :-1]                  # one point per ray: the farthest
+    # 2. pre-filter with the extreme points in D directions of [0, π) and their mirror images
+    D = 4
+    bi = np.arange(B)
+    vx = np.empty((B, 2 * D))
+    vy = np.empty((B, 2 * D))
+    for d in range(D):
+        th = np.pi * d / D
+        pr = X * math.cos(th) + Y * math.sin(th)
+        r = np.abs(pr).argmax(axis=1)
+        sgn = np.sign(pr[bi, r])
+        vx[:, d] = sgn * X[bi, r]
+        vy[:, d] = sgn * Y[bi, r]
+    vx[:, D:] = -vx[:, :D]
+    vy[:, D:] = -vy[:, :D]
+    inside = np.ones((B, R), bool)
+    for d in range(2 * D):
+        ax_, ay_ = vx[:, d:d + 1], vy[:, d:d + 1]
+        ex = vx[:, (d + 1) % (2 * D), None] - ax_
+        ey = vy[:, (d + 1) % (2 * D), None] - ay_
+        crs = ex * (Y - ay_) - ey * (X - ax_)
+        inside &= (crs > 1e-12 * (np.abs(ex) + np.abs(ey))) | ((ex == 0) & (ey == 0))
+    alive &= ~inside
+    # 3. parallel Graham scan on the half chain
     ar = np.arange(R)
-
-    def peel(Xs: np.ndarray, Ys: np.ndarray) -> np.ndarray:
-        """Alive mask of the lower chain of x-sorted points: reflex points are removed in
-        parallel passes (a chain vertex never turns right, so simultaneous removal is safe)."""
-        alive = np.ones((B, R), bool)
-        # duplicates would shield each other from the test: keep the first of each run
-        alive[:, 1:] = (np.abs(Xs[:, 1:] - Xs[:, :-1]) > 1e-15) | (np.abs(Ys[:, 1:] - Ys[:, :-1]) > 1e-15)
-        act = np.arange(B)
-        for _ in range(R):
-            al, Xa, Ya = alive[act], Xs[act], Ys[act]
-            off = _rows(act.size, R)
-            Xaf, Yaf = Xa.ravel(), Ya.ravel()
-            prv = np.maximum.accumulate(np.where(al, ar, -1), axis=1)
-            prv = np.concatenate([np.full((act.size, 1), -1), prv[:, :-1]], axis=1)
-            nxt = np.minimum.accumulate(np.where(al, ar, R)[:, ::-1], axis=1)[:, ::-1]
-            nxt = np.concatenate([nxt[:, 1:], np.full((act.size, 1), R)], axis=1)
-            inner = al & (prv >= 0) & (nxt < R)
-            pa = np.clip(prv, 0, R - 1)
-            pa += off
-            pc = np.clip(nxt, 0, R - 1)
-            pc += off
-            ax_, ay_ = Xaf[pa], Yaf[pa]
-            cx_, cy_ = Xaf[pc], Yaf[pc]
-            e1x, e1y, e2x, e2y = Xa - ax_, Ya - ay_, cx_ - Xa, cy_ - Ya
-            cr = e1x * e2y - e1y * e2x
-            bad_ = inner & ((cr <= 0) | (cr * cr <= 1e-24 * (e1x * e1x + e1y * e1y) * (e2x * e2x + e2y * e2y)))
-            changed = bad_.any(axis=1)
-            if not changed.any():
-                break
-            alive[act] = al & ~bad_
-            act = act[changed]
-        return alive
-
-    lo_alive = peel(X, Y)
-    up_alive = peel(X[:, ::-1], Y[:, ::-1])
-    lo_n = lo_alive.sum(axis=1)
-    up_n = up_alive.sum(axis=1)
-    lo_st = np.argsort(~lo_alive, axis=1, kind="stable")                 # positions, left to right
-    up_st = (R - 1) - np.argsort(~up_alive, axis=1, kind="stable")       # positions, right to left
-    m = lo_n + up_n - 2
-    tt = np.arange(int(m.max()))[None, :]
-    in_lo = tt < (lo_n - 1)[:, None]
-    pos = np.where(in_lo, np.take_along_axis(lo_st, np.minimum(tt, R - 1), 1),
-                   np.take_along_axis(up_st, np.clip(tt - (lo_n - 1)[:, None], 0, R - 1), 1))
-    pos = np.where(tt < m[:, None], pos, 0)
-    return np.take_along_axis(order, pos, 1), m
+    act = np.arange(B)
+    rounds = 0
+    while act.size:
+        if rounds % 2 == 0:
+            kmax = int(alive.sum(axis=1).max())
+            if kmax < 0.75 * R:                             # drop the dead columns
+                pos = np.argsort(~alive, axis=1, kind="stable")[:, :kmax]
+                X = np.take_along_axis(X, pos, 1)
+                Y = np.take_along_axis(Y, pos, 1)
+                idx = np.take_along_axis(idx, pos, 1)
+                alive = np.take_along_axis(alive, pos, 1)
+                R = kmax
+                ar = np.arange(R)
+        rounds += 1
+        al = alive[act]
+        Xa, Ya = X[act], Y[act]
+        nb = act.size
+        pi_ = np.maximum.accumulate(np.where(al, ar, -1), axis=1)
+        nx_ = np.minimum.accumulate(np.where(al, ar, R)[:, ::-1], axis=1)[:, ::-1]
+        last, first = pi_[:, -1:], nx_[:, :1]
+        prv = np.concatenate([np.full((nb, 1), -1), pi_[:, :-1]], axis=1)
+        nxt = np.concatenate([nx_[:, 1:], np.full((nb, 1), R)], axis=1)
+        o = _rows(nb, R)
+        Xf, Yf = Xa.ravel(), Ya.ravel()
+        wrap_p, wrap_n = prv < 0, nxt >= R                  # neighbour across an end: a mirror image
+        pp = np.clip(np.where(wrap_p, last, prv), 0, R - 1) + o     # (clip: rows without alive points)
+        pn = np.clip(np.where(wrap_n, first, nxt), 0, R - 1) + o
+        sp = np.where(wrap_p, -1.0, 1.0)
+        sn = np.where(wrap_n, -1.0, 1.0)
+        e1x = Xa - sp * Xf[pp]
+        e1y = Ya - sp * Yf[pp]
+        e2x = sn * Xf[pn] - Xa
+        e2y = sn * Yf[pn] - Ya
+        cr = e1x * e2y - e1y * e2x
+        near = al & (cr * cr <= 1e-24 * (e1x * e1x + e1y * e1y) * (e2x * e2x + e2y * e2y))
+        strict = al & (cr < 0) & ~near
+        # a vertex collinear within round-off is removed only if its predecessor is not marked too
+        # (two such neighbours removed at once could empty a degenerate, nearly flat hull)
+        bad = strict | (near & ~(strict | near).ravel()[pp])
+        changed = bad.any(axis=1)
+        if not changed.any():
+            break
+        alive[act] = al & ~bad
+        act = act[changed]
+    k = alive.sum(axis=1)
+    K = max(int(k.max()), 1)
+    up = np.take_along_axis(idx, np.argsort(~alive, axis=1, kind="stable")[:, :K], 1)
+    partner = np.zeros(pts.shape[1], np.intp)
+    partner[ipos] = ineg
+    partner[ineg] = ipos
+    m = 2 * k
+    tt = np.arange(2 * K)[None, :]
+    lower = tt < k[:, None]
+    v = np.take_along_axis(up, np.clip(np.where(lower, tt, tt - k[:, None]), 0, K - 1), 1)
+    v = np.where(lower, v, partner[v])
+    return np.where(tt < m[:, None], v, 0), m
 
 
 def _drop_parallel(allr: np.ndarray, order: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -637,11 +647,12 @@ def _drop_parallel(allr: np.ndarray, order: np.ndarray, m: np.ndarray) -> tuple[
     return order, m
 
 
-def _chains(rows: np.ndarray, h: np.ndarray, xn_prev: np.ndarray, xn_cur: np.ndarray
-            ) -> dict[str, np.ndarray]:
+def _chains(rows: np.ndarray, h: np.ndarray, xn_prev: np.ndarray, xn_cur: np.ndarray,
+            ipos: np.ndarray, ineg: np.ndarray) -> dict[str, np.ndarray]:
     """The feasible polygon of every interval in the ``(x_k, x_j) = (ṡ²_{i-1}, ṡ²_i)`` plane.
 
-    ``rows`` (B, R, 2) are normalised constraints ``n·(x_k, u) <= 1`` with ``u = (x_j - x_k)/(2h)``;
+    ``rows`` (B, R, 2) are normalised constraints ``n·(x_k, u) <= 1`` with ``u = (x_j - x_k)/(2h)``,
+    in pairs ``rows[:, ineg] == -rows[:, ipos]``;
     box rows ``|x_k| <= xn_prev``, ``|x_j| <= xn_cur`` are added (relaxations of the node caps) so
     that the polygon is bounded.  Returns the right chain ``x_k = R(x_j)`` and the left chain
     ``x_k = L(x_j)`` of each polygon, flattened for one global ``np.interp`` (abscissa
@@ -655,7 +666,8 @@ def _chains(rows: np.ndarray, h: np.ndarray, xn_prev: np.ndarray, xn_cur: np.nda
     box[:, 2, 1] = 2.0 * h / xn_cur
     box[:, 3] = -box[:, 2]
     allr = np.concatenate([rows, box], axis=1)
-    order, m = _hull_ccw(allr)
+    R = rows.shape[1]
+    order, m = _hull_sym(allr, np.r_[ipos, R, R + 2], np.r_[ineg, R + 1, R + 3])
     V = int(m.max())
     order = order[:, :V]
     br = np.arange(B)[:, None]
@@ -782,11 +794,13 @@ def _prepare(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, chains:
     g = (P / A[None, :, None]).reshape(n - 1, -1)
     c = (Q / A[None, :, None]).reshape(n - 1, -1)
     rows = np.stack([np.concatenate([g, -g], 1), np.concatenate([c, -c], 1)], axis=-1)
+    ipos, ineg = np.arange(g.shape[1]), np.arange(g.shape[1], 2 * g.shape[1])   # the ± pairs
     if math.isfinite(limits.sddot_max):
         extra = np.zeros((n - 1, 2, 2))
         extra[:, 0, 1] = 1.0 / limits.sddot_max
         extra[:, 1, 1] = -1.0 / limits.sddot_max
         rows = np.concatenate([rows, extra], axis=1)
+        ipos, ineg = np.r_[ipos, 2 * g.shape[1]], np.r_[ineg, 2 * g.shape[1] + 1]
     # exact pre-pruning: an inner Bernstein point inside the triangle (origin, first, last) of its
     # own axis is implied by those two (the origin lies inside the hull), so the hull skips it
     hull_rows = rows
@@ -805,7 +819,7 @@ def _prepare(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, chains:
     cap_box = np.minimum(cap, 1e9)
     xn = (1.5 * cap_box) ** 2 + 1.0
     if chains:
-        ch = _chains(hull_rows, h, xn[:-1], xn[1:])
+        ch = _chains(hull_rows, h, xn[:-1], xn[1:], ipos, ineg)
         cap_dp = _reachable(cap_box, h, ch, limits)
         # The box is a relaxation of the node caps.  Where no axis limits the speed (axes at rest or
         # moving linearly, large V, no sdot_max) it is orders of magnitude larger than the speeds any
@@ -815,7 +829,7 @@ def _prepare(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, chains:
         loose = (xn > 1e12) & (xn > 1e6 * xn_r)                 # ṡ > 670 m/s: no physical limit
         if loose.any():
             xn = np.where(loose, xn_r, xn)
-            ch = _chains(hull_rows, h, xn[:-1], xn[1:])
+            ch = _chains(hull_rows, h, xn[:-1], xn[1:], ipos, ineg)
             cap_dp = np.minimum(cap_dp, _reachable(cap_box, h, ch, limits))
     else:
         e = np.zeros(0)

@@ -185,6 +185,36 @@ def test_bernstein_rows_bound_the_acceleration_inside_intervals() -> None:
     assert 0.9 < worst <= 1.0 + 1e-12
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_symmetric_hull_equals_qhull(seed: int) -> None:
+    """The vectorised hull of centrally symmetric sets equals scipy's Qhull, row by row, incl.
+    duplicates, zero rows, points on one ray and nearly flat sets."""
+    from scipy.spatial import ConvexHull
+
+    from engine.timeparam import _hull_sym
+
+    rng = np.random.default_rng(seed)
+    B, R = 300, 20
+    half = rng.normal(size=(B, R, 2)) * rng.uniform(0.01, 100, (B, 1, 2))
+    half[:, 3] = half[:, 2]                                   # duplicates
+    half[:, 5] = 0.3 * half[:, 4]                             # on one ray, inside
+    half[:, 7] = 0.0                                          # dropped rows
+    half[::7, :, 1] *= 1e-9                                   # nearly flat rows
+    half[:, 0] = [1.0, 0.0]                                   # a box pair keeps the origin inside
+    half[:, 1] = [0.0, 1.0]
+    pts = np.concatenate([half, -half], axis=1)
+    order, m = _hull_sym(pts, np.arange(R), np.arange(R, 2 * R))
+    for b in range(B):
+        got = order[b, :m[b]]
+        p = pts[b, got]
+        # counter-clockwise, strictly convex
+        e = np.roll(p, -1, axis=0) - p
+        assert np.all(e[:, 0] * np.roll(e, -1, axis=0)[:, 1] - e[:, 1] * np.roll(e, -1, axis=0)[:, 0] > 0)
+        ref = ConvexHull(pts[b])
+        want = {tuple(pts[b, i]) for i in ref.vertices}
+        assert {tuple(q) for q in p} == want
+
+
 def test_quintic_interpolant_reproduces_the_example_derivatives(example) -> None:
     s, X, dX, ddX, lim = example
     prob = prepare(s, X, dX, ddX, lim)
