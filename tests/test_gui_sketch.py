@@ -160,6 +160,21 @@ def test_drag_on_the_plot_updates_the_table(window) -> None:
     assert ed.selected_index == 1
 
 
+def test_rows_in_concave_zones_are_marked(window) -> None:
+    w = window
+    t = w.mandrel_panel.points_table
+    t.set_cell(2, 1, "40")  # a waist at z = 400: concave around it
+    assert w.wait_idle()
+    zones = w.view_data.concave
+    assert any(a <= 400.0 <= b for a, b in zones)
+    z = _job_points(w)[0]
+    expect = [i for i, v in enumerate(z) if any(a <= v <= b for a, b in zones)]
+    assert 2 in expect and t.concave_rows() == expect
+    head = t.table.verticalHeaderItem(2)
+    assert "◐" in head.text() and "concave zone" in head.toolTip()
+    assert "◐" not in t.table.verticalHeaderItem(0).text() or 0 in expect
+
+
 def test_table_follows_the_job_without_attach(qtbot, sketch_job) -> None:
     """Without the live link, an applied plot edit still reaches the table (through the job)."""
     w = MainWindow(sketch_job)

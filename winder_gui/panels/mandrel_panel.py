@@ -289,9 +289,12 @@ class MandrelPanel(QWidget):
 
         The table already follows the job (every applied plot edit comes back through
         :meth:`set_spec`); attached, it also follows a drag in progress, and the selected point and
-        row highlight each other.
+        row highlight each other, and the rows in concave zones of the built mandrel are marked.
         """
         plot.points_moving.connect(self.points_table.show_points)
+        plot.data_shown.connect(lambda data: self.points_table.set_concave(data.concave))
+        if plot.data is not None:
+            self.points_table.set_concave(plot.data.concave)
         plot.point_selected.connect(self.points_table.select_row)
         self.points_table.row_selected.connect(plot.select_point)
 
@@ -358,7 +361,7 @@ class MandrelPanel(QWidget):
         n = self.points_table.table.rowCount()
         span = f", z from {table_fmt(vals[0][0])} to {table_fmt(vals[0][-1])} mm" if vals is not None else ""
         self.points_info.setText(
-            f"{n} points{span}. C2 spline through them; concave zones are shaded on the plot. "
+            f"{n} points{span}. C2 spline through them; ◐ marks a point in a concave zone (shaded on the plot). "
             "Also editable on the r(z) plot (drag, double-click to add, right-click to remove)."
         )
 

@@ -43,6 +43,7 @@ MIN_POINTS = 4
 """A C2 spline through the points needs at least this many (as :func:`winder_gui.views.geometry.check_points`)."""
 COLUMNS = ("z [mm]", "r [mm]")
 _EXACT = Qt.ItemDataRole.UserRole
+_CONCAVE_FG = QBrush(QColor(200, 30, 30))
 _BAD_BG = QBrush(QColor(255, 200, 200))
 _OK_BG = QBrush()
 
@@ -156,6 +157,8 @@ class PointsTable(QWidget):
         self.message = ""
         self.problems: dict[tuple[int, int], str] = {}
         self._last: tuple[tuple[float, ...], tuple[float, ...]] = ((), ())
+        self.concave: tuple[tuple[float, float], ...] = ()
+        """Concave zones (z_from, z_to) in mm of the built mandrel; their rows are marked."""
 
         lay = QVBoxLayout(self)
         lay.setContentsMargins(0, 0, 0, 0)
@@ -249,6 +252,16 @@ class PointsTable(QWidget):
         """The points (mm) if the table is valid, else ``None``."""
         z, r, probs = check_table(self.cells())
         return None if probs or z is None or r is None else (z, r)
+
+    def set_concave(self, zones: tuple[tuple[float, float], ...] | list[tuple[float, float]]) -> None:
+        """Mark the rows whose z lies in a concave zone (r'' > 0) of the built mandrel (mm)."""
+        self.concave = tuple((float(a), float(b)) for a, b in zones)
+        self._mark_concave()
+
+    def concave_rows(self) -> list[int]:
+        """Rows (0-based) marked as lying in a concave zone."""
+        z, _ = self._numbers(self.cells())
+        return [i for i, v in enumerate(z) if any(a <= v <= b for a, b in self.concave)]
 
     def cell_problem(self, row: int, col: int) -> str:
         """The message of a bad cell ("" when the cell is fine)."""
@@ -397,6 +410,21 @@ class PointsTable(QWidget):
         if it.text() != shown:
             it.setText(shown)
 
+    def _mark_concave(self) -> None:
+        z, _ = self._numbers(self.cells())
+        for i in range(self.table.rowCount()):
+            h = self.table.verticalHeaderItem(i)
+            if h is None:
+                h = QTableWidgetItem()
+                self.table.setVerticalHeaderItem(i, h)
+            zone = next(((a, b) for a, b in self.concave if a <= z[i] <= b), None)
+            h.setText(f"{i + 1} ◐" if zone else str(i + 1))
+            h.setForeground(_CONCAVE_FG if zone else QBrush())
+            h.setToolTip(
+                f"In a concave zone (r'' > 0) from z {fmt(zone[0])} to {fmt(zone[1])} mm: "
+                "the fibre bridges here unless friction holds it" if zone else ""
+            )
+
     def _fill(self, cells: list[tuple[str, str]]) -> None:
         self._loading = True
         try:
@@ -445,10 +473,12 @@ class PointsTable(QWidget):
                     it.setToolTip(msg)
         finally:
             self._loading = False
+        self._mark_concave()
         if probs:
             (i, j), first = min(probs.items())  # (-1, -1) (too few rows) first, then top to bottom
             where = "" if i < 0 else f"row {i + 1}, {'zr'[j]}: "
-            msg = f"{where}{first}"
+            more = len(probs) - 1
+            msg = f"{where}{first}" + (f" (and {more} more red cell{'s' if more > 1 else ''})" if more else "")
         else:
             msg = ""
         self._show_message(msg)

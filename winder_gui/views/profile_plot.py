@@ -254,6 +254,8 @@ class ProfilePlot(QWidget):
     """The drawn points (mm) changed, also during a drag (for a table that follows live)."""
     point_selected = Signal(int)
     """A point was clicked (its index)."""
+    data_shown = Signal(object)
+    """A mandrel's curves were shown (its :class:`MandrelViewData`)."""
     snap_changed = Signal(bool, float)
     """The snap was switched or its grid step (mm) changed."""
 
@@ -363,6 +365,7 @@ class ProfilePlot(QWidget):
         lo, hi = min(float(lo), 0.0), max(float(hi), 0.0)
         span = (hi - lo) or 1e-3
         self.plot_d2.setYRange(lo - 0.1 * span, hi + 0.1 * span, padding=0)
+        self.data_shown.emit(data)
 
     def curve_data(self) -> tuple[FloatArray, FloatArray]:
         """The plotted r(z) curve (mm)."""
@@ -400,14 +403,12 @@ class ProfilePlot(QWidget):
         self.hint_label.setText(f"{HINT} · snap to a {step:g} mm grid" if on else HINT)
 
     def _on_snap_changed(self) -> None:
-        before = self.editor.snap_step
         self._apply_snap()
         st = _settings()
         if st is not None:
             st.setValue("sketch/snap", self.snap_check.isChecked())
             st.setValue("sketch/snap_step_mm", float(self.snap_spin.value()))
-        if before != self.editor.snap_step or self.snap_check.isChecked():
-            self.snap_changed.emit(self.snap_check.isChecked(), float(self.snap_spin.value()))
+        self.snap_changed.emit(self.snap_check.isChecked(), float(self.snap_spin.value()))
 
     def _load_snap(self) -> None:
         st = _settings()
