@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from PySide6.QtCore import Qt
-from PySide6.QtGui import QGuiApplication
+from PySide6.QtCore import QEvent, QPointF, Qt
+from PySide6.QtGui import QGuiApplication, QMouseEvent
 from PySide6.QtWidgets import QAbstractItemView, QApplication
 
 from engine.job import PointsSpec, load_job
@@ -24,6 +24,7 @@ from winder_gui.views.profile_plot import ProfilePlot, snap_to_grid
 ROOT = Path(__file__).resolve().parents[1]
 Z0 = [0.0, 200.0, 400.0, 600.0, 800.0, 1000.0]
 R0 = [70.0, 75.0, 75.0, 75.0, 75.0, 70.0]
+LEFT, NONE = Qt.MouseButton.LeftButton, Qt.MouseButton.NoButton
 
 
 @pytest.fixture(autouse=True)
@@ -223,6 +224,27 @@ def test_snap_puts_points_on_the_grid(window, tmp_path) -> None:
     fresh = ProfilePlot()
     assert fresh.snap_check.isChecked() and fresh.snap_step == 2.5
     fresh.deleteLater()
+
+
+def test_snap_with_the_mouse(window, qtbot) -> None:
+    """A double-click on the plot adds a point on the grid (the scene path, not only the API)."""
+    w = window
+    qtbot.wait(20)
+    w.plot.set_snap(True, 5.0)
+    vb = w.plot.plot_r.getViewBox()
+    pos = w.plot.graphics.mapFromScene(vb.mapViewToScene(QPointF(510.4, 54.6)))
+    vp = w.plot.graphics.viewport()
+    for kind, buttons in ((QEvent.Type.MouseButtonPress, LEFT), (QEvent.Type.MouseButtonRelease, NONE),
+                          (QEvent.Type.MouseButtonDblClick, LEFT), (QEvent.Type.MouseButtonRelease, NONE)):
+        p = QPointF(pos)
+        ev = QMouseEvent(kind, p, vp.mapToGlobal(p), LEFT, buttons, Qt.KeyboardModifier.NoModifier)
+        QApplication.sendEvent(vp, ev)
+    assert w.wait_idle()
+    z, r = _job_points(w)
+    assert len(z) == 7
+    k = int(np.argmin(np.abs(np.asarray(z) - 510.4)))
+    assert z[k] == 510.0 and r[k] == 55.0  # grid points nearest the click (a pixel is ~1 mm here)
+    assert _shown(w, k, 0) == "510"
 
 
 def test_paste_a_block(window, qtbot) -> None:
