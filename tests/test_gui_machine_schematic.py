@@ -307,3 +307,20 @@ def test_panel_with_malformed_template_file(qtbot, tmp_path) -> None:
     panel.grab()
     panel.select_template("lathe4")
     assert panel.schematic.labels() == ["A", "X", "Y", "B"]
+
+
+def test_unlimited_axis_gets_a_nominal_arrow(widget, tmp_path) -> None:
+    text = (MACHINES_DIR / "lathe3.toml").read_text().replace("min = 20.0\n", "").replace("max = 600.0\n", "")
+    path = tmp_path / "free_cross.toml"
+    path.write_text(text)
+    m = load_machine(path)
+    widget.set_template(path)
+    y = next(g for g in widget.axis_glyphs() if g.name == "Y")
+    assert y.label == "Y" and y.ends3 is None and y.ends is None
+    np.testing.assert_allclose(y.dir3, [1.0, 0.0, 0.0], atol=1e-9)
+    sch = widget.schematic
+    # the cross feed is set 300 mm off the datum so the eye is drawn clear of the mandrel
+    assert sch.q[m.axis_index("cross")] == pytest.approx(300.0)
+    np.testing.assert_allclose(sch.eye3, forward_kinematics(m, sch.q[None, :])[0][0], atol=1e-9)
+    assert math.hypot(*sch.eye3[:2]) > sch.mandrel_radius
+    widget.grab()

@@ -7,7 +7,7 @@ axis (a central difference of the same forward kinematics).  So a user-added tem
 same code as the shipped ones; there is no per-template code, only the engine's two machine kinds:
 
 * ``cartesian`` winders: the linear slides are drawn as a staircase in chain (program) order - each
-  slide carries the next one, drawn from the end of its travel farther from the mandrel axis (so a
+  slide carries the next one, drawn from the end of its travel drawn farther from the mandrel axis (so a
   carriage rail runs beside the mandrel and a cross slide reaches towards it); the eye rotations
   (yaw, roll) are circular arrows about their axes through the eye;
 * ``robot`` cells: the track is an arrow at the robot base, the arm is its Denavit-Hartenberg link
@@ -18,13 +18,12 @@ nominal (the template does not know the part).  The payout eye is a dot at the e
 
 Projection
 ----------
-Cabinet oblique projection of the machine frame (mm): the mandrel axis z is drawn horizontal (to the
-right), the vertical y up and x (into the picture) receding up-right at 35 deg, half scale::
-
-    u = z + 0.5 cos(35 deg) x,   v = y + 0.5 sin(35 deg) x      (screen v up)
-
-:data:`PROJECTION` is that 2x3 matrix; :meth:`MachineSchematic.axis_glyphs` returns every axis's
-projected anchor, direction and label (tests check them against the forward kinematics).
+Orthographic axonometric view of the machine frame (mm) from the eye side (+x), turned 40 deg towards
+the tail end (+z) and raised 22 deg: the mandrel axis runs across the picture (headstock on the
+right, at the far end), the vertical y is drawn up, x comes towards the viewer.  :data:`PROJECTION`
+is that 2x3 matrix (rows: the screen's right and up unit vectors); :meth:`MachineSchematic.axis_glyphs`
+returns every axis's projected anchor, direction and label (tests check them against the forward
+kinematics).
 """
 
 from __future__ import annotations
@@ -167,7 +166,7 @@ def neutral_pose(machine: Any) -> np.ndarray:
     Rotary axes at their datum (internal 0) clamped into their travel, robot joints at the template's
     home; linear axes at the middle of their travel (the datum when unlimited).  If the eye would then
     sit closer than 150 mm to the mandrel axis, the first linear axis that moves it radially is set to
-    3/4 of its travel, on the side away from the axis.
+    3/4 of its travel (300 mm from the datum when unlimited), on the side away from the axis.
     """
     from engine.kinematics import eye_pose
 
@@ -185,11 +184,13 @@ def neutral_pose(machine: Any) -> np.ndarray:
     if math.hypot(p0[0], p0[1]) < 150.0:
         for k, ax in enumerate(machine.axes):
             rng = _internal_range(ax)
-            if ax.type != "linear" or rng is None:
+            if ax.type != "linear":
                 continue
             d = _linear_dir(machine, q, k)
             if math.hypot(d[0], d[1]) < 0.5:
                 continue
+            if rng is None:            # unlimited: 300 mm either side of the datum
+                rng = (q[k] - 600.0, q[k] + 600.0)
             hi = q.copy()
             hi[k] = rng[0] + 0.75 * (rng[1] - rng[0])
             lo = q.copy()
@@ -339,6 +340,8 @@ def build_schematic(machine: Any) -> Schematic:
     # rotary axes: mandrel at the headstock; eye rotations through the eye; robot joints at their origins
     glyphs: list[AxisGlyph] = []
     used: list[np.ndarray] = []
+    arm = float(np.ptp(project(np.array([*links, eye])), axis=0).max())
+    r_small = min(0.045 * size, 0.07 * arm) if machine.kind == "robot" and arm > 0 else 0.045 * size
     for k, ax in enumerate(machine.axes):
         label = _range_text(ax)
         if ax.type == "linear":
@@ -361,16 +364,16 @@ def build_schematic(machine: Any) -> Schematic:
             r = 1.25 * radius
         elif k in rot_centres:
             w, c = rot_centres[k]
-            r = 0.045 * size
+            r = r_small
         else:
             w, c = _rotary_axis(machine, q_int, k)
-            r = 0.045 * size
+            r = r_small
         c = c.copy()
         for u in used:                               # two axes through one point: shift along the axis
-            if np.linalg.norm(u - c) < 0.05 * size:
-                c = c + 0.09 * size * w
-        if k != mi and np.linalg.norm(c - eye) < 0.05 * size:
-            c = c + 0.09 * size * w
+            if np.linalg.norm(u - c) < 1.1 * r_small:
+                c = c + 2.1 * r_small * w
+        if k != mi and np.linalg.norm(c - eye) < 1.1 * r_small:
+            c = c + 2.1 * r_small * w
         used.append(c)
         w = ax.sign * w
         glyphs.append(AxisGlyph(ax.name, ax.role, ax.type, k, label, c, w, None, r, project(c),
@@ -426,7 +429,7 @@ def _circle3(c: np.ndarray, w: np.ndarray, r: float, a0: float, a1: float, n: in
 # Widget
 # --------------------------------------------------------------------------------------------------
 class MachineSchematic(QWidget):
-    """The selected template's kinematic scheme (QPainter, oblique projection; works offscreen).
+    """The selected template's kinematic scheme (QPainter, axonometric projection; works offscreen).
 
     ``set_machine(template)`` or ``set_template(name_or_path)`` shows a template; a template that
     fails to load shows its message instead.  ``set_highlight(axis_name)`` draws that axis bold.
@@ -444,8 +447,9 @@ class MachineSchematic(QWidget):
         self.message = ""
         self.highlighted: str | None = None
         self._map: tuple[float, float, float] = (1.0, 0.0, 0.0)    # scale, x0, y0
-        self.setToolTip("Kinematic scheme of the template (oblique view, mandrel axis horizontal); "
-                        "the travel of each axis in controller units")
+        self.setToolTip("Kinematic scheme of the template drawn from its forward kinematics (mandrel "
+                        "schematic, nominal size); each axis with its travel in controller units. "
+                        "Click an axis to select its row.")
 
     def sizeHint(self) -> QSize:
         return QSize(360, 240)
@@ -552,6 +556,9 @@ class MachineSchematic(QWidget):
         self._draw_structure(p, sch)
         order = sorted(sch.axes, key=lambda g: g.name == self.highlighted)   # the highlighted one last
         boxes: list[QRectF] = []
+        z0, z1 = sch.mandrel_z
+        c = self.to_pixels(project(np.array([0, -sch.mandrel_radius, z1 - 0.15 * (z1 - z0)])))
+        self._label(p, "mandrel", QPointF(c.x(), c.y() + 10), boxes, QColor("#555"))
         for g in order:
             self._draw_axis(p, sch, g, boxes)
         # the eye
@@ -595,9 +602,6 @@ class MachineSchematic(QWidget):
         p.setPen(QPen(QColor("#555"), 0.9, Qt.PenStyle.DashDotLine))
         p.drawLine(self.to_pixels(project(np.array([0, 0, z0 - ext]))),
                    self.to_pixels(project(np.array([0, 0, z1 + 0.5 * ext]))))
-        p.setPen(QColor("#666"))
-        c = self.to_pixels(project(np.array([0, -sch.mandrel_radius, 0.5 * (z0 + z1)])))
-        p.drawText(QPointF(c.x() - 22, c.y() + 14), "mandrel")
 
     def _draw_structure(self, p: QPainter, sch: Schematic) -> None:
         if sch.machine.kind == "robot":
@@ -611,9 +615,6 @@ class MachineSchematic(QWidget):
             p.setBrush(QBrush(QColor("#cfcfcf")))
             b = self.to_pixels(sch.links[0])
             p.drawRect(QRectF(b.x() - 9, b.y() - 3, 18, 6))
-        else:
-            # the carriage rail: a light bar under the first slide
-            pass
 
     def _draw_axis(self, p: QPainter, sch: Schematic, g: AxisGlyph, boxes: list[QRectF]) -> None:
         hl = g.name == self.highlighted
@@ -647,18 +648,29 @@ class MachineSchematic(QWidget):
             if heads:
                 self._head(p, a, b, colour, width)
                 self._head(p, b, a, colour, width)
-                o = self.to_pixels(g.origin)
-                p.setBrush(QBrush(colour))
-                p.drawEllipse(o, 2.2, 2.2)
-                p.setBrush(Qt.BrushStyle.NoBrush)
-            return b
-        arc = _circle3(g.origin3, g.dir3, g.radius, 0.0, 1.6 * math.pi)
+                o = self.to_pixels(g.origin)      # the slide's saddle at the neutral pose
+                p.save()
+                p.setPen(QPen(colour.darker(130), 1.0))
+                p.setBrush(QBrush(colour.lighter(150)))
+                p.drawRect(QRectF(o.x() - 5, o.y() - 4, 10, 8))
+                p.restore()
+            # the label goes to the free end: the one farther from the other slides' saddles
+            others = [self.to_pixels(o.origin) for o in sch.axes if o.type == "linear" and o is not g]
+            if not others:
+                return b
+
+            def clearance(pt: QPointF) -> float:
+                return min(math.hypot(pt.x() - o.x(), pt.y() - o.y()) for o in others)
+
+            return b if clearance(b) >= clearance(a) - 1.0 else a
+        arc = _circle3(g.origin3, g.dir3, self._arc_radius(g), 0.0, 1.6 * math.pi)
         poly = self._poly(arc)
         p.drawPolyline(poly)
         if heads:
             self._head(p, poly[-1], poly[-4], colour, width)
             # the rotation axis itself, dash-dot, through the arc
-            ax = np.array([g.origin3 - 1.5 * g.radius * g.dir3, g.origin3 + 1.5 * g.radius * g.dir3])
+            half = 1.5 * self._arc_radius(g) * g.dir3
+            ax = np.array([g.origin3 - half, g.origin3 + half])
             pen = QPen(colour, 0.9, Qt.PenStyle.DashDotLine)
             p.save()
             p.setPen(pen)
@@ -666,6 +678,10 @@ class MachineSchematic(QWidget):
             p.restore()
         top = max(range(poly.size()), key=lambda i: -poly[i].y())
         return QPointF(poly[top].x(), poly[top].y() - 2)
+
+    def _arc_radius(self, g: AxisGlyph) -> float:
+        """A rotary glyph's arc radius, mm, at least 10 px on screen."""
+        return max(g.radius, 10.0 / max(self._map[0], 1e-9))
 
     @staticmethod
     def _head(p: QPainter, tip: QPointF, frm: QPointF, colour: QColor | None, width: float) -> None:
@@ -719,7 +735,7 @@ class MachineSchematic(QWidget):
                 e = self._linear_ends(g, self.schematic)
                 pts = project(np.linspace(e[0], e[1], 20))
             else:
-                pts = project(_circle3(g.origin3, g.dir3, g.radius, 0, 2 * math.pi, 24))
+                pts = project(_circle3(g.origin3, g.dir3, self._arc_radius(g), 0, 2 * math.pi, 24))
             for q in pts:
                 px = self.to_pixels(q)
                 d = math.hypot(px.x() - pos.x(), px.y() - pos.y())
