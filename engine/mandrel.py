@@ -299,12 +299,35 @@ def _isotensoid_series(rho_p: float) -> tuple[Any, Any, float]:
 # ------------------------------------------------------------------------------------------------
 # Mandrel
 # ------------------------------------------------------------------------------------------------
+CONCAVE_GAP_TOL_MM = 0.02
+"""Default bridging-gap tolerance of :meth:`Mandrel.concave_zones` (mm).
+
+A concave zone counts only if a straight fibre spanning it would stand off the surface by more than
+this.  0.02 mm is below the surface tolerance of a turned mandrel (about ±0.05 mm) and a tenth of one
+band thickness (0.2-0.3 mm), and above the wiggle of a C2 spline through sampled points on a straight
+cylinder (measured up to 0.016 mm, r'' up to 2e-4 1/mm) and its overshoot at a cylinder-dome joint of
+an imported profile (up to 0.001 mm, r'' up to 7e-3 1/mm within 2 mm of the joint).
+"""
+
+_D2_FLOOR = 1e-12
+"""r'' (1/mm) at or below which a sample does not start a concave run (floating-point noise)."""
+
+_MERGE_GAP_FRACTION = 0.25
+"""Two concave runs merge only across a gap at most this fraction of the shorter of them."""
+
+
 @dataclass(frozen=True)
 class Zone:
-    """A z interval (mm) with a label, e.g. a concave zone."""
+    """A z interval (mm), e.g. a concave zone.
+
+    ``gap_mm`` is, for a concave zone, the largest distance (mm) between the generatrix and the
+    straight chord from (z_from, r(z_from)) to (z_to, r(z_to)): the gap a fibre laid along the
+    meridian would bridge there (a fibre at a winding angle bridges less).  0 when not computed.
+    """
 
     z_from: float
     z_to: float
+    gap_mm: float = field(default=0.0, compare=False)
 
 
 @dataclass(frozen=True)
@@ -421,18 +444,115 @@ class Mandrel:
             total += float(np.sum(math.pi * r * r * dz * w))
         return total
 
-    def concave_zones(self, n: int = 4000, tol: float = 1e-9) -> list[Zone]:
-        """Maximal z intervals where r'' > 0 (the generatrix is concave seen from outside)."""
-        z = np.linspace(self.z_min, self.z_max, n)
-        _, _, d2 = self.evaluate(z)
-        mask = d2 > tol
-        zones: list[Zone] = []
-        if not mask.any():
-            return zones
-        edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(int), [0]])))
-        for a, b in zip(edges[0::2], edges[1::2]):
-            zones.append(Zone(float(z[a]), float(z[b - 1])))
-        return zones
+    def concave_zones(self, tol_mm: float = CONCAVE_GAP_TOL_MM, n: int = 4000) -> list[Zone]:
+        """Concave zones: z intervals where r'' > 0 (concave seen from outside) that a fibre would bridge.
+
+        A fibre laid over a concave zone stands off the surface; the zone matters for the winding
+        (non-geodesic / minimax lines, pressure on the band) only if that gap is real.  Zones are found
+        in three steps:
+
+        1. maximal runs where r'' > 0, on a grid of about ``n`` samples that contains every segment
+           joint (r'' may jump there);
+        2. neighbouring runs are merged across a short gap (at most a quarter of the shorter run)
+           whose convex bump stays within ``tol_mm`` of its chord: the waist of a bottle where r''
+           touches 0, a real zone cut by the noise of measured points.  Longer gaps are not bridged
+           (a spline wiggling along a cylinder alternates concave and convex runs of equal length);
+        3. a merged zone is kept only if the generatrix lies more than ``tol_mm`` below the chord
+           joining its ends (:attr:`Zone.gap_mm`, the bridging gap of a meridional fibre, an upper
+           bound for a fibre at any winding angle).
+
+        This drops what a C2 spline through sampled points adds by itself: round-off wiggle along a
+        straight cylinder and the overshoot next to a jump of r'' (cylinder-dome joint), while real
+        concave zones stay: a waisted neck, the inflection of an isotensoid dome near its pole
+        (ρ = sqrt(3/2)·ρ0, ρ0 the Clairaut constant / R), a deliberately concave sketch.
+        Zone ends are refined to the zero of r'' (to about 1e-9 mm) or a segment joint.
+
+        Parameters
+        ----------
+        tol_mm:
+            Bridging-gap tolerance (mm), >= 0; default :data:`CONCAVE_GAP_TOL_MM`.  0 keeps every
+            run with r'' > 0 (merged only across straight stretches).
+        n:
+            Number of samples of r'' over the winding zone (>= 16).
+
+        Returns
+        -------
+        list of Zone
+            Increasing, disjoint zones, with ``gap_mm`` set (mm).
+        """
+        if not (isinstance(tol_mm, int | float) and math.isfinite(tol_mm) and tol_mm >= 0):
+            raise InputError(f"the concave-zone gap tolerance must be a number of mm >= 0, got {tol_mm!r}",
+                             field="tol_mm")
+        z = self._zone_grid(max(int(n), 16))
+        d2 = self.evaluate(z)[2]
+        pos = np.where(np.isfinite(d2), d2, 0.0) > _D2_FLOOR
+        if not pos.any():
+            return []
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], pos.astype(np.int8), [0]])))
+        first, last = edges[0::2], edges[1::2] - 1  # sample indices of each run
+        # run ends halfway to the neighbouring sample outside (refined below for the kept zones)
+        lo = np.where(first > 0, 0.5 * (z[np.maximum(first - 1, 0)] + z[first]), z[first])
+        hi = np.where(last < len(z) - 1, 0.5 * (z[last] + z[np.minimum(last + 1, len(z) - 1)]), z[last])
+        # 2. merge neighbours across a short convex stretch that stays within tol of its chord
+        _, bump = self._chord_deviation(hi[:-1], lo[1:])
+        groups: list[list[int]] = [[0]]
+        for i in range(1, len(first)):
+            shorter = min(hi[groups[-1][-1]] - lo[groups[-1][0]], hi[i] - lo[i])
+            short = lo[i] - hi[i - 1] <= _MERGE_GAP_FRACTION * shorter
+            if short and bump[i - 1] <= tol_mm:
+                groups[-1].append(i)
+            else:
+                groups.append([i])
+        # 3. refine the ends, keep the zones that a fibre would bridge by more than tol
+        a = np.array([self._refine_end(z, first[g[0]], -1) for g in groups])
+        b = np.array([self._refine_end(z, last[g[-1]], +1) for g in groups])
+        gap, _ = self._chord_deviation(a, b)
+        return [Zone(float(za), float(zb), float(g)) for za, zb, g in zip(a, b, gap) if g > tol_mm and zb > za]
+
+    def _zone_grid(self, n: int) -> FloatArray:
+        """About ``n`` increasing z samples (mm) over the winding zone, every segment joint included."""
+        zs = []
+        for s in self.segments:
+            k = max(8, int(math.ceil(n * (s.z1 - s.z0) / self.length)))
+            zs.append(np.linspace(s.z0, s.z1, k, endpoint=False))
+        return np.concatenate([*zs, [self.z_max]])
+
+    def _refine_end(self, z: FloatArray, i: int, side: int) -> float:
+        """The end (mm) of a run of r'' > 0 whose outermost sample is ``z[i]``, towards ``side`` (±1).
+
+        The zero of r'' between ``z[i]`` and its outside neighbour (brentq; a jump of r'' at a
+        segment joint gives the joint), or the end of the winding zone.
+        """
+        j = i + side
+        if j < 0 or j >= len(z):
+            return float(z[i])
+        from scipy.optimize import brentq
+
+        def f(x: float) -> float:
+            v = float(self.evaluate(np.array([x]))[2][0])
+            return v - _D2_FLOOR if math.isfinite(v) else -1.0
+
+        x0, x1 = sorted((float(z[i]), float(z[j])))
+        f0, f1 = f(x0), f(x1)
+        if f0 * f1 > 0:  # no bracket (not expected): take the midpoint
+            return 0.5 * (x0 + x1)
+        return float(brentq(f, x0, x1, xtol=1e-10, rtol=4 * np.finfo(float).eps))
+
+    def _chord_deviation(self, a: ArrayLike, b: ArrayLike, k: int = 257) -> tuple[FloatArray, FloatArray]:
+        """How far the generatrix strays from its chord on each interval [a_i, b_i] (mm).
+
+        The chord joins (a, r(a)) and (b, r(b)).  Returns the largest distance below it and the
+        largest distance above it (both >= 0, mm, normal to the chord, from ``k`` samples).
+        """
+        a = np.atleast_1d(np.asarray(a, dtype=float))
+        b = np.atleast_1d(np.asarray(b, dtype=float))
+        t = np.linspace(0.0, 1.0, k)
+        zz = a[:, None] + (b - a)[:, None] * t[None, :]
+        rr = self.r(zz)
+        slope = np.divide(rr[:, -1] - rr[:, 0], b - a, out=np.zeros_like(a), where=b > a)
+        below = (rr[:, :1] + (rr[:, -1:] - rr[:, :1]) * t[None, :] - rr) / np.sqrt(1.0 + slope * slope)[:, None]
+        below = np.where(np.isfinite(below), below, 0.0)
+        return np.maximum(below.max(axis=1), 0.0), np.maximum(-below.min(axis=1), 0.0)
 
     def summary(self) -> dict[str, Any]:
         """The mandrel summary printed by ``winder mandrel --json``."""
