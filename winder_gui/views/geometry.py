@@ -130,6 +130,10 @@ def to_view(xyz: FloatArray) -> FloatArray:
     return np.column_stack([xyz[:, 2], xyz[:, 0], xyz[:, 1]])
 
 
+LOD_POINTS = 40_000
+"""Points of the coarse copy of the winding line drawn while the 3D view moves (level of detail)."""
+
+
 @dataclass(frozen=True)
 class PathsViewData:
     """The winding line, eye trajectory and fibre of one pipeline result, thinned for display.
@@ -137,7 +141,10 @@ class PathsViewData:
     Attributes
     ----------
     line_index:
-        Indices of the shown points into the engine's winding line (stride ``line_stride``).
+        Indices of the shown points into the engine's winding line, increasing: every turnaround
+        (local extremum of z: the poles and the ends of a cylinder), both ends of every circuit,
+        the points with the smallest and largest x, y, z (so the shown bounds are the line's), and
+        points evenly spaced about ``line_stride`` apart between them (:func:`decimate_indices`).
     line_xyz:
         Shown path points in the view frame (mm), lifted off the surface by ``lift`` mm so they are
         not hidden in it.
@@ -148,6 +155,12 @@ class PathsViewData:
         Indices of the animation frames into the eye path (= the winding line's points).
     eye_xyz, contact_xyz:
         Eye and contact point at each frame, view frame (mm).
+    n_line:
+        Points of the engine's winding line.
+    lod_index:
+        A coarser selection of the same kind (at most ``lod_points``), positions into ``line_index``
+        (so ``line_xyz[lod_index]`` are its points); drawn while the view is rotated or animated.
+        Equal to ``arange(len(line_index))`` when the line is short enough to move as it is.
     """
 
     line_index: NDArray[np.int64]
@@ -159,32 +172,89 @@ class PathsViewData:
     eye_xyz: FloatArray
     contact_xyz: FloatArray
     n_line: int
+    lod_index: NDArray[np.int64] | None = None
+
+
+def feature_indices(xyz: FloatArray, circuit: NDArray | None = None, rel_tol: float = 1e-9) -> NDArray[np.int64]:
+    """Indices of the points of a polyline that a thinned copy must keep (increasing, unique).
+
+    Kept: the two ends; every turnaround, i.e. each end of a run where the axial coordinate
+    (``xyz[:, 2]``, mm) stops rising or falling, plateaus included (steps of less than ``rel_tol``
+    times the axial extent count as flat); both points of every change of ``circuit``; and the first
+    points with the smallest and largest x, y and z, so the thinned line spans the same box.
+    """
+    xyz = np.asarray(xyz, dtype=float)
+    n = xyz.shape[0]
+    if n <= 2:
+        return np.arange(n, dtype=np.int64)
+    z = xyz[:, 2]
+    dz = np.diff(z)
+    tol = rel_tol * max(float(np.ptp(z)), 1e-300)
+    s = np.where(dz > tol, 1, np.where(dz < -tol, -1, 0))
+    turn = np.flatnonzero(s[1:] != s[:-1]) + 1  # the point between two steps of different direction
+    parts = [np.array([0, n - 1]), turn, np.argmin(xyz, axis=0), np.argmax(xyz, axis=0)]
+    if circuit is not None:
+        c = np.asarray(circuit)
+        ch = np.flatnonzero(c[1:] != c[:-1])
+        parts += [ch, ch + 1]
+    return np.unique(np.concatenate(parts).astype(np.int64))
+
+
+def decimate_indices(xyz: FloatArray, max_points: int, circuit: NDArray | None = None) -> tuple[NDArray[np.int64], int]:
+    """At most ``max_points`` increasing indices of a polyline that keep its shape for display.
+
+    The :func:`feature_indices` (turnarounds, circuit ends, bounding-box points) are always kept
+    — uniform sub-sampling would cut the corners at the poles — and the rest of the budget is spread
+    evenly along the index.  If the features alone exceed half the budget they are thinned by a stride.
+
+    Returns
+    -------
+    (indices, stride):
+        The kept indices and the (rounded) spacing of the even part (1: every point kept).
+    """
+    n = int(np.asarray(xyz).shape[0])
+    max_points = max(int(max_points), 64)
+    if n <= max_points:
+        return np.arange(n, dtype=np.int64), 1
+    keep = feature_indices(xyz, circuit)
+    if keep.size > max_points // 2:
+        box = np.concatenate([np.argmin(xyz, axis=0), np.argmax(xyz, axis=0), [0, n - 1]]).astype(np.int64)
+        step = int(np.ceil(keep.size / (max_points // 2 - box.size)))
+        keep = np.unique(np.concatenate([keep[::step], box]))
+    m = max_points - keep.size
+    uniform = np.rint(np.linspace(0.0, n - 1.0, m)).astype(np.int64)
+    idx = np.union1d(uniform, keep)
+    return idx, max(1, round((n - 1) / max(m - 1, 1)))
 
 
 def paths_view_data(line: object, eye: object, max_points: int = 200_000, max_frames: int = 1500,
-                    lift: float | None = None) -> PathsViewData:
-    """Thin the engine's winding ``line`` and full-line ``eye`` path for the 3D view (no new maths)."""
+                    lift: float | None = None, lod_points: int = LOD_POINTS) -> PathsViewData:
+    """Thin the engine's winding ``line`` and full-line ``eye`` path for the 3D view (no new maths).
+
+    ``max_points`` bounds the line drawn at rest, ``lod_points`` the coarse copy drawn while the view
+    moves, ``max_frames`` the animation frames; see :func:`decimate_indices`.
+    """
     z = np.asarray(line.z)  # type: ignore[attr-defined]
     n = z.size
-    stride = max(1, int(np.ceil(n / max_points)))
-    idx = np.arange(0, n, stride, dtype=np.int64)
-    if idx[-1] != n - 1:
-        idx = np.append(idx, n - 1)
+    xyz_all = np.asarray(line.xyz)  # type: ignore[attr-defined]
+    circuit_all = np.asarray(line.circuit)  # type: ignore[attr-defined]
+    idx, stride = decimate_indices(xyz_all, max_points, circuit_all)
     r = np.asarray(line.r)[idx]  # type: ignore[attr-defined]
     rmax = float(np.max(np.asarray(line.r)))  # type: ignore[attr-defined]
     lift = 0.004 * rmax if lift is None else lift
-    xyz = np.asarray(line.xyz)[idx].copy()  # type: ignore[attr-defined]
+    xyz = xyz_all[idx].copy()
     scale = np.where(r > 1e-9, (r + lift) / np.maximum(r, 1e-9), 1.0)
     xyz[:, 0] *= scale
     xyz[:, 1] *= scale
     u_full = np.asarray(getattr(eye, "u", np.zeros(0)), dtype=float) if eye is not None else np.zeros(0)
     u_pt = np.append(u_full, u_full[-1]) if u_full.size == n - 1 else np.zeros(n)
     scalars = {
-        "circuit": np.asarray(line.circuit, dtype=float)[idx],  # type: ignore[attr-defined]
+        "circuit": np.asarray(circuit_all, dtype=float)[idx],
         "beta_deg": np.degrees(np.asarray(line.beta))[idx],  # type: ignore[attr-defined]
         "lam": np.asarray(line.lam, dtype=float)[idx],  # type: ignore[attr-defined]
         "u": u_pt[idx],
     }
+    lod, _ = decimate_indices(xyz, lod_points, scalars["circuit"])
     if eye is not None:
         ne = np.asarray(eye.eye_xyz).shape[0]  # type: ignore[attr-defined]
         fstride = max(1, int(np.ceil(ne / max_frames)))
@@ -194,4 +264,4 @@ def paths_view_data(line: object, eye: object, max_points: int = 200_000, max_fr
     else:
         fidx = np.zeros(0, dtype=np.int64)
         exyz = cxyz = np.zeros((0, 3))
-    return PathsViewData(idx, stride, to_view(xyz), scalars, float(lift), fidx, exyz, cxyz, n)
+    return PathsViewData(idx, stride, to_view(xyz), scalars, float(lift), fidx, exyz, cxyz, n, lod)

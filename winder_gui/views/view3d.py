@@ -9,9 +9,14 @@ the surface arrays come ready-made from a worker (:mod:`winder_gui.views.geometr
 
 After a pipeline run, :meth:`MandrelView3D.set_paths` adds the winding line (coloured by circuit,
 winding angle, λ or pull speed), the eye trajectory and the free fibre from the eye to the contact
-point.  Paths are thinned to :data:`MAX_DISPLAY_POINTS` for display, so a million path points stay
-interactive.  The animation (play / pause / scrub) moves the eye along its trajectory; the frame
-logic also runs with the placeholder, so it is tested offscreen.
+point.  Level of detail: at rest the view draws the winding line with up to
+:data:`MAX_DISPLAY_POINTS` points (all of a million-point program); while the camera moves (mouse
+interaction, VTK's "desired update rate" is high) and while the animation plays it draws a coarse
+copy of at most :data:`~winder_gui.views.geometry.LOD_POINTS` points instead, so rotating stays
+smooth with software OpenGL (numbers in ``benchmarks/bench_gui_3d.py``).  Both copies keep every
+turnaround and circuit end (:func:`~winder_gui.views.geometry.decimate_indices`).  The animation
+(play / pause / scrub) moves the eye along its trajectory; the frame logic also runs with the
+placeholder, so it is tested offscreen.
 """
 
 from __future__ import annotations
@@ -29,8 +34,16 @@ from winder_gui.views.geometry import MandrelViewData, PathsViewData
 from winder_gui.workers import JobRunner
 
 HEADLESS_PLATFORMS = {"offscreen", "minimal", "vnc"}
-MAX_DISPLAY_POINTS = 200_000
-"""Largest number of winding-path points drawn (the path is thinned by a stride above it)."""
+MAX_DISPLAY_POINTS = 1_000_000
+"""Largest number of winding-path points drawn at rest (thinned above it, keeping the turnarounds)."""
+PATH_LINE_WIDTH = 1.0
+"""Line width of the winding paths in pixels (wide lines cost a geometry shader per frame in llvmpipe)."""
+MULTI_SAMPLES = int(os.environ.get("WINDER_3D_MULTISAMPLES", "0") or 0)
+"""MSAA samples of the render window (``WINDER_3D_MULTISAMPLES``; 0: no anti-aliasing).  pyvista's
+default of 8, and FXAA too, more than double llvmpipe's time per frame (``benchmarks/bench_gui_3d.py``);
+with a GPU, 4 or 8 look smoother at no cost."""
+LOD_UPDATE_RATE = 1.0
+"""VTK asks for more frames per second than this while the camera moves: then the coarse paths are drawn."""
 MAX_FRAMES = 20_000
 """Animation frames over the eye path (thinned by a stride above it)."""
 TRAIL_FRAMES = 60
@@ -75,6 +88,10 @@ class MandrelView3D(QWidget):
         """The VTK render widget (below the animation controls), once created."""
         self.colour_by = COLOUR_BY[0]
         self.frame = 0
+        self.lod_active = False
+        self._eye_meshes: dict[str, Any] = {}
+        self._path_meshes: dict[str, Any] = {}
+        """True while the coarse copy of the paths is drawn (camera moving or animation playing)."""
         self._anim = QTimer(self)
         self._anim.setInterval(FRAME_MS)
         self._anim.timeout.connect(self._tick)
@@ -146,9 +163,11 @@ class MandrelView3D(QWidget):
             import pyvista  # noqa: F401 - heavy, lazy on purpose
             from pyvistaqt import QtInteractor
 
-            plotter = QtInteractor(self, auto_update=False, off_screen=False)  # PYVISTA_OFF_SCREEN must not apply here
+            # off_screen=False: PYVISTA_OFF_SCREEN must not apply here
+            plotter = QtInteractor(self, auto_update=False, off_screen=False, multi_samples=MULTI_SAMPLES)
             plotter.set_background("#f4f6fa", top="#c9d3e3")
             plotter.add_axes(interactive=False, line_width=2, labels_off=False)
+            plotter.renderer.AddObserver("StartEvent", self._choose_detail)
         except Exception as exc:  # noqa: BLE001 - no VTK/GL: degrade to a label, the app stays usable
             print(f"winder: 3D view disabled: {exc}", file=sys.stderr)
             self._use_placeholder(f"3D view unavailable: {exc}")
@@ -283,6 +302,8 @@ class MandrelView3D(QWidget):
             self._anim.start()
         else:
             self._anim.stop()
+            if self.plotter is not None and self.lod_active:
+                self.plotter.render()  # back to the full line
 
     def _tick(self) -> None:
         if self.paths is None or self.paths.frame_index.size == 0:
@@ -302,34 +323,88 @@ class MandrelView3D(QWidget):
         import pyvista as pv
 
         assert self.plotter is not None
-        for name in ("paths", "eye_path", "eye", "fibre"):
+        for name in ("paths", "paths_lod", "eye_path", "eye", "fibre"):
             self.plotter.remove_actor(name, render=False)
+        self._eye_meshes.clear()
+        self._path_meshes.clear()
         p = self.paths
         if p is None or p.line_xyz.shape[0] < 2:
             self.plotter.render()
             return
-        line = pv.lines_from_points(p.line_xyz)
-        line.point_data["c"] = np.asarray(self.colour_scalars(), dtype=float)
+        c = np.asarray(self.colour_scalars(), dtype=float)
         cmap = "tab20" if self.colour_by == "circuit" else "viridis"
-        self.plotter.add_mesh(line, name="paths", scalars="c", cmap=cmap, line_width=2, show_scalar_bar=True,
-                              scalar_bar_args={"title": VTK_TITLES[self.colour_by], "vertical": True},
-                              reset_camera=False)
+        clim = (float(np.min(c)), float(np.max(c)))
+        if clim[1] <= clim[0]:
+            clim = (clim[0] - 0.5, clim[0] + 0.5)
+        lod = p.lod_index
+        coarse = lod is not None and 2 <= lod.size < p.line_xyz.shape[0]
+        for name, idx in (("paths", None), ("paths_lod", lod if coarse else None)):
+            if name == "paths_lod" and not coarse:
+                continue
+            line = pv.lines_from_points(p.line_xyz if idx is None else p.line_xyz[idx])
+            line.point_data["c"] = c if idx is None else c[idx]
+            self._path_meshes[name] = line
+            actor = self.plotter.add_mesh(
+                line, name=name, scalars="c", cmap=cmap, clim=clim, line_width=PATH_LINE_WIDTH,
+                show_scalar_bar=name == "paths", reset_camera=False, render=False,
+                scalar_bar_args={"title": VTK_TITLES[self.colour_by], "vertical": True})
+            if name == "paths_lod":
+                actor.SetVisibility(False)
         self._update_eye()
 
+    def _choose_detail(self, *_args: Any) -> None:
+        """Renderer start: draw the coarse paths while the camera moves or the animation plays."""
+        if self.plotter is None:
+            return
+        full, lod = self.plotter.actors.get("paths"), self.plotter.actors.get("paths_lod")
+        moving = self.plotter.render_window.GetDesiredUpdateRate() > LOD_UPDATE_RATE
+        self.lod_active = lod is not None and (moving or self._anim.isActive())
+        if lod is not None:
+            lod.SetVisibility(self.lod_active)
+        if full is not None:
+            full.SetVisibility(not self.lod_active)
+
+    def shown_path_points(self) -> np.ndarray | None:
+        """Points of the winding line as drawn by the last render (the coarse copy while moving)."""
+        return self.actor_points("paths_lod" if self.lod_active else "paths")
+
     def _update_eye(self) -> None:
+        """Move the eye, the fibre and the eye's trail to the current frame and render once.
+
+        The three small meshes are made once per path set and then updated in place (a new actor
+        per frame would cost a render each in pyvista's ``add_mesh``).
+        """
         import pyvista as pv
 
         at = self.eye_at_frame()
         if at is None or self.plotter is None:
             return
         eye, contact = at
-        size = 0.03 * float(np.max(np.abs(self.paths.line_xyz[:, 1:]))) if self.paths is not None else 3.0
-        self.plotter.add_mesh(pv.Sphere(radius=size, center=eye), name="eye", color="#e0201a", reset_camera=False)
-        self.plotter.add_mesh(pv.Line(contact, eye), name="fibre", color="#202020", line_width=3, reset_camera=False)
+        actors = self.plotter.actors
+        meshes = self._eye_meshes
+        if "eye" not in actors or "eye" not in meshes:
+            size = 0.03 * float(np.max(np.abs(self.paths.line_xyz[:, 1:]))) if self.paths is not None else 3.0
+            meshes["eye"] = pv.Sphere(radius=size, center=(0.0, 0.0, 0.0))
+            meshes["eye0"] = np.array(meshes["eye"].points)
+            self.plotter.add_mesh(meshes["eye"], name="eye", color="#e0201a", reset_camera=False, render=False)
+        meshes["eye"].points = meshes["eye0"] + eye
+        if "fibre" not in actors or "fibre" not in meshes:
+            meshes["fibre"] = pv.Line(contact, eye)
+            self.plotter.add_mesh(meshes["fibre"], name="fibre", color="#202020", line_width=3, reset_camera=False,
+                                  render=False)
+        else:
+            meshes["fibre"].points = np.array([contact, eye], dtype=float)
         trail = self.trail()
         if trail is not None and trail.shape[0] >= 2:
-            self.plotter.add_mesh(pv.lines_from_points(trail), name="eye_path", color="#e07b00", line_width=2.5,
-                                  reset_camera=False)
+            if "eye_path" not in actors or "eye_path" not in meshes:
+                meshes["eye_path"] = pv.lines_from_points(trail)
+                self.plotter.add_mesh(meshes["eye_path"], name="eye_path", color="#e07b00", line_width=2.5,
+                                      reset_camera=False, render=False)
+            else:
+                meshes["eye_path"].copy_from(pv.lines_from_points(trail))
+        elif "eye_path" in actors:
+            self.plotter.remove_actor("eye_path", render=False)
+            meshes.pop("eye_path", None)
         self.plotter.render()
 
     def trail(self) -> np.ndarray | None:
@@ -338,10 +413,20 @@ class MandrelView3D(QWidget):
             return None
         return self.paths.eye_xyz[max(0, self.frame - TRAIL_FRAMES): self.frame + 1]
 
+    def path_mesh(self, name: str = "paths") -> Any:
+        """The pyvista mesh of the winding line drawn at rest (``paths``) or while moving (``paths_lod``).
+
+        Kept here: pyvista's ``actor.mapper.dataset`` of an actor that was hidden at the last render
+        can be an empty pipeline output.
+        """
+        return self._path_meshes.get(name)
+
     def actor_points(self, name: str) -> np.ndarray | None:
-        """Points of a VTK actor (``paths``, ``eye_path``, ``eye``, ``fibre``), or ``None``."""
+        """Points of a VTK actor (``paths``, ``paths_lod``, ``eye_path``, ``eye``, ``fibre``), or ``None``."""
         if self.plotter is None:
             return None
+        if name in self._path_meshes and name in self.plotter.actors:
+            return np.asarray(self._path_meshes[name].points)
         actor = self.plotter.actors.get(name)
         if actor is None:
             return None
