@@ -16,7 +16,9 @@ The environment variable ``WINDER_QUIT_WHEN_SHOWN`` makes the application quit o
 ``full`` (what ``--selftest`` does) after the whole pipeline.
 
 On a normal start, autosaved copies left by an earlier session (e.g. a killed process) are offered
-for restoring.  Times count from the process start (Linux),
+for restoring; the live copies of another winder running at the same time are not (each copy is
+locked by its instance, see :class:`winder_gui.main_window.AutosaveOwner`), and this instance's
+locks are released when its window closes.  Times count from the process start (Linux),
 or from ``WINDER_T0`` (seconds since the epoch) if the launcher sets it.
 """
 
@@ -91,7 +93,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     if not quit_when:
         QTimer.singleShot(0, window.offer_autosaves)
-    return app.exec()
+    try:
+        return app.exec()
+    finally:
+        from winder_gui.main_window import process_autosave_owner
+
+        process_autosave_owner().release_all()  # normally done by the window's close already
 
 
 def _arm_selftest(app, window, mode: str, timer_cls) -> None:  # noqa: ANN001 - Qt objects, imported lazily

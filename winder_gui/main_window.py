@@ -23,7 +23,10 @@ re-run automatically (debounced, superseding the run in flight).  Cancel (Esc) d
 once; errors are shown as a readable dialog.  Edits of the job are undoable (a QUndoStack of job
 snapshots), settings and the window layout persist (QSettings), recent files are remembered, and a
 dirty job is autosaved atomically every :data:`AUTOSAVE_MS` to
-``AppDataLocation/autosave/<name>.toml``; a leftover autosave is offered on the next start.
+``AppDataLocation/autosave/<name>.toml``; a leftover autosave is offered on the next start.  Each copy
+is locked (:class:`AutosaveOwner`, a QLockFile) by the running instance writing it: a second instance
+neither offers, restores, deletes nor overwrites it (it writes ``<name>-2.toml``), while the copy of
+a killed instance (stale lock: its PID is gone) is offered as before.
 
 Every mandrel edit makes a *candidate* job; the mandrel is built from it in a
 :class:`~winder_gui.workers.JobRunner` worker (never on the GUI thread), and only a candidate that
@@ -43,7 +46,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from PySide6.QtCore import QByteArray, QEventLoop, QPoint, QRect, QSettings, QStandardPaths, Qt, QTimer, Signal
+from PySide6.QtCore import (
+    QByteArray,
+    QEventLoop,
+    QLockFile,
+    QPoint,
+    QRect,
+    QSettings,
+    QStandardPaths,
+    Qt,
+    QTimer,
+    Signal,
+)
 from PySide6.QtGui import QAction, QCloseEvent, QImage, QKeySequence, QPainter, QUndoCommand, QUndoStack
 from PySide6.QtWidgets import (
     QApplication,
@@ -248,6 +262,80 @@ def autosave_origin(path: Path) -> Path | None:
     return None
 
 
+AUTOSAVE_LOCK_SUFFIX = ".lock"
+"""An autosave copy ``x.toml`` is owned by whoever holds the lock file ``x.toml.lock`` (a QLockFile)."""
+
+
+class AutosaveOwner:
+    """The autosave copies one running winder holds, each by a :class:`QLockFile` next to it.
+
+    A copy whose lock is held by another running winder is that instance's live autosave: it is
+    never offered, restored, deleted or overwritten here.  A lock left by a process that died (the
+    PID in the lock file no longer runs) is stale: Qt removes it on the next try, so the copy of a
+    killed session is offered again.  Locks never go stale by age alone (``setStaleLockTime(0)``).
+    All windows of one process share :func:`process_autosave_owner`; tests give windows their own.
+    """
+
+    def __init__(self) -> None:
+        self._locks: dict[Path, QLockFile] = {}
+
+    @staticmethod
+    def lock_path(copy: Path) -> Path:
+        return copy.with_name(copy.name + AUTOSAVE_LOCK_SUFFIX)
+
+    def holds(self, copy: Path) -> bool:
+        """True when this owner holds the lock of ``copy``."""
+        return Path(copy) in self._locks
+
+    def claim(self, copy: Path) -> bool:
+        """Take the lock of ``copy`` (True), or False when another running instance holds it."""
+        copy = Path(copy)
+        if copy in self._locks:
+            return True
+        try:
+            copy.parent.mkdir(parents=True, exist_ok=True)
+        except OSError:
+            return False
+        lock = QLockFile(str(self.lock_path(copy)))
+        lock.setStaleLockTime(0)  # stale only when its process is gone, however old
+        if not lock.tryLock(0):
+            return False
+        self._locks[copy] = lock
+        return True
+
+    def is_free(self, copy: Path) -> bool:
+        """True when nobody else holds ``copy`` (this owner does, or its lock is free or stale)."""
+        if self.holds(copy):
+            return True
+        lock = QLockFile(str(self.lock_path(Path(copy))))
+        lock.setStaleLockTime(0)
+        if lock.tryLock(0):
+            lock.unlock()
+            return True
+        return False
+
+    def release(self, copy: Path | None) -> None:
+        """Give up the lock of ``copy`` (removes the lock file)."""
+        lock = self._locks.pop(Path(copy), None) if copy is not None else None
+        if lock is not None:
+            lock.unlock()
+
+    def release_all(self) -> None:
+        for copy in list(self._locks):
+            self.release(copy)
+
+
+_PROCESS_OWNER: AutosaveOwner | None = None
+
+
+def process_autosave_owner() -> AutosaveOwner:
+    """The :class:`AutosaveOwner` of this process (made on first use)."""
+    global _PROCESS_OWNER
+    if _PROCESS_OWNER is None:
+        _PROCESS_OWNER = AutosaveOwner()
+    return _PROCESS_OWNER
+
+
 class _JobSnapshot(QUndoCommand):
     """One edit of the job: the job before and after (immutable pydantic models)."""
 
@@ -350,6 +438,8 @@ class MainWindow(QMainWindow):
         self._laws_key = ""
         self._paths_key: str | None = None
         self._autosaved: Path | None = None
+        self.autosave_owner: AutosaveOwner = process_autosave_owner()
+        """Holds the locks of this window's autosave copies (see :class:`AutosaveOwner`)."""
         self.undo_stack = QUndoStack(self)
         self.pipe_runner = JobRunner(self)
         self.pipe_runner.finished.connect(self._on_pipe_done)
@@ -1284,16 +1374,33 @@ class MainWindow(QMainWindow):
         st.sync()
 
     def autosave_path(self) -> Path:
-        """Where this job's autosave copy goes."""
+        """Where this job's autosave copy goes: ``<name>.toml``, or ``<name>-2.toml``, … when that name
+        is taken (another running instance's live copy, or a leftover copy not yet offered)."""
         name = self.job_path.stem if self.job_path is not None else self.job.name
-        return autosave_dir() / f"{_slug(name)}.toml"
+        stem = _slug(name)
+        d = autosave_dir()
+        names = [f"{stem}.toml", *(f"{stem}-{k}.toml" for k in range(2, 1000))]
+        mine = self._autosaved
+        if mine is not None and mine.parent == d and mine.name in names and self.autosave_owner.holds(mine):
+            return mine
+        for name in names:
+            p = d / name
+            if p.exists() or self.lock_taken(p):
+                continue
+            if self.autosave_owner.claim(p):
+                return p
+        raise OSError(f"no free autosave name for {stem!r} in {d}")
+
+    def lock_taken(self, p: Path) -> bool:
+        """True when the lock of autosave copy ``p`` is held by another running instance."""
+        return AutosaveOwner.lock_path(p).exists() and not self.autosave_owner.is_free(p)
 
     def autosave_now(self) -> Path | None:
         """Write the job to the autosave folder (atomically) if it has unsaved changes."""
         if not self.dirty:
             return None
-        p = self.autosave_path()
         try:
+            p = self.autosave_path()
             p.parent.mkdir(parents=True, exist_ok=True)
             origin = str(self.job_path.resolve()) if self.job_path is not None else "(not saved)"
             atomic_write_text(p, f"{AUTOSAVE_HEADER}{origin}\n{self.job.to_toml()}")
@@ -1301,40 +1408,64 @@ class MainWindow(QMainWindow):
             self._status(f"Autosave failed: {exc}", error=True)
             return None
         if self._autosaved is not None and self._autosaved != p:
-            self._autosaved.unlink(missing_ok=True)
+            self._drop_copy(self._autosaved)
         self._autosaved = p
         return p
 
+    def _drop_copy(self, p: Path) -> None:
+        """Delete autosave copy ``p`` and release its lock, if this window's owner holds it."""
+        if not self.autosave_owner.holds(p):
+            return
+        try:
+            p.unlink(missing_ok=True)
+        except OSError:
+            pass
+        self.autosave_owner.release(p)
+
     def drop_autosave(self) -> None:
-        """Remove this job's autosave copy (after a save or a deliberate close)."""
-        for p in {self._autosaved, self.autosave_path()}:
-            if p is not None:
-                try:
-                    p.unlink(missing_ok=True)
-                except OSError:
-                    pass
+        """Remove this window's autosave copy (after a save or a deliberate close).
+
+        Only a copy this window's :class:`AutosaveOwner` holds is removed: never another running
+        instance's, never a leftover nobody restored.
+        """
+        if self._autosaved is not None:
+            self._drop_copy(self._autosaved)
         self._autosaved = None
 
-    @staticmethod
-    def pending_autosaves() -> list[Path]:
-        """Autosave copies left by an earlier session (e.g. a killed process)."""
+    def pending_autosaves(self) -> list[Path]:
+        """Autosave copies left by an earlier session (e.g. a killed process), not another live instance's."""
         d = autosave_dir()
-        return sorted(d.glob("*.toml")) if d.is_dir() else []
+        if not d.is_dir():
+            return []
+        return [p for p in sorted(d.glob("*.toml")) if p != self._autosaved and self.autosave_owner.is_free(p)]
 
     def restore_autosave(self, path: str | Path) -> None:
         """Load an autosave copy as the current job (unsaved; its file is the job it was made of)."""
         p = Path(path)
+        if not self.autosave_owner.claim(p):
+            self._status(f"{p.name} is the autosave of another running winder; not restored", error=True)
+            return
         try:
             job = load_job(p)
         except (InputError, OSError) as exc:
+            self.autosave_owner.release(p)
             self._report_dialog("Could not restore the autosaved job", exc)
             return
+        if self._autosaved is not None and self._autosaved != p:
+            self._drop_copy(self._autosaved)
         self._autosaved = p
         self._submit("restore", build_task, job, autosave_origin(p))
 
     def offer_autosaves(self) -> None:
-        """Ask, for each leftover autosave copy, whether to restore it (the first accepted is loaded)."""
+        """Ask, for each leftover autosave copy, whether to restore it (the first accepted is loaded).
+
+        A copy is locked while the question is open, so two instances starting together never both
+        restore or delete it; the live copies of other running instances are not offered.
+        """
         for p in self.pending_autosaves():
+            owned = self.autosave_owner.holds(p)
+            if not owned and not self.autosave_owner.claim(p):
+                continue  # another instance took it meanwhile
             origin = autosave_origin(p)
             ans = QMessageBox.question(
                 self, "Restore autosaved job?",
@@ -1347,6 +1478,8 @@ class MainWindow(QMainWindow):
                 return
             if ans == QMessageBox.StandardButton.Discard:
                 p.unlink(missing_ok=True)
+            if not owned:
+                self.autosave_owner.release(p)
 
     # -- edits -----------------------------------------------------------------------------------
     def _on_spec_edited(self, spec: Any) -> None:
