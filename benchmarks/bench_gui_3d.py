@@ -127,6 +127,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--multi-samples", type=int, default=None,
                     help="MSAA samples of the render window (default: the view's MULTI_SAMPLES)")
     ap.add_argument("--fxaa", action="store_true", help="add FXAA anti-aliasing")
+    ap.add_argument("--lod", type=int, default=None, help="points of the coarse copy (default: LOD_POINTS)")
     ap.add_argument("--quick", action="store_true", help="skip the colour, line-width and polyline comparisons")
     args = ap.parse_args(argv)
 
@@ -170,7 +171,7 @@ def main(argv: list[str] | None = None) -> int:
 
     src = synthetic_line(args.points, args.circuits)
     print(f"source: {args.points} path points, {args.circuits} circuits; coarse copy while moving: "
-          f"<= {LOD_POINTS} points; RSS {_rss_mb():.0f} MB")
+          f"<= {args.lod or LOD_POINTS} points; RSS {_rss_mb():.0f} MB")
     print("frame times in ms: wall-clock median / 95th percentile (CPU-time median of the process); "
           "rest = full line, moving = coarse line")
     hdr = (f"{'cap':>9} {'shown':>9} {'thin ms':>8} {'build ms':>9} {'rest':>22} "
@@ -178,7 +179,7 @@ def main(argv: list[str] | None = None) -> int:
     print(hdr)
     for cap in [int(c) for c in args.caps.split(",")]:
         t0 = time.perf_counter()
-        paths = paths_view_data(src.line, src.eye, cap, v3.MAX_FRAMES)
+        paths = paths_view_data(src.line, src.eye, cap, v3.MAX_FRAMES, lod_points=args.lod or LOD_POINTS)
         thin = time.perf_counter() - t0
         view.set_paths(None)
         t0 = time.perf_counter()

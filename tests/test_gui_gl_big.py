@@ -162,21 +162,31 @@ def test_a_million_points_are_all_shown_at_rest_and_a_coarse_copy_while_moving(b
     # the colours are the source's circuit numbers
     c = np.asarray(v.path_mesh("paths").point_data["c"])
     np.testing.assert_array_equal(c, line.circuit)
-    # a mouse drag: the interactor style raises VTK's update rate -> the coarse copy is drawn
-    style = v.plotter.iren.interactor.GetInteractorStyle()
-    style.StartRotate()
-    v.plotter.render()
-    coarse = v.shown_path_points()
-    assert v.lod_active and coarse.shape[0] <= LOD_POINTS
-    assert not v.plotter.actors["paths"].GetVisibility() and v.plotter.actors["paths_lod"].GetVisibility()
+    # a mouse drag (Qt events -> VTK's interactor style, which raises the desired update rate): the coarse copy
+    from PySide6.QtCore import QPoint, Qt
+    from PySide6.QtTest import QTest
+
+    g = v.gl_widget
+    at = QPoint(g.width() // 2, g.height() // 2)
+    cam0 = np.array(v.plotter.camera.position)
+    QTest.mousePress(g, Qt.MouseButton.LeftButton, Qt.KeyboardModifier.NoModifier, at)
+    for k in range(1, 4):
+        QTest.mouseMove(g, at + QPoint(15 * k, 4 * k))
+        qtbot.wait(1)
+        coarse = v.shown_path_points()
+        assert v.lod_active and coarse.shape[0] <= LOD_POINTS
+        assert not v.plotter.actors["paths"].GetVisibility() and v.plotter.actors["paths_lod"].GetVisibility()
     np.testing.assert_allclose(coarse.min(axis=0), expected.min(axis=0), atol=1e-4)  # same bounds
     np.testing.assert_allclose(coarse.max(axis=0), expected.max(axis=0), atol=1e-4)
-    style.EndRotate()  # renders at the still rate: the full line again
-    assert not v.lod_active and v.plotter.actors["paths"].GetVisibility()
+    QTest.mouseRelease(g, Qt.MouseButton.LeftButton, Qt.KeyboardModifier.NoModifier, at + QPoint(45, 12))
+    qtbot.wait(1)
+    assert not np.allclose(v.plotter.camera.position, cam0)  # it did rotate
+    assert not v.lod_active and v.plotter.actors["paths"].GetVisibility()  # at rest: the full line again
+    assert not v.plotter.actors["paths_lod"].GetVisibility()
     # playing draws the coarse copy, pausing the full one
     v.play()
     v.set_frame(10)
-    assert v.lod_active
+    qtbot.waitUntil(lambda: v.lod_active, timeout=5000)  # the next paint renders it
     v.pause()
     assert not v.lod_active and v.shown_path_points().shape[0] == N
     # another colour: both copies re-coloured with the source's values

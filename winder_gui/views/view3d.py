@@ -405,7 +405,10 @@ class MandrelView3D(QWidget):
         elif "eye_path" in actors:
             self.plotter.remove_actor("eye_path", render=False)
             meshes.pop("eye_path", None)
-        self.plotter.render()
+        if self._anim.isActive() and self.gl_widget is not None:
+            self.gl_widget.update()  # playing: one render in the next paint (render() + paint would be two)
+        else:
+            self.plotter.render()
 
     def trail(self) -> np.ndarray | None:
         """The eye's trajectory over the last :data:`TRAIL_FRAMES` frames up to the current one (view frame)."""
