@@ -68,3 +68,26 @@ def test_check_points(z, r, index, words) -> None:
         assert res is None
     else:
         assert res is not None and res[0] == index and words in res[1]
+
+
+@pytest.mark.parametrize("example", ["bottle", "pressure_vessel", "pipe"])
+def test_convert_to_sketch_points_reproduce_the_template(example: str) -> None:
+    """The spline through the converted points stays within 0.01 mm of the template (checked
+    independently on a fine grid) and keeps exactly the template's concave zones."""
+    from engine.job import build_mandrel, load_job
+    from engine.resources import resource_path
+    from winder_gui.views.geometry import sketch_points
+
+    m = build_mandrel(load_job(resource_path("examples", f"{example}.toml")))
+    z, r, dev = sketch_points(m, tol_mm=0.01)
+    assert dev <= 0.01 and np.all(np.diff(z) > 0) and z.size < 400
+    spline = Mandrel.from_points(z, r)
+    zz = np.linspace(z[0], z[-1], 20001)
+    assert np.max(np.abs(spline.r(zz) - m.r(zz))) < 0.012
+    want = [(a.z_from, a.z_to) for a in m.concave_zones()]
+    got = [(a.z_from, a.z_to) for a in spline.concave_zones()]
+    assert len(got) == len(want)
+    for (a0, a1), (b0, b1) in zip(got, want):
+        assert abs(a0 - b0) < 0.5 and abs(a1 - b1) < 0.5
+    vd = mandrel_view_data(m)
+    np.testing.assert_array_equal(vd.sketch_z, z)

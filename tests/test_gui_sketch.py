@@ -368,14 +368,19 @@ def test_template_offers_convert_to_sketch(qtbot) -> None:
     panel = w.mandrel_panel
     assert panel.current_kind() == "vessel"
     assert panel.convert_button.isVisibleTo(panel) and not panel.points_table.isVisibleTo(panel)
-    curve_z, curve_r = w.plot.curve_data()
+    from engine.job import build_mandrel
+
+    template = build_mandrel(w.job)
+    dev = w.view_data.sketch_dev_mm
     panel.convert_button.click()
     assert w.wait_idle()
     assert panel.current_kind() == "points" and panel.points_table.isVisibleTo(panel)
     z, r = _job_points(w)
     assert len(z) >= 4 and list(_table_values(w)[0]) == z
-    # the sketch goes through the template's curve at its points
-    np.testing.assert_allclose(r, np.interp(z, curve_z, curve_r), atol=0.5)
+    # the sketch goes through the template's curve at its points, and its spline stays within
+    # 0.01 mm of the template between them
+    np.testing.assert_allclose(r, template.r(np.asarray(z)), atol=1e-9)
+    assert 0 < dev <= 0.01 and len(z) > 20
     w.undo_stack.undo()
     assert w.wait_idle()
     assert w.job.mandrel.kind == "vessel" and panel.convert_button.isVisibleTo(panel)

@@ -594,6 +594,7 @@ class MainWindow(QMainWindow):
         self.mandrel_panel.points_requested.connect(self._convert_to_points)
         self.mandrel_panel.import_requested.connect(self._action_import)
         self.plot.points_edited.connect(self._on_points_edited)
+        self.mandrel_panel.attach_plot(self.plot)  # live table while dragging, shared selection
         self.plot.message.connect(lambda m: self._status(m, error=True) if m else None)
 
     def _build_menus(self) -> None:
@@ -1499,7 +1500,9 @@ class MainWindow(QMainWindow):
         if self.view_data is None:
             self.mandrel_panel.set_spec(self.job.mandrel)
             return
-        self._on_points_edited(self.view_data.handle_z, self.view_data.handle_r)
+        vd = self.view_data
+        z, r = (vd.sketch_z, vd.sketch_r) if vd.sketch_z is not None else (vd.handle_z, vd.handle_r)
+        self._on_points_edited(z, r)
 
     # -- messages --------------------------------------------------------------------------------
     def _status(self, msg: str, error: bool = False) -> None:

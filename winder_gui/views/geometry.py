@@ -33,6 +33,11 @@ class MandrelViewData:
         sparse sample of the curve otherwise.
     surface_x, surface_y, surface_z:
         The revolved surface on an (n_z, n_theta) grid (mm); the mandrel axis is the x axis.
+    sketch_z, sketch_r:
+        Points whose spline reproduces a template's generatrix (mm; "Convert to sketch"); the
+        sketch points themselves for a ``points`` mandrel.
+    sketch_dev_mm:
+        Largest distance in r between that spline and the template (mm).
     """
 
     z: FloatArray
@@ -44,6 +49,9 @@ class MandrelViewData:
     surface_x: FloatArray
     surface_y: FloatArray
     surface_z: FloatArray
+    sketch_z: FloatArray | None = None
+    sketch_r: FloatArray | None = None
+    sketch_dev_mm: float = 0.0
 
 
 def handle_points(
@@ -62,6 +70,33 @@ def handle_points(
         zs.extend(pts[1:] if zs else pts)
     z = np.asarray(zs, dtype=float)
     return z, np.asarray(mandrel.r(z), dtype=float)
+
+
+def sketch_points(mandrel: Mandrel, tol_mm: float = 0.01, max_points: int = 400,
+                  ) -> tuple[FloatArray, FloatArray, float]:
+    """Points whose C2 spline (the ``points`` mandrel) stays within ``tol_mm`` of ``mandrel`` in r.
+
+    Starts from :func:`handle_points` and inserts the midpoint of every interval where the spline
+    strays by more than ``tol_mm`` (checked at 16 points per interval), until it fits or
+    ``max_points`` is reached.  Returns ``(z, r, worst deviation)`` in mm.
+    """
+    from engine.mandrel import Mandrel as _Mandrel  # (a worker-side import; the module is light)
+
+    z, r = handle_points(mandrel)
+    tau = (np.arange(1, 16) / 16.0)[None, :]
+    dev = np.inf
+    while True:
+        zz = (z[:-1, None] + (z[1:] - z[:-1])[:, None] * tau).ravel()
+        spline = _Mandrel.from_points(z, r, name=mandrel.name, source="points")
+        err = np.abs(spline.r(zz) - mandrel.r(zz)).reshape(z.size - 1, -1).max(axis=1)
+        dev = float(err.max())
+        bad = np.flatnonzero(err > tol_mm)
+        if bad.size == 0 or z.size >= max_points:
+            return z, r, dev
+        bad = bad[: max_points - z.size]
+        zm = 0.5 * (z[bad] + z[bad + 1])
+        z = np.insert(z, bad + 1, zm)
+        r = np.insert(r, bad + 1, mandrel.r(zm))
 
 
 def mandrel_view_data(
@@ -93,7 +128,11 @@ def mandrel_view_data(
     sy = r[:, None] * np.cos(theta)[None, :]
     sz = r[:, None] * np.sin(theta)[None, :]
     zones = tuple((zn.z_from, zn.z_to) for zn in mandrel.concave_zones())
-    return MandrelViewData(z, r, d2r, zones, hz, hr, sx, sy, sz)
+    if sketch is not None:
+        kz, kr, kdev = hz, hr, 0.0
+    else:
+        kz, kr, kdev = sketch_points(mandrel)
+    return MandrelViewData(z, r, d2r, zones, hz, hr, sx, sy, sz, kz, kr, kdev)
 
 
 def check_points(z: FloatArray, r: FloatArray) -> tuple[int, str] | None:

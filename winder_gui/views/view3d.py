@@ -441,7 +441,11 @@ class MandrelView3D(QWidget):
         d = self.data
         assert d is not None and self.plotter is not None
         grid = pv.StructuredGrid(d.surface_x, d.surface_y, d.surface_z)
-        concave = np.repeat((d.d2r > 1e-9).astype(float)[:, None], d.surface_x.shape[1], axis=1)
+        # the engine's concave zones (those a fibre would bridge), not every sign change of r''
+        zin = np.zeros(d.z.size, bool)
+        for z0, z1 in d.concave:
+            zin |= (d.z >= z0) & (d.z <= z1)
+        concave = np.repeat(zin.astype(float)[:, None], d.surface_x.shape[1], axis=1)
         grid.point_data["concave"] = concave.ravel(order="F")
         self.plotter.add_mesh(
             grid,
