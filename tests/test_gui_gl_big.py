@@ -189,6 +189,14 @@ def test_a_million_points_are_all_shown_at_rest_and_a_coarse_copy_while_moving(b
     qtbot.waitUntil(lambda: v.lod_active, timeout=5000)  # the next paint renders it
     v.pause()
     assert not v.lod_active and v.shown_path_points().shape[0] == N
+    # while the engine computes, the coarse copy (a full frame would hold the GUI thread ~0.25 s)
+    busy = [True]
+    v.set_busy_source(lambda: busy[0])
+    qtbot.waitUntil(lambda: v.lod_active, timeout=5000)
+    assert v.plotter.actors["paths_lod"].GetVisibility() and not v.plotter.actors["paths"].GetVisibility()
+    busy[0] = False
+    qtbot.waitUntil(lambda: not v.lod_active, timeout=5000)
+    assert v.shown_path_points().shape[0] == N
     # another colour: both copies re-coloured with the source's values
     v.set_colour_by("λ [–]")
     np.testing.assert_allclose(np.asarray(v.path_mesh("paths").point_data["c"]), line.lam, rtol=1e-6, atol=1e-9)

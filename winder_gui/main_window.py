@@ -490,6 +490,7 @@ class MainWindow(QMainWindow):
     def _build_ui(self) -> None:
         self.steps = StepBar()
         self.view3d = MandrelView3D()
+        self.view3d.set_busy_source(self.busy)
         self.plot = ProfilePlot()
         self.plot_tabs = QTabWidget()
         self.plot_tabs.setDocumentMode(True)

@@ -89,9 +89,16 @@ class MandrelView3D(QWidget):
         self.colour_by = COLOUR_BY[0]
         self.frame = 0
         self.lod_active = False
+        """True while the coarse copy of the paths is drawn (camera moving, animation playing or the
+        engine busy -- a full-detail frame of a million points takes ~0.25 s on software GL, longer
+        than the GUI thread may be held while the engine works)."""
         self._eye_meshes: dict[str, Any] = {}
         self._path_meshes: dict[str, Any] = {}
-        """True while the coarse copy of the paths is drawn (camera moving or animation playing)."""
+        self._busy_fn: Any = None
+        self._was_busy = False
+        self._busy_timer = QTimer(self)
+        self._busy_timer.setInterval(200)
+        self._busy_timer.timeout.connect(self._check_busy)
         self._anim = QTimer(self)
         self._anim.setInterval(FRAME_MS)
         self._anim.timeout.connect(self._tick)
@@ -352,13 +359,26 @@ class MandrelView3D(QWidget):
                 actor.SetVisibility(False)
         self._update_eye()
 
+    def set_busy_source(self, fn: Any) -> None:
+        """``fn() -> bool``: whether the engine is computing; the coarse paths are drawn meanwhile."""
+        self._busy_fn = fn
+        self._busy_timer.start()
+
+    def _check_busy(self) -> None:
+        busy = bool(self._busy_fn()) if self._busy_fn is not None else False
+        if busy == self._was_busy:
+            return
+        self._was_busy = busy
+        if self.plotter is not None and self.plotter.actors.get("paths_lod") is not None:
+            self.plotter.render()                   # _choose_detail runs at the start of the render
+
     def _choose_detail(self, *_args: Any) -> None:
         """Renderer start: draw the coarse paths while the camera moves or the animation plays."""
         if self.plotter is None:
             return
         full, lod = self.plotter.actors.get("paths"), self.plotter.actors.get("paths_lod")
         moving = self.plotter.render_window.GetDesiredUpdateRate() > LOD_UPDATE_RATE
-        self.lod_active = lod is not None and (moving or self._anim.isActive())
+        self.lod_active = lod is not None and (moving or self._anim.isActive() or self._was_busy)
         if lod is not None:
             lod.SetVisibility(self.lod_active)
         if full is not None:
