@@ -881,64 +881,6 @@ def _pool() -> ThreadPoolExecutor:
     return _POOL[0]
 
 
-def _trim_to_useful(klo: np.ndarray, khi: np.ndarray, ok: np.ndarray, M: int) -> None:
-    """Drop the transitions that lie on no start-to-end path of the grid (in place; exact).
-
-    ``klo/khi[i, j]`` (N-1, M) are the departure windows of level j at node i+1, ``ok[i, j]`` whether
-    it has one.  A level that cannot be reached from the start, or from which the end cannot be
-    reached, never lies on the optimal path; nor does a transition into or out of one.  Both sets
-    are bounded by index intervals, propagated through monotone envelopes of the windows (suffix
-    minimum of ``klo``, prefix maximum of ``khi``: supersets of every window, so the intervals are
-    supersets of the true sets and nothing useful is dropped).  The two sweeps are integer table
-    look-ups, one per node.  In the tube iterations this removes 10-45 % of the candidates (the
-    parts of the tube above what the path can accelerate or brake to).
-    """
-    n1 = klo.shape[0]
-    valid = ok & (khi >= klo)
-    lo_env = np.minimum.accumulate(np.where(valid, klo, M)[:, ::-1], axis=1)[:, ::-1]   # nondecreasing
-    hi_env = np.maximum.accumulate(np.where(valid, khi, -1), axis=1)                   # nondecreasing
-    rows = (M + 2) * np.arange(n1)[:, None]
-    # F[i, b] = last j with lo_env <= b;  G[i, a] = first j with hi_env >= a  (b, a = 0..M-1)
-    F = np.bincount((np.minimum(lo_env, M) + rows).ravel(), minlength=n1 * (M + 2)).reshape(n1, M + 2)
-    F = np.cumsum(F, axis=1) - 1
-    Gc = np.bincount((hi_env + 1 + rows).ravel(), minlength=n1 * (M + 2)).reshape(n1, M + 2)
-    Gc = np.cumsum(Gc, axis=1)                  # Gc[i, a] = number of j with hi_env <= a - 1
-    anyv = valid.any(axis=1)
-    first = np.where(anyv, np.argmax(valid, axis=1), 0)
-    last = np.where(anyv, M - 1 - np.argmax(valid[:, ::-1], axis=1), -1)
-    # flat arrays read one element per node (converting them to lists would cost more than the sweep)
-    Ff, Gf, lef, hef = F.ravel().item, Gc.ravel().item, lo_env.ravel().item, hi_env.ravel().item
-    fl, ll = first.tolist(), last.tolist()
-    W = M + 2
-    A = [0] * (n1 + 1)
-    B = [M - 1] * (n1 + 1)
-    a = b = 0                                   # the start: one level (index 0)
-    fa, fb = [0] * (n1 + 1), [0] * (n1 + 1)
-    for i in range(n1):
-        a2 = max(Gf(i * W + a), fl[i])
-        b2 = min(Ff(i * W + b), ll[i])
-        if a2 > b2:                             # no admissible law: leave it to the DP's message
-            return
-        a, b = a2, b2
-        fa[i + 1], fb[i + 1] = a, b
-    c = d = 0                                   # the end: level index 0
-    A[n1], B[n1] = max(fa[n1], c), min(fb[n1], d)
-    for i in range(n1 - 1, -1, -1):
-        c2, d2 = lef(i * M + c), hef(i * M + d)
-        if c2 > d2 or c2 >= M or d2 < 0:
-            return
-        c, d = c2, d2
-        A[i], B[i] = max(fa[i], c), min(fb[i], d)
-        if A[i] > B[i]:
-            return
-    Aa = np.asarray(A)
-    Ba = np.asarray(B)
-    ar = np.arange(M)
-    ok &= (ar >= Aa[1:, None]) & (ar <= Ba[1:, None])       # arrivals
-    np.maximum(klo, Aa[:-1, None], out=klo)                  # departures
-    np.minimum(khi, Ba[:-1, None], out=khi)
-
-
 def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | None = None,
         square: bool = False, cluster: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """One DP pass on the grid ``s_i × {M levels in [lo_i, hi_i]}``.
@@ -1011,7 +953,6 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
         inside = (lo_p[degp] >= pk_lo[degp]) & (lo_p[degp] <= pk_hi[degp])
         klo[degp] = 0
         khi[degp] = np.where(inside, 0, -1)
-    _trim_to_useful(klo, khi, ok, M)
     cnt_eff = khi - klo
     cnt_eff += 1
     cnt_eff[~ok] = 0

@@ -131,35 +131,6 @@ def test_dp_equals_brute_force(seed: int) -> None:
     assert _path_cost(prob, v) == pytest.approx(best, rel=1e-9)
 
 
-@pytest.mark.parametrize("M", [40, 100])
-def test_trimming_to_useful_levels_changes_nothing(example, monkeypatch, M: int) -> None:
-    """Dropping the transitions on no start-to-end path (exact by construction) gives the same law,
-    iteration by iteration, as the DP over every feasible window -- and does drop candidates."""
-    import engine.timeparam as tpm
-
-    s, X, dX, ddX, lim = example
-    lim = replace(lim, levels=M)
-    counts: dict[str, list[int]] = {"trim": [], "all": []}
-    dp = tpm._dp
-
-    def counting(key: str):
-        def run(*a, **k):
-            out = dp(*a, **k)
-            counts[key].append(tpm._STATS["candidates"])
-            return out
-        return run
-
-    monkeypatch.setattr(tpm, "_dp", counting("trim"))
-    trimmed = parametrize(s, X, dX, ddX, lim, method="tube")
-    monkeypatch.setattr(tpm, "_trim_to_useful", lambda *a: None)
-    monkeypatch.setattr(tpm, "_dp", counting("all"))
-    full = parametrize(s, X, dX, ddX, lim, method="tube")
-    assert len(trimmed.iterations) == len(full.iterations)
-    for a, b in zip(trimmed.iterations, full.iterations):
-        np.testing.assert_array_equal(a.sdot, b.sdot)
-    assert sum(counts["trim"]) < 0.9 * sum(counts["all"])
-
-
 def test_brute_force_instances_are_mostly_feasible() -> None:
     """Guard for the test above: most random instances must have an answer to compare."""
     feasible = binding = 0
