@@ -55,7 +55,7 @@ def main() -> None:
           f"Δ_sh = {lim.tube_share}, Δ_p = {lim.stop_percent} %")
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(f"load average {load:.2f} on {os.cpu_count()} cores; chunk building in a worker thread: "
-          f"{'on' if tp._threads_wanted() else 'off'} (on only when a core is idle)")
+          f"{'on' if tp._threads_wanted() else 'off'} (off by default: slower, see engine.timeparam._THREADS)")
     print(f"{'method':<22}{'time s':>9}{'/TOPP-RA':>10}{'wall s':>9}{'cpu s':>8}{'iters':>6}"
           f"{'max a/A':>9}{'E (SI)':>10}{'E (mm/s)':>12}")
 
@@ -111,8 +111,11 @@ def main() -> None:
     print("targets:")
     print(f"  tube within 0.5 % of TOPP-RA, M = 74..100: worst ratio {worst_ratio:.5f} "
           f"-> {'PASS' if worst_ratio <= 1.005 else 'FAIL'}")
-    print(f"  tube run <= 0.15 s (M = 100): wall {w100:.3f} s, cpu {c100:.3f} s "
-          f"-> {'PASS' if w100 <= 0.15 else 'FAIL'}")
+    worst_m = max(results, key=lambda m: results[m][1])
+    w_worst = results[worst_m][1]
+    print(f"  tube run <= 0.15 s, M = 74..100 (the paper's own run: M = 74): worst wall {w_worst:.3f} s "
+          f"(M = {worst_m}); M = 74 {results[74][1]:.3f} s, M = 100 {w100:.3f} s (cpu {c100:.3f} s) "
+          f"-> {'PASS' if w_worst <= 0.15 else 'FAIL'}")
     print(f"  classical DP M = 1100 < 2 s: wall {w1100:.3f} s, cpu {c1100:.3f} s "
           f"-> {'PASS' if w1100 < 2 else 'FAIL'}")
     print(f"  tube energy below classical DP at equal node count (M = {nodes}): "

@@ -857,7 +857,11 @@ def _infeasible(prob: _Problem, i: int, why: str) -> InfeasibleError:
 
 
 _CHUNK = 1 << 16   # candidates costed at once (whole intervals)
-_THREADS: bool | None = None  # build the next chunk in a worker thread: True, False, None = if a core is idle
+# Build the next chunk in a worker thread: True, False, None = when a core is idle.  Off by default:
+# measured on the 2-core machine (quiet, 2026-11-22) the GIL hand-offs between the worker's numpy calls
+# and the sequential pass's many small ones cost more than the overlap gains (M = 100: 0.142 s on,
+# 0.123 s off; M = 80: 0.154 vs 0.137 s).
+_THREADS: bool | None = False
 _POOL: list[ThreadPoolExecutor] = []
 _STATS: dict[str, int] = {}  # size of the last DP pass (for the benchmark)
 _LOBITS = 12
