@@ -14,15 +14,35 @@ display caps of 200 000, 500 000 and 1 000 000 points:
 * thinning in the worker (:func:`~winder_gui.views.geometry.paths_view_data`), ms;
 * building the actors (``set_paths`` including the first render), ms;
 * frame time of ``--frames`` camera rotations (``camera.azimuth``, ``plotter.render()`` and Qt's paint
-  of the widget, which in pyvistaqt renders once more and blits), median and 95th percentile, at rest
-  (the full line) and while moving (the coarse level-of-detail line, what a mouse drag shows);
+  of the widget), median and 95th percentile, at rest (the full line) and while moving (the coarse
+  level-of-detail line), and of ``--frames`` real mouse-drag steps (Qt mouse events -> VTK's interactor
+  style renders -> Qt paints), with the VTK renders per frame counted;
 * one animation step (``set_frame`` while playing, and the paint), median, ms;
 * resident memory (MB);
 
 then a colour-mode switch and the frame time per colour mode, line width 1 vs 2, and one polyline
-cell per circuit vs one cell per segment (plain pyvista).  ``--multi-samples 8`` / ``--fxaa`` show
-what anti-aliasing costs.  The machine is shared: the mandrel-only frame time is printed first as the
-baseline, with the process CPU time per frame (llvmpipe's threads included) next to the wall clock.
+cell per circuit vs one cell per segment (plain pyvista).  ``--pyvistaqt-paint`` uses pyvistaqt's own
+``QtInteractor``, whose paint renders again after every render: two renders per frame (the view's
+:func:`~winder_gui.views.view3d.interactor_class` paints by blitting the frame just rendered).
+``--multi-samples 8`` / ``--fxaa`` show what anti-aliasing costs.  The machine is shared: the mandrel-only
+frame time is printed first as the baseline, with the process CPU time per frame (llvmpipe's threads
+included) next to the wall clock.
+
+Measured 2026-11-22 (llvmpipe, 2 CPUs at load 2.5-3, 1200 x 768 px, ``--quick``, two runs each, interleaved),
+ms median wall clock, [VTK renders per frame]:
+
+=====================  ==========================  ==========================
+1 000 000 points        pyvistaqt's paint (before)  blit-only paint (now)
+=====================  ==========================  ==========================
+mandrel only            75-77 [2.0]                 45-48 [1.0]
+rest (full line)        222-231 [2.0]               124-125 [1.0]
+moving (coarse line)    107-108 [2.0]               63-64 [1.0]
+real mouse drag         100-101 [2.0]               60 [1.0]
+animation step          62-63 [1.0]                 60-63 [1.0]
+=====================  ==========================  ==========================
+
+(200 000 points: rest 155-159 -> 84-86, moving 109-110 -> 63-64, drag 106-109 -> 64-66 ms.)  The animation
+already rendered once per step (it asks for a paint instead of rendering).
 """
 
 from __future__ import annotations
@@ -84,11 +104,15 @@ def _ms(samples: list[float]) -> tuple[float, float]:
 
 CPU: list[float] = []
 """Process CPU time (all threads, llvmpipe's included) of each frame timed last, s."""
+RENDERS = [0]
+"""VTK renders (render-window EndEvents) so far."""
+PER_FRAME: list[float] = []
+"""VTK renders per frame of the frames timed last."""
 
 
 def frame(view) -> None:  # noqa: ANN001
-    """One frame as the user sees it: VTK renders, then Qt paints (pyvistaqt's paintGL renders again and
-    blits into the window)."""
+    """One frame as the user sees it: VTK renders, then Qt paints (blits VTK's frame into the window;
+    pyvistaqt's own paintGL renders again first, see ``--pyvistaqt-paint``)."""
     from PySide6.QtWidgets import QApplication
 
     view.plotter.render()
@@ -103,14 +127,48 @@ def rotations(view, count: int, moving: bool) -> tuple[float, float]:  # noqa: A
     frame(view)
     out = []
     CPU.clear()
+    r0 = RENDERS[0]
     for _ in range(count):
         pl.camera.azimuth += 360.0 / count
         t0, c0 = time.perf_counter(), time.process_time()
         frame(view)
         out.append(time.perf_counter() - t0)
         CPU.append(time.process_time() - c0)
+    PER_FRAME[:] = [(RENDERS[0] - r0) / count]
     rw.SetDesiredUpdateRate(0.0001)
     return _ms(out)
+
+
+def drag(view, count: int) -> tuple[float, float]:  # noqa: ANN001
+    """Median and 95th percentile of ``count`` steps of a real left-button mouse drag (ms): Qt's mouse-move
+    event, VTK's trackball style rotating and rendering (the coarse line), Qt's paint."""
+    from PySide6.QtCore import QPoint, Qt
+    from PySide6.QtTest import QTest
+    from PySide6.QtWidgets import QApplication
+
+    g = view.gl_widget
+    at = QPoint(g.width() // 2, g.height() // 2)
+    nb = Qt.KeyboardModifier.NoModifier
+    QTest.mousePress(g, Qt.MouseButton.LeftButton, nb, at)
+    QApplication.processEvents()
+    out = []
+    CPU.clear()
+    r0 = RENDERS[0]
+    for k in range(1, count + 1):
+        t0, c0 = time.perf_counter(), time.process_time()
+        QTest.mouseMove(g, at + QPoint(3 * k, k))
+        QApplication.processEvents()
+        out.append(time.perf_counter() - t0)
+        CPU.append(time.process_time() - c0)
+    PER_FRAME[:] = [(RENDERS[0] - r0) / count]
+    QTest.mouseRelease(g, Qt.MouseButton.LeftButton, nb, at + QPoint(3 * count, count))
+    QApplication.processEvents()
+    return _ms(out)
+
+
+def per_frame() -> float:
+    """VTK renders per frame of the frames timed last."""
+    return PER_FRAME[0] if PER_FRAME else float("nan")
 
 
 def cpu_ms() -> float:
@@ -129,6 +187,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fxaa", action="store_true", help="add FXAA anti-aliasing")
     ap.add_argument("--lod", type=int, default=None, help="points of the coarse copy (default: LOD_POINTS)")
     ap.add_argument("--quick", action="store_true", help="skip the colour, line-width and polyline comparisons")
+    ap.add_argument("--pyvistaqt-paint", action="store_true",
+                    help="pyvistaqt's own QtInteractor (its paint renders again after each render: the old way)")
     args = ap.parse_args(argv)
 
     if os.environ.get("QT_QPA_PLATFORM", "") in ("offscreen", "minimal") or not os.environ.get("DISPLAY"):
@@ -148,6 +208,10 @@ def main(argv: list[str] | None = None) -> int:
 
     if args.multi_samples is not None:
         v3.MULTI_SAMPLES = args.multi_samples
+    if args.pyvistaqt_paint:
+        from pyvistaqt import QtInteractor
+
+        v3._INTERACTOR_CLASS = QtInteractor
     view = v3.MandrelView3D()
     view.resize(1200, 800)
     view.show()
@@ -158,24 +222,25 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if args.fxaa:
         view.plotter.enable_anti_aliasing("fxaa")
+    view.plotter.render_window.AddObserver("EndEvent", lambda *_: RENDERS.__setitem__(0, RENDERS[0] + 1))
     app.processEvents()
     gl = view.plotter.render_window.ReportCapabilities().splitlines()
     renderer = next((s.split(":", 1)[1].strip() for s in gl if "OpenGL renderer string" in s), "?")
     print(f"OpenGL renderer: {renderer}; view {view.gl_widget.width()} x {view.gl_widget.height()} px, "
-          f"MSAA {v3.MULTI_SAMPLES}{' + FXAA' if args.fxaa else ''}; "
+          f"MSAA {v3.MULTI_SAMPLES}{' + FXAA' if args.fxaa else ''}; widget {type(view.plotter).__name__}; "
           f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
     rotations(view, 10, moving=False)  # warm-up: shaders, first expose
     med, p95 = rotations(view, args.frames, moving=False)
-    print(f"mandrel only: frame median {med:.1f} ms, p95 {p95:.1f} ms, CPU {cpu_ms():.1f} ms "
-          "(baseline of this machine right now)")
+    print(f"mandrel only: frame median {med:.1f} ms, p95 {p95:.1f} ms, CPU {cpu_ms():.1f} ms, "
+          f"{per_frame():.1f} renders per frame (baseline of this machine right now)")
 
     src = synthetic_line(args.points, args.circuits)
     print(f"source: {args.points} path points, {args.circuits} circuits; coarse copy while moving: "
           f"<= {args.lod or LOD_POINTS} points; RSS {_rss_mb():.0f} MB")
-    print("frame times in ms: wall-clock median / 95th percentile (CPU-time median of the process); "
-          "rest = full line, moving = coarse line")
-    hdr = (f"{'cap':>9} {'shown':>9} {'thin ms':>8} {'build ms':>9} {'rest':>22} "
-           f"{'moving':>22} {'anim step':>9} {'RSS MB':>7}")
+    print("frame times in ms: wall-clock median / 95th percentile (CPU-time median of the process) "
+          "[VTK renders per frame]; rest = full line, moving = coarse line, drag = real mouse drag (coarse)")
+    hdr = (f"{'cap':>9} {'shown':>9} {'thin ms':>8} {'build ms':>9} {'rest':>26} "
+           f"{'moving':>26} {'drag':>26} {'anim step':>9} {'RSS MB':>7}")
     print(hdr)
     for cap in [int(c) for c in args.caps.split(",")]:
         t0 = time.perf_counter()
@@ -187,9 +252,11 @@ def main(argv: list[str] | None = None) -> int:
         app.processEvents()
         build = time.perf_counter() - t0
         rest = rotations(view, args.frames, moving=False)
-        rest_cpu = cpu_ms()
+        rest_cpu, rest_n = cpu_ms(), per_frame()
         moving = rotations(view, args.frames, moving=True)
-        moving_cpu = cpu_ms()
+        moving_cpu, moving_n = cpu_ms(), per_frame()
+        dragged = drag(view, args.frames)
+        drag_cpu, drag_n = cpu_ms(), per_frame()
         view.play()  # the timer is started but never fires here: set_frame is timed alone
         steps = []
         for k in range(20):
@@ -199,8 +266,9 @@ def main(argv: list[str] | None = None) -> int:
             steps.append(time.perf_counter() - t0)
         view.pause()
         print(f"{cap:>9} {paths.line_xyz.shape[0]:>9} {thin * 1e3:>8.0f} {build * 1e3:>9.0f} "
-              f"{rest[0]:>7.1f} / {rest[1]:<6.1f} ({rest_cpu:5.0f}) "
-              f"{moving[0]:>6.1f} / {moving[1]:<6.1f} ({moving_cpu:5.0f}) "
+              f"{rest[0]:>7.1f} / {rest[1]:<6.1f} ({rest_cpu:5.0f}) [{rest_n:.1f}] "
+              f"{moving[0]:>6.1f} / {moving[1]:<6.1f} ({moving_cpu:5.0f}) [{moving_n:.1f}] "
+              f"{dragged[0]:>6.1f} / {dragged[1]:<6.1f} ({drag_cpu:5.0f}) [{drag_n:.1f}] "
               f"{_ms(steps)[0]:>9.1f} "
               f"{_rss_mb():>7.0f}")
     if args.quick:

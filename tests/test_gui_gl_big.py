@@ -210,3 +210,100 @@ def test_a_million_points_are_all_shown_at_rest_and_a_coarse_copy_while_moving(b
     np.testing.assert_allclose(v.actor_points("fibre")[[0, -1]], [ct, e], rtol=1e-5, atol=1e-3)
     np.testing.assert_allclose(v.actor_points("eye").mean(axis=0), e, atol=0.5)
     np.testing.assert_allclose(v.actor_points("eye_path"), v.trail(), rtol=1e-5, atol=1e-3)
+
+
+def _rgb(img) -> np.ndarray:
+    """(h, w * 3) bytes of an RGB888 QImage, copied (the QImage's buffer goes with it)."""
+    rows = np.frombuffer(img.constBits(), np.uint8).reshape(img.height(), img.bytesPerLine())
+    return rows[:, : 3 * img.width()].copy()
+
+
+def _on_screen(v) -> np.ndarray:
+    """The 3D widget's pixels as the X server shows them (RGB), not a new render."""
+    from PySide6.QtCore import QPoint
+    from PySide6.QtGui import QGuiApplication, QImage
+
+    g = v.gl_widget
+    at = g.mapTo(v.window(), QPoint(0, 0))
+    img = QGuiApplication.primaryScreen().grabWindow(v.window().winId()).toImage()
+    img = img.copy(at.x(), at.y(), g.width(), g.height()).convertToFormat(QImage.Format.Format_RGB888)
+    return _rgb(img)
+
+
+def _rendered(v) -> np.ndarray:
+    """A new render of the scene (RGB)."""
+    from PySide6.QtGui import QImage
+
+    img = v.render_image().convertToFormat(QImage.Format.Format_RGB888)
+    return _rgb(img)
+
+
+@pytest.mark.gl
+def test_one_render_per_frame_and_the_window_shows_the_current_picture(big_view, qtbot) -> None:
+    """pyvistaqt's paint renders again after every render; the view's widget paints by blitting the frame just
+    rendered: one VTK render per camera step (counted as render-window EndEvents), and still no stale picture."""
+    from PySide6.QtCore import QPoint, Qt
+    from PySide6.QtTest import QTest
+    from PySide6.QtWidgets import QWidget
+
+    v = big_view
+    line = helix_line(50_000, 20)
+    eye = SimpleNamespace(u=np.ones(49_999), eye_xyz=line.xyz * [1.5, 1.5, 1.0], contact_xyz=line.xyz)
+    v.set_paths(paths_view_data(line, eye, 1_000_000, 1000, lod_points=5_000))
+    qtbot.wait(50)
+    pl = v.plotter
+    renders = [0]
+    pl.render_window.AddObserver("EndEvent", lambda *_: renders.__setitem__(0, renders[0] + 1))
+
+    def step(action) -> int:
+        """Renders done by ``action`` and the Qt paint it causes (waits for that paint)."""
+        r0, b0, p0 = renders[0], pl.blit_only_paints, pl.paint_renders
+        action()
+        qtbot.waitUntil(lambda: pl.blit_only_paints + pl.paint_renders > b0 + p0, timeout=5000)
+        qtbot.wait(20)  # a second paint would come now
+        return renders[0] - r0
+
+    assert step(pl.render) == 1
+    assert step(lambda: v.set_frame(20)) == 1  # a scrub step: the eye moves, one render
+    g = v.gl_widget
+    at = QPoint(g.width() // 2, g.height() // 2)
+    nb = Qt.KeyboardModifier.NoModifier
+    QTest.mousePress(g, Qt.MouseButton.LeftButton, nb, at)
+    for k in range(1, 5):
+        p0 = pl.paint_renders
+        assert step(lambda k=k: QTest.mouseMove(g, at + QPoint(12 * k, 3 * k))) == 1
+        assert pl.paint_renders == p0 and v.lod_active  # the paint only blitted the coarse frame just rendered
+    assert step(lambda: QTest.mouseRelease(g, Qt.MouseButton.LeftButton, nb, at + QPoint(48, 12))) == 1
+    assert not v.lod_active
+    np.testing.assert_array_equal(_on_screen(v), _rendered(v))
+    qtbot.wait(20)
+    # the scene changed after the last render and before the paint (pyvista does that): the paint renders
+    before = _on_screen(v)
+
+    def render_then_turn() -> None:
+        pl.render()
+        pl.camera.azimuth += 40.0
+
+    p0 = pl.paint_renders
+    assert step(render_then_turn) == 2 and pl.paint_renders == p0 + 1
+    now = _on_screen(v)
+    assert np.abs(now.astype(int) - before).mean() > 1.0  # it did turn on screen
+    np.testing.assert_array_equal(now, _rendered(v))
+    # a resize and an exposure after another window covered the view: the current picture, not black or stale
+    v.resize(700, 450)
+    qtbot.waitUntil(lambda: _on_screen(v).shape == _rendered(v).shape, timeout=5000)
+    qtbot.wait(50)
+    np.testing.assert_array_equal(_on_screen(v), _rendered(v))
+    cover = QWidget()
+    qtbot.addWidget(cover)
+    cover.setStyleSheet("background: black")
+    cover.setGeometry(v.window().geometry())
+    cover.show()
+    cover.raise_()
+    qtbot.wait(100)
+    cover.hide()
+    v.window().raise_()
+    qtbot.wait(100)
+    shown = _on_screen(v)
+    assert shown.mean() > 100  # not black: the view's background is light
+    np.testing.assert_array_equal(shown, _rendered(v))
