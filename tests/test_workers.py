@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import threading
 import time
 
 from engine.errors import InputError
@@ -58,3 +59,40 @@ def test_warm_engine_imports_loads_the_stage_modules() -> None:
             "warm_engine_imports(); print(all(m in sys.modules for m in ENGINE_MODULES))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "True"
+
+
+def test_cyclic_garbage_is_collected_on_the_gui_thread(qtbot) -> None:
+    """A worker that allocates a lot never runs the cyclic collector: Qt wrappers in garbage cycles
+    (closed windows, dialogs) are destroyed on the GUI thread only (a worker destroying them can
+    deadlock against the GUI thread on Qt's object mutexes and the GIL)."""
+    import gc
+    import weakref
+
+    from PySide6.QtCore import QObject
+
+    runner = JobRunner()
+    assert not gc.isenabled()
+    died_on: list[str] = []
+
+    class Cycle(QObject):
+        def __del__(self) -> None:
+            died_on.append(threading.current_thread().name)
+
+    obj = Cycle()
+    obj.me = obj                      # a reference cycle: only the cyclic collector frees it
+    ref = weakref.ref(obj)
+    del obj
+
+    def churn(*, state) -> int:
+        junk = []
+        for i in range(300_000):      # far past every automatic-collection threshold
+            d = {"i": i}
+            d["self"] = d
+            junk.append(d)
+        return len(junk)
+
+    with qtbot.waitSignal(runner.finished, timeout=30_000):
+        runner.submit(churn)
+    assert ref() is not None          # the worker did not collect it
+    qtbot.waitUntil(lambda: ref() is None, timeout=5_000)
+    assert died_on == [threading.main_thread().name]

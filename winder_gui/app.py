@@ -89,7 +89,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     # after the first mandrel is on screen, so the imports do not compete with start-up for the GIL
     QTimer.singleShot(
-        3000, lambda: threading.Thread(target=warm_engine_imports, name="winder-warm-imports", daemon=True).start()
+        3000, lambda: threading.Thread(target=warm_engine_imports, args=(True,), name="winder-warm-imports",
+                                 daemon=True).start()
     )
     if not quit_when:
         QTimer.singleShot(0, window.offer_autosaves)

@@ -18,6 +18,7 @@ pyqtgraph plot, 14 ms alone, took 93 ms next to a busy worker; 30 ms with a 1 ms
 
 from __future__ import annotations
 
+import gc
 import itertools
 import sys
 import threading
@@ -25,7 +26,7 @@ import traceback
 from collections.abc import Callable
 from typing import Any
 
-from PySide6.QtCore import QObject, QThread, Signal, Slot
+from PySide6.QtCore import QCoreApplication, QObject, QThread, QTimer, Signal, Slot
 
 from engine.errors import Cancelled
 
@@ -39,6 +40,34 @@ with 1 ms, one 128 ms heartbeat gap held 139 GIL waits of the GUI thread; with 0
 def _gui_friendly_switch_interval() -> None:
     if sys.getswitchinterval() > GUI_SWITCH_INTERVAL_S:
         sys.setswitchinterval(GUI_SWITCH_INTERVAL_S)
+
+
+GC_INTERVAL_MS = 1000
+"""How often the GUI thread runs Python's cyclic garbage collector (young generations; all of them
+every :data:`GC_FULL_EVERY` ticks) -- see :func:`collect_garbage_on_the_gui_thread`."""
+GC_FULL_EVERY = 30
+_GC_TIMER: list[QTimer] = []
+
+
+def collect_garbage_on_the_gui_thread() -> None:
+    """Turn Python's automatic cyclic collector off and collect on a GUI-thread timer instead.
+
+    The automatic collector runs in whichever thread allocates when a threshold is passed.  A worker
+    that collects a cycle holding Qt wrappers (a closed window or dialog) destroys those Qt objects
+    off the GUI thread, taking Qt's object mutexes while waiting for the GIL that the GUI thread holds
+    as it deletes related objects: a deadlock (seen in the test suite: a worker deleting a QMenu while
+    the GUI thread deleted its QActions).  Idempotent; call on the GUI thread with a QApplication.
+    """
+    app = QCoreApplication.instance()
+    if _GC_TIMER or app is None or QThread.currentThread() is not app.thread():
+        return
+    gc.disable()
+    timer = QTimer(app)
+    timer.setInterval(GC_INTERVAL_MS)
+    ticks = itertools.count(1)
+    timer.timeout.connect(lambda: gc.collect(2 if next(ticks) % GC_FULL_EVERY == 0 else 1))
+    timer.start()
+    _GC_TIMER.append(timer)
 
 
 class _WorkerState:
@@ -102,6 +131,7 @@ class JobRunner(QObject):
     def __init__(self, parent: QObject | None = None) -> None:
         super().__init__(parent)
         _gui_friendly_switch_interval()
+        collect_garbage_on_the_gui_thread()
         self._emitter = _Emitter()
         self._emitter.progress.connect(self._on_progress)
         self._emitter.partial.connect(self._on_partial)
