@@ -410,7 +410,6 @@ class MandrelView3D(QWidget):
         return f"frame {self.frame + 1}/{n}" + ("" if short else f" (path point {point})")
 
     def _render_paths(self) -> None:
-        import pyvista as pv
 
         assert self.plotter is not None
         for name in ("paths", "paths_lod", "eye_path", "eye", "fibre"):
@@ -428,8 +427,22 @@ class MandrelView3D(QWidget):
             clim = (clim[0] - 0.5, clim[0] + 0.5)
         lod = p.lod_index
         coarse = lod is not None and 2 <= lod.size < p.line_xyz.shape[0]
-        for name, idx in (("paths", None), ("paths_lod", lod if coarse else None)):
-            if name == "paths_lod" and not coarse:
+        # pyvista renders inside add_mesh/add_scalar_bar even with render=False (twice here, ~40 ms
+        # each at 1e5 points on software GL, on the GUI thread): build everything, then render once
+        self.plotter.suppress_rendering = True
+        try:
+            self._add_path_actors(p, c, cmap, clim, lod if coarse else None)
+            self._update_eye()
+        finally:
+            self.plotter.suppress_rendering = False
+        self.plotter.render()
+
+    def _add_path_actors(self, p: PathsViewData, c: np.ndarray, cmap: str, clim: tuple[float, float],
+                         lod: np.ndarray | None) -> None:
+        import pyvista as pv
+
+        for name, idx in (("paths", None), ("paths_lod", lod)):
+            if name == "paths_lod" and lod is None:
                 continue
             line = pv.lines_from_points(p.line_xyz if idx is None else p.line_xyz[idx])
             line.point_data["c"] = c if idx is None else c[idx]
@@ -440,7 +453,6 @@ class MandrelView3D(QWidget):
                 scalar_bar_args={"title": VTK_TITLES[self.colour_by], "vertical": True})
             if name == "paths_lod":
                 actor.SetVisibility(False)
-        self._update_eye()
 
     def set_busy_source(self, fn: Any) -> None:
         """``fn() -> bool``: whether the engine is computing; the coarse paths are drawn meanwhile."""
@@ -550,6 +562,14 @@ class MandrelView3D(QWidget):
             zin |= (d.z >= z0) & (d.z <= z1)
         concave = np.repeat(zin.astype(float)[:, None], d.surface_x.shape[1], axis=1)
         grid.point_data["concave"] = concave.ravel(order="F")
+        self.plotter.suppress_rendering = True     # one render at the end, not one inside add_mesh
+        try:
+            self._add_mandrel_actor(grid)
+        finally:
+            self.plotter.suppress_rendering = False
+        self.plotter.render()
+
+    def _add_mandrel_actor(self, grid: Any) -> None:
         self.plotter.add_mesh(
             grid,
             name="mandrel",
@@ -569,7 +589,6 @@ class MandrelView3D(QWidget):
             self.plotter.reset_camera()
             self.plotter.camera.zoom(1.35)
             self._reset_camera = False
-        self.plotter.render()
 
     def render_image(self) -> QImage | None:
         """The 3D view rendered to an image (VTK draws with GL, which ``QWidget.grab`` may miss)."""
