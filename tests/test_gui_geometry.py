@@ -89,5 +89,19 @@ def test_convert_to_sketch_points_reproduce_the_template(example: str) -> None:
     assert len(got) == len(want)
     for (a0, a1), (b0, b1) in zip(got, want):
         assert abs(a0 - b0) < 0.5 and abs(a1 - b1) < 0.5
-    vd = mandrel_view_data(m)
-    np.testing.assert_array_equal(vd.sketch_z, z)
+
+
+def test_closed_pole_profile_builds_and_converts() -> None:
+    """A sampled sphere closed at both poles (r = 0 at the ends; r() gives -1e-15 there): the view data
+    builds and the converted sketch has no negative radius."""
+    from winder_gui.views.geometry import sketch_points
+
+    th = np.linspace(0.0, np.pi, 41)
+    r0 = 50.0 * np.sin(th)
+    r0[0] = r0[-1] = 0.0
+    m = Mandrel.from_points(-50.0 * np.cos(th), r0)
+    d = mandrel_view_data(m)
+    assert np.all(d.handle_r >= 0.0)
+    z, r, dev = sketch_points(m, tol_mm=0.05)
+    assert np.all(r >= 0.0) and r[0] < 1e-12 and r[-1] < 1e-12
+    Mandrel.from_points(z, r)              # a valid sketch

@@ -84,7 +84,7 @@ from engine.state import check_cancel
 from winder_gui.panels.mandrel_panel import MandrelPanel
 from winder_gui.panels.section_panel import SectionPanel, payout_panel, winding_panel
 from winder_gui.panels.steps import STEPS, StepBar
-from winder_gui.views.geometry import MandrelViewData, mandrel_view_data
+from winder_gui.views.geometry import MandrelViewData, mandrel_view_data, sketch_points
 from winder_gui.views.plots import AxesPlot, CoveragePlot, EyePlot, PullSpeedPlot, TimeLawPlot, WindingPlots
 from winder_gui.views.profile_plot import ProfilePlot
 from winder_gui.views.view3d import MandrelView3D
@@ -180,6 +180,15 @@ def build_task(job: Job, path: Path | None, *, state: Any) -> BuildResult:
     data = mandrel_view_data(mandrel, sketch)
     state.progress(1.0, "")
     return BuildResult(job, path, mandrel, data)
+
+
+def convert_task(job: Job, mandrel: Mandrel, path: Path | None, *, state: Any) -> BuildResult:
+    """``job`` with its mandrel replaced by a sketch whose spline is within 0.01 mm of ``mandrel``
+    (:func:`winder_gui.views.geometry.sketch_points`), built (worker thread)."""
+    state.progress(0.0, "converting the generatrix to sketch points")
+    z, r, _dev = sketch_points(mandrel, state=state)
+    spec = PointsSpec(z_mm=[float(v) for v in z], r_mm=[float(v) for v in r])
+    return build_task(job.replace(mandrel=spec), path, state=state)
 
 
 def open_task(path: Path, *, state: Any) -> BuildResult:
@@ -1501,9 +1510,7 @@ class MainWindow(QMainWindow):
         if self.view_data is None:
             self.mandrel_panel.set_spec(self.job.mandrel)
             return
-        vd = self.view_data
-        z, r = (vd.sketch_z, vd.sketch_r) if vd.sketch_z is not None else (vd.handle_z, vd.handle_r)
-        self._on_points_edited(z, r)
+        self._submit("points", convert_task, self.job, self.mandrel, self.job_path)
 
     # -- messages --------------------------------------------------------------------------------
     def _status(self, msg: str, error: bool = False) -> None:

@@ -7,7 +7,7 @@ The GUI thread only hands these arrays to pyqtgraph / pyvista; everything numeri
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -33,11 +33,6 @@ class MandrelViewData:
         sparse sample of the curve otherwise.
     surface_x, surface_y, surface_z:
         The revolved surface on an (n_z, n_theta) grid (mm); the mandrel axis is the x axis.
-    sketch_z, sketch_r:
-        Points whose spline reproduces a template's generatrix (mm; "Convert to sketch"); the
-        sketch points themselves for a ``points`` mandrel.
-    sketch_dev_mm:
-        Largest distance in r between that spline and the template (mm).
     """
 
     z: FloatArray
@@ -49,9 +44,6 @@ class MandrelViewData:
     surface_x: FloatArray
     surface_y: FloatArray
     surface_z: FloatArray
-    sketch_z: FloatArray | None = None
-    sketch_r: FloatArray | None = None
-    sketch_dev_mm: float = 0.0
 
 
 def handle_points(
@@ -69,18 +61,20 @@ def handle_points(
         pts = np.linspace(seg.z0, seg.z1, k)
         zs.extend(pts[1:] if zs else pts)
     z = np.asarray(zs, dtype=float)
-    return z, np.asarray(mandrel.r(z), dtype=float)
+    return z, np.maximum(np.asarray(mandrel.r(z), dtype=float), 0.0)   # a closed pole: -1e-15 -> 0
 
 
-def sketch_points(mandrel: Mandrel, tol_mm: float = 0.01, max_points: int = 400,
+def sketch_points(mandrel: Mandrel, tol_mm: float = 0.01, max_points: int = 400, state: Any = None,
                   ) -> tuple[FloatArray, FloatArray, float]:
     """Points whose C2 spline (the ``points`` mandrel) stays within ``tol_mm`` of ``mandrel`` in r.
 
     Starts from :func:`handle_points` and inserts the midpoint of every interval where the spline
     strays by more than ``tol_mm`` (checked at 16 points per interval), until it fits or
-    ``max_points`` is reached.  Returns ``(z, r, worst deviation)`` in mm.
+    ``max_points`` is reached.  Radii are clamped at 0 (a closed pole evaluates to -1e-15 mm).
+    Returns ``(z, r, worst deviation)`` in mm.  ``state``: cancellation between refinements.
     """
     from engine.mandrel import Mandrel as _Mandrel  # (a worker-side import; the module is light)
+    from engine.state import check_cancel
 
     z, r = handle_points(mandrel)
     tau = (np.arange(1, 16) / 16.0)[None, :]
@@ -93,10 +87,12 @@ def sketch_points(mandrel: Mandrel, tol_mm: float = 0.01, max_points: int = 400,
         bad = np.flatnonzero(err > tol_mm)
         if bad.size == 0 or z.size >= max_points:
             return z, r, dev
+        if state is not None:
+            check_cancel(state)
         bad = bad[: max_points - z.size]
         zm = 0.5 * (z[bad] + z[bad + 1])
         z = np.insert(z, bad + 1, zm)
-        r = np.insert(r, bad + 1, mandrel.r(zm))
+        r = np.insert(r, bad + 1, np.maximum(mandrel.r(zm), 0.0))
 
 
 def mandrel_view_data(
@@ -128,11 +124,7 @@ def mandrel_view_data(
     sy = r[:, None] * np.cos(theta)[None, :]
     sz = r[:, None] * np.sin(theta)[None, :]
     zones = tuple((zn.z_from, zn.z_to) for zn in mandrel.concave_zones())
-    if sketch is not None:
-        kz, kr, kdev = hz, hr, 0.0
-    else:
-        kz, kr, kdev = sketch_points(mandrel)
-    return MandrelViewData(z, r, d2r, zones, hz, hr, sx, sy, sz, kz, kr, kdev)
+    return MandrelViewData(z, r, d2r, zones, hz, hr, sx, sy, sz)
 
 
 def check_points(z: FloatArray, r: FloatArray) -> tuple[int, str] | None:
