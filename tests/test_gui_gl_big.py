@@ -190,11 +190,10 @@ def test_a_million_points_are_all_shown_at_rest_and_a_coarse_copy_while_moving(b
     v.pause()
     assert not v.lod_active and v.shown_path_points().shape[0] == N
     # while the engine computes, the coarse copy (a full frame would hold the GUI thread ~0.25 s)
-    busy = [True]
-    v.set_busy_source(lambda: busy[0])
+    v.set_busy(True)
     qtbot.waitUntil(lambda: v.lod_active, timeout=5000)
     assert v.plotter.actors["paths_lod"].GetVisibility() and not v.plotter.actors["paths"].GetVisibility()
-    busy[0] = False
+    v.set_busy(False)
     qtbot.waitUntil(lambda: not v.lod_active, timeout=5000)
     assert v.shown_path_points().shape[0] == N
     # another colour: both copies re-coloured with the source's values

@@ -499,7 +499,6 @@ class MainWindow(QMainWindow):
     def _build_ui(self) -> None:
         self.steps = StepBar()
         self.view3d = MandrelView3D()
-        self.view3d.set_busy_source(self.busy)
         self.plot = ProfilePlot()
         self.plot_tabs = QTabWidget()
         self.plot_tabs.setDocumentMode(True)
@@ -925,6 +924,7 @@ class MainWindow(QMainWindow):
         self.progress_bar.setVisible(computing)
         self.cancel_button.setVisible(computing)
         self.actions["cancel"].setEnabled(computing)
+        self.view3d.set_busy(self.busy())
         self._update_run_state()
 
     def _on_progress(self, fraction: float, message: str) -> None:

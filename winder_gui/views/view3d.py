@@ -179,11 +179,7 @@ class MandrelView3D(QWidget):
         than the GUI thread may be held while the engine works)."""
         self._eye_meshes: dict[str, Any] = {}
         self._path_meshes: dict[str, Any] = {}
-        self._busy_fn: Any = None
         self._was_busy = False
-        self._busy_timer = QTimer(self)
-        self._busy_timer.setInterval(200)
-        self._busy_timer.timeout.connect(self._check_busy)
         self._anim = QTimer(self)
         self._anim.setInterval(FRAME_MS)
         self._anim.timeout.connect(self._tick)
@@ -454,13 +450,9 @@ class MandrelView3D(QWidget):
             if name == "paths_lod":
                 actor.SetVisibility(False)
 
-    def set_busy_source(self, fn: Any) -> None:
-        """``fn() -> bool``: whether the engine is computing; the coarse paths are drawn meanwhile."""
-        self._busy_fn = fn
-        self._busy_timer.start()
-
-    def _check_busy(self) -> None:
-        busy = bool(self._busy_fn()) if self._busy_fn is not None else False
+    def set_busy(self, busy: bool) -> None:
+        """Whether the engine is computing: the coarse paths are drawn meanwhile, the full ones after."""
+        busy = bool(busy)
         if busy == self._was_busy:
             return
         self._was_busy = busy
