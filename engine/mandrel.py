@@ -23,6 +23,7 @@ for CSV/DXF/STEP are in :mod:`engine.mandrel_io`.
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -444,7 +445,7 @@ class Mandrel:
             total += float(np.sum(math.pi * r * r * dz * w))
         return total
 
-    def concave_zones(self, tol_mm: float = CONCAVE_GAP_TOL_MM, n: int = 4000) -> list[Zone]:
+    def concave_zones(self, *, tol_mm: float = CONCAVE_GAP_TOL_MM, n: int = 4000) -> list[Zone]:
         """Concave zones: z intervals where r'' > 0 (concave seen from outside) that a fibre would bridge.
 
         A fibre laid over a concave zone stands off the surface; the zone matters for the winding
@@ -480,10 +481,13 @@ class Mandrel:
         list of Zone
             Increasing, disjoint zones, with ``gap_mm`` set (mm).
         """
-        if not (isinstance(tol_mm, int | float) and math.isfinite(tol_mm) and tol_mm >= 0):
+        if not (isinstance(tol_mm, numbers.Real) and not isinstance(tol_mm, bool) and math.isfinite(tol_mm)
+                and tol_mm >= 0):
             raise InputError(f"the concave-zone gap tolerance must be a number of mm >= 0, got {tol_mm!r}",
                              field="tol_mm")
-        z = self._zone_grid(max(int(n), 16))
+        if isinstance(n, bool) or not isinstance(n, numbers.Integral) or n < 16:
+            raise InputError(f"the concave-zone sample count must be an integer >= 16, got {n!r}", field="n")
+        z = self._zone_grid(int(n))
         d2 = self.evaluate(z)[2]
         pos = np.where(np.isfinite(d2), d2, 0.0) > _D2_FLOOR
         if not pos.any():

@@ -240,7 +240,18 @@ def test_zones_are_ordered_disjoint_and_shrink_with_the_tolerance() -> None:
     assert prev == []
 
 
-@pytest.mark.parametrize("bad", [-0.01, float("nan"), float("inf"), "0.02"])
+@pytest.mark.parametrize("bad", [-0.01, float("nan"), float("inf"), "0.02", True])
 def test_bad_tolerance_is_an_input_error(bad: object) -> None:
     with pytest.raises(InputError, match="tolerance"):
         Mandrel.bottle().concave_zones(tol_mm=bad)  # type: ignore[arg-type]
+
+
+def test_numpy_tolerance_and_bad_sample_count() -> None:
+    m = Mandrel.bottle()
+    assert [(z.z_from, z.z_to) for z in m.concave_zones(tol_mm=np.float32(0.02))] == \
+        [(z.z_from, z.z_to) for z in m.concave_zones(tol_mm=0.02)]
+    for bad in (0, 15, 100.5, True):
+        with pytest.raises(InputError, match="sample count"):
+            m.concave_zones(n=bad)  # type: ignore[arg-type]
+    with pytest.raises(TypeError):
+        m.concave_zones(0.02)  # type: ignore[misc]  # keyword-only: an old positional n cannot be read as mm
