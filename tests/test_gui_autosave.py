@@ -175,3 +175,24 @@ def test_killed_instance_copy_is_offered_only_after_it_died(qtbot, tmp_path, ask
     assert w.autosave_now() == copy and load_job(copy).payout.clearance_mm == 36.0
     _close(w)
     assert not copy.exists()
+
+
+def test_failed_autosave_releases_the_lock_it_took(qtbot, monkeypatch) -> None:
+    """A write that fails (disk full, permissions) leaves no lock on a name without a copy."""
+    import winder_gui.main_window as mw
+
+    w = _instance(qtbot)
+    w.set_dirty(True)
+
+    def fail(*_a, **_k):
+        raise OSError(28, "No space left on device")
+
+    write = mw.atomic_write_text
+    monkeypatch.setattr(mw, "atomic_write_text", fail)
+    p = w.autosave_path()
+    assert w.autosave_now() is None
+    assert not p.exists() and not w.autosave_owner.holds(p)
+    assert "Autosave failed" in w.status_msg.text()
+    monkeypatch.setattr(mw, "atomic_write_text", write)
+    assert w.autosave_now() == p and p.exists() and w.autosave_owner.holds(p)
+    _close(w)

@@ -1410,12 +1410,15 @@ class MainWindow(QMainWindow):
         """Write the job to the autosave folder (atomically) if it has unsaved changes."""
         if not self.dirty:
             return None
+        p = None
         try:
             p = self.autosave_path()
             p.parent.mkdir(parents=True, exist_ok=True)
             origin = str(self.job_path.resolve()) if self.job_path is not None else "(not saved)"
             atomic_write_text(p, f"{AUTOSAVE_HEADER}{origin}\n{self.job.to_toml()}")
         except OSError as exc:
+            if p is not None and p != self._autosaved and not p.exists():
+                self.autosave_owner.release(p)      # a name locked for a copy that was never written
             self._status(f"Autosave failed: {exc}", error=True)
             return None
         if self._autosaved is not None and self._autosaved != p:
@@ -1488,7 +1491,10 @@ class MainWindow(QMainWindow):
                 self.restore_autosave(p)
                 return
             if ans == QMessageBox.StandardButton.Discard:
-                p.unlink(missing_ok=True)
+                try:
+                    p.unlink(missing_ok=True)
+                except OSError as exc:
+                    self._status(f"Could not delete the autosaved copy {p}: {exc}", error=True)
             if not owned:
                 self.autosave_owner.release(p)
 

@@ -39,7 +39,15 @@ MAX_DISPLAY_POINTS = 1_000_000
 """Largest number of winding-path points drawn at rest (thinned above it, keeping the turnarounds)."""
 PATH_LINE_WIDTH = 1.0
 """Line width of the winding paths in pixels (wide lines cost a geometry shader per frame in llvmpipe)."""
-MULTI_SAMPLES = int(os.environ.get("WINDER_3D_MULTISAMPLES", "0") or 0)
+def _env_int(name: str, default: int) -> int:
+    """An integer setting from the environment; a malformed value falls back to ``default``."""
+    try:
+        return max(int(os.environ.get(name, "") or default), 0)
+    except ValueError:
+        return default
+
+
+MULTI_SAMPLES = _env_int("WINDER_3D_MULTISAMPLES", 0)
 """MSAA samples of the render window (``WINDER_3D_MULTISAMPLES``; 0: no anti-aliasing).  pyvista's
 default of 8, and FXAA too, more than double llvmpipe's time per frame (``benchmarks/bench_gui_3d.py``);
 with a GPU, 4 or 8 look smoother at no cost."""
@@ -418,7 +426,8 @@ class MandrelView3D(QWidget):
             return
         c = np.asarray(self.colour_scalars(), dtype=float)
         cmap = "tab20" if self.colour_by == "circuit" else "viridis"
-        clim = (float(np.min(c)), float(np.max(c)))
+        finite = c[np.isfinite(c)]
+        clim = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
         if clim[1] <= clim[0]:
             clim = (clim[0] - 0.5, clim[0] + 0.5)
         lod = p.lod_index
