@@ -394,6 +394,11 @@ def test_parse_block() -> None:
     assert parse_block("z [mm]\tr [mm]\n1,5\t2\n\n3\t4,25\r\n") == [["1,5", "2"], ["3", "4,25"]]
     assert parse_block("1, 2\n3 4\n5;6") == [["1", "2"], ["3", "4"], ["5", "6"]]
     assert parse_block("  \n") == []
+    # blanks and decimal commas in one line: the blanks separate, the commas are decimal
+    assert parse_block("12,5 80\n13,5  81,25\n") == [["12,5", "80"], ["13,5", "81,25"]]
+    assert parse_block("1, 2\n3, 4") == [["1", "2"], ["3", "4"]]
+    # a mistyped first data row is kept (and reported in its cell), not dropped as a header
+    assert parse_block("x1,2\n3,4") == [["x1", "2"], ["3", "4"]]
 
 
 def test_check_table_cells() -> None:

@@ -76,7 +76,10 @@ def parse_block(text: str) -> list[list[str]]:
     """Split pasted text into rows of fields (tab, semicolon, comma or blank separated).
 
     Lines with tabs or semicolons are split on those only, so a decimal comma survives
-    (``12,5<TAB>80``); other lines are split on commas and blanks.  Empty lines are dropped.
+    (``12,5<TAB>80``); so are lines with both blanks and commas (``12,5 80``: blank separated,
+    decimal commas); other lines are split on commas or blanks.  Empty lines are dropped; the first
+    line is dropped as a header (``z,r``, ``z [mm]<TAB>r [mm]``) only when none of its fields is a
+    number, so a mistyped first data row stays and is reported in its cell.
     """
     rows: list[list[str]] = []
     for line in text.replace("\r\n", "\n").replace("\r", "\n").split("\n"):
@@ -84,11 +87,13 @@ def parse_block(text: str) -> list[list[str]]:
             continue
         if "\t" in line or ";" in line:
             fields = [f.strip() for f in re.split(r"[\t;]", line)]
+        elif "," in line and re.search(r"\S\s+\S", line.replace(", ", ",")):
+            fields = line.split()
         else:
             fields = [f for f in re.split(r"[,\s]+", line.strip())]
         rows.append([f for f in fields if f != ""])
-    if rows and any(isinstance(parse_number(f), str) for f in rows[0]):
-        rows = rows[1:]  # a header line such as "z,r" or "z [mm]\tr [mm]"
+    if rows and all(isinstance(parse_number(f), str) for f in rows[0]):
+        rows = rows[1:]
     return [r for r in rows if r]
 
 
