@@ -6,6 +6,8 @@ Qt runs offscreen unless the caller chose a platform (the ``gl`` tests run under
 
 from __future__ import annotations
 
+import gc
+import itertools
 import os
 from pathlib import Path
 
@@ -30,3 +32,14 @@ def state() -> RecordingState:
 @pytest.fixture
 def examples_dir() -> Path:
     return EXAMPLES
+
+
+_TESTS_RUN = itertools.count(1)
+
+
+def pytest_runtest_teardown(item, nextitem) -> None:  # noqa: ARG001 - pytest hook signature
+    """Once a GUI test made a JobRunner, Python's automatic cyclic GC is off for the session
+    (winder_gui.workers: collection belongs on the GUI thread, where a QTimer does it while a Qt
+    loop runs).  Tests without a Qt loop would then never collect: do it here, on the main thread."""
+    if not gc.isenabled():
+        gc.collect(2 if next(_TESTS_RUN) % 50 == 0 else 1)
