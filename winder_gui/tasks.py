@@ -128,14 +128,12 @@ ENGINE_MODULES: tuple[str, ...] = (
 )
 
 
-def warm_engine_imports(freeze_gc: bool = False) -> None:
+def warm_engine_imports() -> None:
     """Import the engine's heavy modules ahead of the first run (call from a background thread).
 
     An import cannot be cancelled: done lazily inside the first pipeline run, scipy.spatial alone
-    would hold a Cancel for 0.5–1 s.  Errors are left for the real run to report.  ``freeze_gc``
-    (the application, not tests): move every object alive now out of the cyclic collector's reach.
+    would hold a Cancel for 0.5–1 s.  Errors are left for the real run to report.
     """
-    import gc
     import importlib
 
     for name in ENGINE_MODULES:
@@ -143,8 +141,3 @@ def warm_engine_imports(freeze_gc: bool = False) -> None:
             importlib.import_module(name)
         except Exception:  # noqa: BLE001 - the run that needs the module reports the problem
             pass
-    if freeze_gc:
-        # The ~100k objects of the start-up and the imports never die; kept out of the cyclic
-        # collector, whose full collections (40-60 ms with them, holding the GIL in whichever thread
-        # triggers one) would otherwise stall the GUI thread during runs, they cost 0.1 ms.
-        gc.freeze()
