@@ -300,6 +300,9 @@ def _isotensoid_series(rho_p: float) -> tuple[Any, Any, float]:
 # ------------------------------------------------------------------------------------------------
 # Mandrel
 # ------------------------------------------------------------------------------------------------
+MIN_SKETCH_POINTS = 4
+"""Fewest points of a sketched/imported generatrix (a C2 cubic spline needs 4)."""
+
 CONCAVE_GAP_TOL_MM = 0.02
 """Default bridging-gap tolerance of :meth:`Mandrel.concave_zones` (mm).
 
@@ -749,8 +752,8 @@ def validate_points(z: FloatArray, r: FloatArray, file: str | None = None, lines
 
     if z.ndim != 1 or z.shape != r.shape:
         raise InputError("z and r must be 1-D arrays of equal length", file=file)
-    if len(z) < 4:
-        raise InputError(f"need at least 4 points for a C2 generatrix, got {len(z)}", file=file)
+    if len(z) < MIN_SKETCH_POINTS:
+        raise InputError(f"need at least {MIN_SKETCH_POINTS} points for a C2 generatrix, got {len(z)}", file=file)
     for name, arr in (("z", z), ("r", r)):
         bad = np.flatnonzero(~np.isfinite(arr))
         if bad.size:

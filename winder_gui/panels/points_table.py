@@ -37,9 +37,10 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from engine.mandrel import MIN_SKETCH_POINTS
 from winder_gui.views.geometry import FloatArray
 
-MIN_POINTS = 4
+MIN_POINTS = MIN_SKETCH_POINTS
 """A C2 spline through the points needs at least this many (as :func:`winder_gui.views.geometry.check_points`)."""
 COLUMNS = ("z [mm]", "r [mm]")
 _EXACT = Qt.ItemDataRole.UserRole

@@ -133,9 +133,11 @@ def check_points(z: FloatArray, r: FloatArray) -> tuple[int, str] | None:
     z must increase strictly, r must be > 0 (0 is allowed at the two end points: a closed pole),
     and a C2 spline needs at least 4 points.  Positions in mm; indices 0-based, messages 1-based.
     """
+    from engine.mandrel import MIN_SKETCH_POINTS
+
     n = len(z)
-    if n < 4:
-        return max(n - 1, 0), f"a sketched generatrix needs at least 4 points (it would have {n})"
+    if n < MIN_SKETCH_POINTS:
+        return max(n - 1, 0), f"a sketched generatrix needs at least {MIN_SKETCH_POINTS} points (it would have {n})"
     for i in range(n):
         if not (np.isfinite(z[i]) and np.isfinite(r[i])):
             return i, f"point {i + 1} is not a finite number"
