@@ -93,6 +93,6 @@ def test_cyclic_garbage_is_collected_on_the_gui_thread(qtbot) -> None:
 
     with qtbot.waitSignal(runner.finished, timeout=30_000):
         runner.submit(churn)
-    assert ref() is not None          # the worker did not collect it
+    # collected by the GUI thread's timer (maybe already while the worker ran), never by the worker
     qtbot.waitUntil(lambda: ref() is None, timeout=5_000)
     assert died_on == [threading.main_thread().name]
