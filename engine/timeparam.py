@@ -1035,6 +1035,8 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
         starts0 = seg[:, 0].tolist()
         return G, glow, cost, segl, starts0, ends
 
+    fbuf = np.empty(int(per_int.max()))            # the sequential pass's scratch and its integer view
+    ibuf = fbuf.view(np.int64)
     chunks = list(zip(bounds[:-1], bounds[1:]))
     pool = _pool() if len(chunks) > 1 and _threads_wanted() else None
     fut = pool.submit(build, *chunks[0], 0) if pool is not None else None
@@ -1050,9 +1052,10 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
             for ii in range(ni):
                 i = i0 + ii
                 a, b = starts0[ii], ends[ii]
-                cand = Jf.take(G[a:b])
+                cand = fbuf[:b - a]
+                Jf.take(G[a:b], out=cand, mode="clip")      # G is in range; "clip" is unbuffered
                 cand += cost[a:b]
-                ci = cand.view(np.int64)
+                ci = ibuf[:b - a]
                 ci &= _HIMASK
                 ci |= glow[a:b]
                 # min and argmin at once; the low bits stay in J (<= 2^-40 relative; infeasible -> NaN)
