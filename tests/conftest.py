@@ -23,6 +23,13 @@ RESOURCES = ROOT / "resources"
 EXAMPLES = RESOURCES / "examples"
 
 
+@pytest.fixture(autouse=True)
+def _isolated(tmp_path, monkeypatch):
+    """Settings and autosave copies in the test's own folder, never the user's (every test)."""
+    monkeypatch.setenv("WINDER_SETTINGS", str(tmp_path / "settings.ini"))
+    monkeypatch.setenv("WINDER_AUTOSAVE_DIR", str(tmp_path / "autosave"))
+
+
 @pytest.fixture
 def state() -> RecordingState:
     """A recording stand-in for the GUI/CLI job state."""

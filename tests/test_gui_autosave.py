@@ -25,13 +25,6 @@ ROOT = Path(__file__).resolve().parents[1]
 PIPE = ROOT / "resources" / "examples" / "pipe.toml"
 
 
-@pytest.fixture(autouse=True)
-def _isolated(tmp_path, monkeypatch):
-    """Settings and autosave copies in the test's own folder, never the user's."""
-    monkeypatch.setenv("WINDER_SETTINGS", str(tmp_path / "settings.ini"))
-    monkeypatch.setenv("WINDER_AUTOSAVE_DIR", str(tmp_path / "autosave"))
-
-
 @pytest.fixture
 def asked(monkeypatch) -> list[str]:
     """Questions asked by QMessageBox.question (answered Yes)."""

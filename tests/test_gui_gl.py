@@ -24,13 +24,6 @@ SHOTS_DIR = Path(os.environ.get("WINDER_SCREENSHOTS") or tempfile.mkdtemp(prefix
 SCREENSHOT = SHOTS_DIR / "main_window.png"
 
 
-@pytest.fixture(autouse=True)
-def _isolated(tmp_path, monkeypatch):
-    """Settings and autosave copies in the test's own folder, never the user's."""
-    monkeypatch.setenv("WINDER_SETTINGS", str(tmp_path / "settings.ini"))
-    monkeypatch.setenv("WINDER_AUTOSAVE_DIR", str(tmp_path / "autosave"))
-
-
 @pytest.fixture
 def gl_window(qtbot):
     from PySide6.QtGui import QGuiApplication

@@ -187,13 +187,6 @@ def full_run_with_heartbeat(w, timeout_s: float = 180.0) -> Heartbeat:  # noqa: 
     return hb
 
 
-@pytest.fixture(autouse=True)
-def _isolated(tmp_path, monkeypatch):
-    """Settings and autosave copies in the test's own folder, never the user's."""
-    monkeypatch.setenv("WINDER_SETTINGS", str(tmp_path / "settings.ini"))
-    monkeypatch.setenv("WINDER_AUTOSAVE_DIR", str(tmp_path / "autosave"))
-
-
 @pytest.mark.parametrize("example", ["pipe", "pressure_vessel"])
 def test_gui_thread_heartbeat_during_a_full_run(qtbot, example: str) -> None:
     """Between two 10 ms ticks: GUI-thread CPU < 100 ms and wall gap less load < 100 ms (see the module)."""

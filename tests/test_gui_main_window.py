@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from gui_helpers import close_window, shown_window
 from PySide6.QtCore import QEvent, QPoint, QPointF, Qt
 from PySide6.QtGui import QMouseEvent
 from PySide6.QtWidgets import QApplication, QMessageBox
@@ -29,28 +30,11 @@ EXAMPLES = sorted(
 )  # every example job (files there without a [mandrel] table are inputs of other tools)
 
 
-@pytest.fixture(autouse=True)
-def _isolated(tmp_path, monkeypatch):
-    """Settings and autosave copies in the test's own folder, never the user's."""
-    monkeypatch.setenv("WINDER_SETTINGS", str(tmp_path / "settings.ini"))
-    monkeypatch.setenv("WINDER_AUTOSAVE_DIR", str(tmp_path / "autosave"))
-
-
 @pytest.fixture
 def window(qtbot):
-    w = MainWindow()
-    w.confirm_discard = False
-    qtbot.addWidget(w)
-    w.show()
-    assert w.wait_idle()
+    w = shown_window(qtbot)
     yield w
-    w.wait_idle()
-    if w.error_box is not None:
-        try:
-            w.error_box.close()
-        except RuntimeError:
-            pass
-    w.close()
+    close_window(w)
 
 
 def _open(w: MainWindow, path: Path) -> None:

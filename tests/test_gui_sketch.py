@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from gui_helpers import close_window, shown_window
 from PySide6.QtCore import QEvent, QPointF, Qt
 from PySide6.QtGui import QGuiApplication, QMouseEvent
 from PySide6.QtWidgets import QAbstractItemView, QApplication
@@ -27,13 +28,6 @@ R0 = [70.0, 75.0, 75.0, 75.0, 75.0, 70.0]
 LEFT, NONE = Qt.MouseButton.LeftButton, Qt.MouseButton.NoButton
 
 
-@pytest.fixture(autouse=True)
-def _isolated(tmp_path, monkeypatch):
-    """Settings and autosave copies in the test's own folder, never the user's."""
-    monkeypatch.setenv("WINDER_SETTINGS", str(tmp_path / "settings.ini"))
-    monkeypatch.setenv("WINDER_AUTOSAVE_DIR", str(tmp_path / "autosave"))
-
-
 @pytest.fixture
 def sketch_job(tmp_path) -> Path:
     job = load_job(ROOT / "resources/examples/pipe.toml").replace(mandrel=PointsSpec(z_mm=Z0, r_mm=R0))
@@ -44,21 +38,10 @@ def sketch_job(tmp_path) -> Path:
 
 @pytest.fixture
 def window(qtbot, sketch_job):
-    w = MainWindow(sketch_job)
-    w.confirm_discard = False
-    qtbot.addWidget(w)
-    w.show()
-    assert w.wait_idle()
+    w = shown_window(qtbot, sketch_job)
     w.go_to_step("mandrel")
-    w.mandrel_panel.attach_plot(w.plot)
     yield w
-    w.wait_idle()
-    if w.error_box is not None:
-        try:
-            w.error_box.close()
-        except RuntimeError:
-            pass
-    w.close()
+    close_window(w)
 
 
 def _table_values(w: MainWindow) -> tuple[np.ndarray, np.ndarray]:

@@ -20,12 +20,6 @@ ROOT = Path(__file__).resolve().parents[1]
 PIPE = ROOT / "resources" / "examples" / "pipe.toml"
 
 
-@pytest.fixture(autouse=True)
-def _isolated(tmp_path, monkeypatch):
-    monkeypatch.setenv("WINDER_SETTINGS", str(tmp_path / "settings.ini"))
-    monkeypatch.setenv("WINDER_AUTOSAVE_DIR", str(tmp_path / "autosave"))
-
-
 @pytest.fixture
 def ran(qtbot):
     w = MainWindow(PIPE)

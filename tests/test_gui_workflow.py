@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from gui_helpers import close_window, shown_window
 from PySide6.QtWidgets import QMessageBox
 
 from engine.job import load_job
@@ -32,30 +33,12 @@ PIPE = EXAMPLES / "pipe.toml"
 JOBS = sorted(p for p in EXAMPLES.glob("*.toml") if "mandrel" in tomllib.loads(p.read_text("utf-8")))
 
 
-@pytest.fixture(autouse=True)
-def _isolated(tmp_path, monkeypatch):
-    """Settings and autosave copies in the test's own folder, never the user's."""
-    monkeypatch.setenv("WINDER_SETTINGS", str(tmp_path / "settings.ini"))
-    monkeypatch.setenv("WINDER_AUTOSAVE_DIR", str(tmp_path / "autosave"))
-
-
 def _window(qtbot, path: Path | None = PIPE) -> MainWindow:
-    w = MainWindow(path)
-    w.confirm_discard = False
-    qtbot.addWidget(w)
-    w.show()
-    assert w.wait_idle()
-    return w
+    return shown_window(qtbot, path)
 
 
 def _close(w: MainWindow) -> None:
-    w.wait_idle(120000)
-    if w.error_box is not None:
-        try:
-            w.error_box.close()
-        except RuntimeError:
-            pass
-    w.close()
+    close_window(w, 120000)
 
 
 @pytest.fixture
