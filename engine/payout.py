@@ -293,7 +293,10 @@ class _Contour:
     """
 
     def __init__(self, mandrel: Any, n: int = 6000) -> None:
-        from scipy.spatial import cKDTree
+        try:  # the KD-tree module alone: `scipy.spatial` also loads qhull, distances, rotations (~0.1 s)
+            from scipy.spatial._ckdtree import cKDTree
+        except ImportError:  # pragma: no cover - a SciPy that moved it
+            from scipy.spatial import cKDTree
 
         z, r = mandrel.sample(n)
         self.z, self.r = np.asarray(z, float), np.asarray(r, float)
@@ -1807,14 +1810,20 @@ def extend_to_line(eye: EyePath, line: Any) -> EyePath:
     cl = ContactLine.from_line(line)
     x_all = _parameter(cl, eye.parameter)
     circ = cl.circuit if cl.circuit is not None else np.zeros(cl.z.size, dtype=np.int64)
-    l = np.empty(cl.z.size)
+    # x of each point's circuit start: circuits are runs of equal numbers (slices, no per-circuit
+    # masks); a circuit number that comes back after another one falls back to its first occurrence.
+    run_start = np.flatnonzero(np.concatenate([[True], circ[1:] != circ[:-1]]))
+    if np.unique(circ[run_start]).size == run_start.size:
+        first = np.repeat(run_start, np.diff(np.append(run_start, circ.size)))
+    else:
+        _, first_idx, inverse = np.unique(circ, return_index=True, return_inverse=True)
+        first = first_idx[inverse]
+    xc = x_all - x_all[first] + eye.x[0]
     period = float(eye.x[-1] - eye.x[0])
-    for c in np.unique(circ):
-        m = circ == c
-        xc = x_all[m] - x_all[m][0] + eye.x[0]
-        if period > 0:
-            xc = eye.x[0] + np.mod(xc - eye.x[0], period * (1 + 1e-12))
-        l[m] = np.interp(xc, eye.x, eye.l)
+    if period > 0:
+        xc = eye.x[0] + np.mod(xc - eye.x[0], period * (1 + 1e-12))
+    l = np.interp(xc, eye.x, eye.l)
+    del xc, first
     idx = np.arange(cl.z.size)
     a, b, c3 = tangent_components(cl.r, cl.dr, cl.beta, cl.direction)
     geo = _Geo(cl, x_all, a, b, c3, idx.astype(np.int64))

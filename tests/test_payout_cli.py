@@ -109,3 +109,46 @@ def test_bottle_free_fibre_never_crosses_the_mandrel() -> None:
     coarse = payout_for_job(job.replace(payout=job.payout.model_copy(update={"grid_points": 150})),
                             winding_line_for_job(job, path), mandrel)
     assert abs(coarse.report["u_range"] - eye.report["u_range"]) < 0.25 * eye.report["u_range"]
+
+
+def _l_per_circuit_masks(eye1, line) -> np.ndarray:
+    """The reference: l(x) evaluated circuit by circuit with boolean masks (the former loop)."""
+    from engine.payout import ContactLine, _parameter
+
+    cl = ContactLine.from_line(line)
+    x_all = _parameter(cl, eye1.parameter)
+    l = np.empty(cl.z.size)
+    period = float(eye1.x[-1] - eye1.x[0])
+    for c in np.unique(cl.circuit):
+        m = cl.circuit == c
+        xc = x_all[m] - x_all[m][0] + eye1.x[0]
+        xc = eye1.x[0] + np.mod(xc - eye1.x[0], period * (1 + 1e-12))
+        l[m] = np.interp(xc, eye1.x, eye1.l)
+    return l
+
+
+def test_extend_by_slices_equals_per_circuit_masks(vessel_job) -> None:
+    """The slice form of extend_to_line gives the per-circuit loop's l bit for bit, also when a
+    circuit number comes back after another one (the general fall-back)."""
+    from dataclasses import replace
+
+    job, mandrel, line = vessel_job
+    eye1 = payout_for_job(job, line, mandrel)
+    assert np.unique(line.circuit).size > 2
+    full = extend_to_line(eye1, line)
+    ref = _l_per_circuit_masks(eye1, line)
+    assert np.array_equal(full.l, ref[full.index])
+    # renumber: circuits 0 and 2 share a number (not contiguous)
+    circ = np.asarray(line.circuit).copy()
+    circ[circ == 2] = 0
+    odd = replace(line, circuit=circ)
+    full2 = extend_to_line(eye1, odd)
+    assert np.array_equal(full2.l, _l_per_circuit_masks(eye1, odd)[full2.index])
+
+
+def test_version_does_not_import_numpy() -> None:
+    from engine import __version__
+
+    code = "import sys; from engine.cli import main; main(['--version']); print('numpy' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 0 and out.stdout.split() == ["winder", __version__, "False"], out.stdout + out.stderr

@@ -18,8 +18,6 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
-import numpy as np
-
 from engine import __version__
 from engine.errors import InputError
 
@@ -51,6 +49,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``winder``; returns the process exit code."""
     args_list = list(sys.argv[1:] if argv is None else argv)
+    if args_list == ["--version"]:  # answered before any sub-command (and numpy) is imported
+        print(f"winder {__version__}")
+        return 0
     gui_flags = {"--selftest", "--"}
     # the GUI: no arguments, or only GUI flags and at most one job file
     if all(a in gui_flags or a.lower().endswith(".toml") for a in args_list) and (
@@ -75,6 +76,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _json_default(obj: Any) -> Any:
+    import numpy as np
+
     if isinstance(obj, np.ndarray):
         return obj.tolist()
     if isinstance(obj, np.generic):
