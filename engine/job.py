@@ -121,8 +121,32 @@ class FileSpec(_Model):
         return v
 
 
+class SketchSegmentSpec(_Model):
+    """One segment of a sketched generatrix (see :mod:`engine.sketch` for the fields each type takes)."""
+
+    type: Literal["line", "arc", "ellipse", "isotensoid", "spline", "smoothstep"]
+    to_mm: tuple[Finite, Finite] | None = None
+    center_mm: tuple[Finite, Finite] | None = None
+    radius_mm: Finite | None = None
+    """arc: signed radius (> 0 convex, < 0 concave); isotensoid: the equator radius of a rising dome."""
+    semi_axes_mm: tuple[PositiveMM, PositiveMM] | None = None
+    pole_radius_mm: NonNegMM | None = None
+    points_mm: list[tuple[Finite, Finite]] | None = None
+    corner: bool = False
+    """The joint at the start of this segment is a corner (not tangent); it must be rounded by fillet_mm."""
+    fillet_mm: PositiveMM | None = None
+
+
+class SegmentsSpec(_Model):
+    """A generatrix sketched from exact segments joined tangentially (G1) except at marked corners."""
+
+    kind: Literal["segments"] = "segments"
+    start_mm: tuple[Finite, NonNegMM]
+    segments: Annotated[list[SketchSegmentSpec], Field(min_length=1)]
+
+
 MandrelSpec = Annotated[
-    VesselSpec | ConeSpec | PipeSpec | BottleSpec | PointsSpec | FileSpec, Field(discriminator="kind")
+    VesselSpec | ConeSpec | PipeSpec | BottleSpec | PointsSpec | FileSpec | SegmentsSpec, Field(discriminator="kind")
 ]
 
 
@@ -336,14 +360,38 @@ def _validation_error(exc: ValidationError, text: str, file: str | Path | None) 
     if len(errs) > 1:
         msg += f" (and {len(errs) - 1} more problem{'s' if len(errs) > 2 else ''})"
     line = _find_line(text, loc)
+    if len(loc) >= 3 and loc[:2] == ("mandrel", "segments") and isinstance(loc[2], int):
+        line = _segment_line(text, loc[2], next((p for p in loc[3:] if isinstance(p, str)), None)) or line
+        field = f"mandrel.segments[{loc[2]}]" + "".join(f".{p}" for p in loc[3:] if isinstance(p, str))
     return InputError(msg, file=file, line=line, field=field)
+
+
+def _segment_line(text: str, index: int, key: str | None) -> int | None:
+    """Line (1-based) of ``key`` in the ``index``-th (0-based) ``[[mandrel.segments]]`` table, or of its header."""
+    seen = -1
+    header: int | None = None
+    for i, line in enumerate(text.splitlines(), start=1):
+        h = _HEADER.match(line)
+        if h:
+            if header is not None:
+                break
+            if line.strip().startswith("[[") and h.group(1).strip() == "mandrel.segments":
+                seen += 1
+                if seen == index:
+                    header = i
+            continue
+        k = _KEY.match(line)
+        if header is not None and key and k and k.group(1).strip("\"'") == key:
+            return i
+    return header
 
 
 def _clean_loc(loc: tuple[Any, ...]) -> tuple[Any, ...]:
     # drop discriminator tags (e.g. ('mandrel', 'vessel', 'radius_mm')) and tuple/union members
     out: list[Any] = []
     for i, part in enumerate(loc):
-        if i > 0 and loc[0] == "mandrel" and i == 1 and part in {"vessel", "cone", "pipe", "bottle", "points", "file"}:
+        if i > 0 and loc[0] == "mandrel" and i == 1 and part in {"vessel", "cone", "pipe", "bottle", "points", "file",
+                                                                 "segments"}:
             continue
         if isinstance(part, str) and ("[" in part or part in {"tuple", "float", "function-after"}):
             continue
@@ -367,7 +415,10 @@ def _allowed(loc: tuple[Any, ...]) -> str:
         "bottle": BottleSpec,
         "points": PointsSpec,
         "file": FileSpec,
+        "segments": SegmentsSpec,
     }
+    if len(loc) >= 5 and loc[0] == "mandrel" and loc[1] == "segments" and loc[2] == "segments":
+        return ", ".join(SketchSegmentSpec.model_fields)
     if len(loc) >= 3 and loc[0] == "mandrel" and loc[1] in kinds:
         return ", ".join(kinds[loc[1]].model_fields)
     if len(loc) >= 2 and loc[0] in models:
@@ -443,6 +494,11 @@ def build_mandrel(job: Job, job_path: str | Path | None = None) -> Any:
             )
         if isinstance(spec, PointsSpec):
             return Mandrel.from_points(spec.z_mm, spec.r_mm, name=job.name, source="points")
+        if isinstance(spec, SegmentsSpec):
+            from engine.sketch import build_sketch
+
+            return build_sketch(spec.start_mm, [sg.model_dump(exclude_none=True) for sg in spec.segments],
+                                name=job.name)
         if isinstance(spec, FileSpec):
             from engine.mandrel_io import load_mandrel_file
 
@@ -455,7 +511,9 @@ def build_mandrel(job: Job, job_path: str | Path | None = None) -> Any:
         loc = ("mandrel", _spec_field(f)) if f else ("mandrel",)
         line = None
         if job_path is not None and Path(job_path).is_file():
-            line = _find_line(Path(job_path).read_text(encoding="utf-8", errors="replace"), loc)
+            text = Path(job_path).read_text(encoding="utf-8", errors="replace")
+            m = re.match(r"segments\[(\d+)\]\.(\w+)$", f or "")
+            line = _segment_line(text, int(m.group(1)), m.group(2)) if m else _find_line(text, loc)
         raise InputError(exc.message, file=job_path, line=line, field=".".join(loc)) from None
     raise InputError(f"unknown mandrel kind {spec!r}", file=job_path, field="mandrel.kind")
 

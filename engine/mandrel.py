@@ -112,20 +112,26 @@ class SmoothStepSegment(Segment):
 
 @dataclass(frozen=True)
 class ArcSegment(Segment):
-    """Circle arc r = rc + sqrt(a² − (z − zc)²) (upper half), radius ``a`` (mm)."""
+    """Circle arc r = rc + side·sqrt(a² − (z − zc)²), radius ``a`` (mm), centre (zc, rc).
+
+    ``side`` = +1: the upper half of the circle (convex, r'' < 0, the centre below the arc);
+    −1: the lower half (concave, r'' > 0, the centre above the arc).
+    """
 
     zc: float = 0.0
     rc: float = 0.0
     a: float = 1.0
+    side: int = 1
     kind: ClassVar[str] = "arc"
 
     def eval(self, z: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         u = z - self.zc
         q = np.sqrt(np.maximum(self.a * self.a - u * u, 0.0))
+        sd = float(self.side)
         with np.errstate(divide="ignore", invalid="ignore"):
-            dr = -u / q
-            d2r = -(self.a * self.a) / (q * q * q)
-        return self.rc + q, dr, d2r
+            dr = -sd * u / q
+            d2r = -sd * (self.a * self.a) / (q * q * q)
+        return self.rc + sd * q, dr, d2r
 
     def _angles(self) -> tuple[float, float]:
         t0 = math.acos(np.clip((self.z0 - self.zc) / self.a, -1, 1))
@@ -136,17 +142,22 @@ class ArcSegment(Segment):
         # z = zc + a cos t, r = rc + a sin t, t decreasing from t0 to t1
         t0, t1 = self._angles()
         t, w = _gauss(t1, t0)
-        r = self.rc + self.a * np.sin(t)
+        r = self.rc + self.side * self.a * np.sin(t)
         return r, self.a * np.sin(t), np.full_like(t, self.a), w
+
+    def spec(self) -> dict[str, Any]:
+        return {**super().spec(), "center": [self.zc, self.rc], "radius": self.a, "side": self.side}
 
 
 @dataclass(frozen=True)
 class EllipseSegment(Segment):
-    """Ellipse arc r = b·sqrt(1 − ((z − zc)/a)²): axial semi-axis a, radial semi-axis b (mm)."""
+    """Ellipse arc r = rc + b·sqrt(1 − ((z − zc)/a)²): centre (zc, rc), axial semi-axis a, radial
+    semi-axis b (mm); the upper half (convex)."""
 
     zc: float = 0.0
     a: float = 1.0
     b: float = 1.0
+    rc: float = 0.0
     kind: ClassVar[str] = "ellipse"
 
     def eval(self, z: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -155,31 +166,51 @@ class EllipseSegment(Segment):
         with np.errstate(divide="ignore", invalid="ignore"):
             dr = -self.b * u / (self.a * q)
             d2r = -self.b / (self.a * self.a * q * q * q)
-        return self.b * q, dr, d2r
+        return self.rc + self.b * q, dr, d2r
 
     def param_nodes(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         t0 = math.acos(np.clip((self.z0 - self.zc) / self.a, -1, 1))
         t1 = math.acos(np.clip((self.z1 - self.zc) / self.a, -1, 1))
         t, w = _gauss(t1, t0)
-        r = self.b * np.sin(t)
+        r = self.rc + self.b * np.sin(t)
         dz = self.a * np.sin(t)
         ds = np.hypot(self.a * np.sin(t), self.b * np.cos(t))
         return r, dz, ds, w
 
+    def spec(self) -> dict[str, Any]:
+        return {**super().spec(), "center": [self.zc, self.rc], "semi_axes": [self.a, self.b]}
+
 
 @dataclass(frozen=True)
 class SplineSegment(Segment):
-    """C2 cubic spline r(z) through points (scipy ``CubicSpline``, not-a-knot ends)."""
+    """C2 cubic spline r(z) through points (scipy ``CubicSpline``).
+
+    ``slopes`` (r' at the first and the last point) clamp the ends where given (a tangent joint of a
+    sketch); an end without a slope is not-a-knot.
+    """
 
     z_pts: tuple[float, ...] = ()
     r_pts: tuple[float, ...] = ()
+    slopes: tuple[float | None, float | None] = (None, None)
     kind: ClassVar[str] = "spline"
 
     @cached_property
     def _spline(self) -> Any:
         from scipy.interpolate import CubicSpline
 
-        return CubicSpline(np.asarray(self.z_pts), np.asarray(self.r_pts), bc_type="not-a-knot")
+        s0, s1 = self.slopes
+        n = len(self.z_pts)
+        if s0 is None and s1 is None:
+            bc: Any = "not-a-knot"
+        elif n < 3 and (s0 is None or s1 is None):
+            bc = ((1, s0), (2, 0.0)) if s1 is None else ((2, 0.0), (1, s1))
+        else:
+            bc = ("not-a-knot" if s0 is None else (1, s0), "not-a-knot" if s1 is None else (1, s1))
+        return CubicSpline(np.asarray(self.z_pts), np.asarray(self.r_pts), bc_type=bc)
+
+    def knots(self) -> FloatArray:
+        """The spline's knots (mm): r'' is linear between them and has its extrema there."""
+        return np.asarray(self.z_pts, dtype=float)
 
     def eval(self, z: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         s = self._spline

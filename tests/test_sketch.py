@@ -1,0 +1,174 @@
+"""Sketched generatrix of exact segments (engine.sketch, issue 17 point 1)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from engine.errors import InputError
+from engine.job import build_mandrel, load_job, parse_job, save_job
+from engine.mandrel import ArcSegment, LineSegment, Mandrel
+from engine.sketch import build_sketch, sketch_from_mandrel
+from engine.winding import winding_line
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "resources" / "examples"
+
+R = 60.0
+CYL = [{"type": "arc", "center_mm": [0.0, 0.0], "to_mm": [0.0, R]},
+       {"type": "line", "to_mm": [300.0, R]},
+       {"type": "arc", "to_mm": [300.0 + math.sqrt(R * R - 400.0), 20.0]}]
+START = [-math.sqrt(R * R - 400.0), 20.0]
+
+
+def test_cylinder_with_arc_ends_is_exactly_straight() -> None:
+    m = build_sketch(START, CYL)
+    z = np.linspace(0.0, 300.0, 200_001)
+    r, dr, d2r = m.evaluate(z)
+    assert np.abs(r - R).max() <= 1e-9
+    assert np.abs(dr).max() <= 1e-12 and np.abs(d2r[:-1]).max() == 0.0  # z = 300: the arc's r''
+    assert m.concave_zones(tol_mm=0.0) == []
+    # the domes are the circle of radius R around the cylinder's end centres (the second one tangent)
+    zz = np.linspace(m.z_min, 0.0, 1001)
+    assert np.abs(np.hypot(zz, m.r(zz)) - R).max() < 1e-9
+    zz = np.linspace(300.0, m.z_max, 1001)
+    assert np.abs(np.hypot(zz - 300.0, m.r(zz)) - R).max() < 1e-9
+    assert m.pole_radii == pytest.approx((20.0, 20.0), abs=1e-9)
+
+
+def test_first_arc_tangent_to_the_following_line() -> None:
+    m = build_sketch([0.0, 20.0], [{"type": "arc", "to_mm": [40.0, 60.0]}, {"type": "line", "to_mm": [200.0, 60.0]}])
+    arc = m.segments[0]
+    assert isinstance(arc, ArcSegment)
+    # tangent to r = 60 at z = 40: centre (40, 60 - a), through (0, 20): a = 40
+    assert (arc.zc, arc.rc, arc.a, arc.side) == pytest.approx((40.0, 20.0, 40.0, 1))
+
+
+@pytest.mark.parametrize("rho", [5.0, 20.0, 50.0])
+def test_fillet_between_lines_is_tangent_with_the_given_radius(rho: float) -> None:
+    # a cone 60 -> 30 over 100 mm after a cylinder: a convex corner at z = 300, a concave one at z = 400
+    m = build_sketch([0.0, 60.0], [
+        {"type": "line", "to_mm": [300.0, 60.0]},
+        {"type": "line", "to_mm": [400.0, 30.0], "corner": True, "fillet_mm": rho},
+        {"type": "line", "to_mm": [500.0, 30.0], "corner": True, "fillet_mm": rho},
+    ])
+    kinds = [s.kind for s in m.segments]
+    assert kinds == ["line", "arc", "line", "arc", "line"]
+    theta = math.atan(0.3)  # deflection of each corner
+    tangent_len = rho * math.tan(0.5 * theta)  # analytic: corner to tangent point
+    a1, a2 = m.segments[1], m.segments[3]
+    assert isinstance(a1, ArcSegment) and isinstance(a2, ArcSegment)
+    assert a1.a == rho and a2.a == rho and a1.side == 1 and a2.side == -1
+    assert a1.z0 == pytest.approx(300.0 - tangent_len, abs=1e-9)
+    assert a2.z1 == pytest.approx(400.0 + tangent_len, abs=1e-9)
+    for j in (1, 2, 3, 4):
+        z = m.segments[j].z0
+        left, right = m.segments[j - 1].eval(np.array([z])), m.segments[j].eval(np.array([z]))
+        assert abs(left[0][0] - right[0][0]) < 1e-9 and abs(left[1][0] - right[1][0]) < 1e-9
+    assert len(m.concave_zones(tol_mm=0.0)) == 1  # the concave fillet only
+    assert all(s.kind == "line" for s in m.segments[::2])
+
+
+@pytest.mark.parametrize("template", [
+    Mandrel.vessel(100.0, 300.0, "isotensoid", (25.0, 40.0)),
+    Mandrel.vessel(100.0, 300.0, "ellipse", 30.0, 0.6),
+    Mandrel.vessel(100.0, 300.0, "hemisphere", (30.0, 0.0)),
+    Mandrel.bottle(),
+    Mandrel.cone(50.0, 80.0, 200.0),
+    Mandrel.pipe(75.0, 1000.0),
+    Mandrel.from_points([0, 10, 20, 30, 40], [20, 24, 23, 26, 21]),
+], ids=["isotensoid", "ellipse", "hemisphere-closed", "bottle", "cone", "pipe", "spline"])
+def test_templates_convert_to_the_same_exact_segments(template: Mandrel) -> None:
+    sk = sketch_from_mandrel(template)
+    assert sk["kind"] == "segments"
+    again = build_sketch(sk["start_mm"], sk["segments"])
+    assert [type(s) for s in again.segments] == [type(s) for s in template.segments]
+    z = np.linspace(template.z_min, template.z_max, 50_001)
+    assert abs(again.z_min - template.z_min) < 1e-9 and abs(again.z_max - template.z_max) < 1e-9
+    assert np.abs(again.r(z) - template.r(z)).max() < 1e-9
+    # and through the job document
+    job = parse_job('schema_version = 1\n[mandrel]\nkind = "pipe"\nradius_mm = 1\nlength_mm = 1\n')
+    job = job.replace(mandrel=sk)
+    text = job.to_toml()
+    assert "[[mandrel.segments]]" in text
+    m = build_mandrel(parse_job(text))
+    assert np.abs(m.r(z) - template.r(z)).max() < 1e-9
+
+
+@pytest.mark.parametrize("name", ["pressure_vessel", "bottle", "pipe"])
+def test_examples_lines_unchanged_by_convert_to_sketch(name: str) -> None:
+    job = load_job(EXAMPLES / f"{name}.toml")
+    m0 = build_mandrel(job)
+    m1 = build_mandrel(job.replace(mandrel=sketch_from_mandrel(m0)))
+    w = job.winding.model_copy(update={"points_per_pass": 400})
+    a = winding_line(m0, job.band.width_mm, job.band.friction, w)
+    b = winding_line(m1, job.band.width_mm, job.band.friction, w)
+    for f in ("z", "r", "v", "C", "lam", "beta", "s"):
+        assert np.abs(getattr(a, f) - getattr(b, f)).max() <= 1e-9, f
+
+
+def _bad(start: list[float], segs: list[dict]) -> InputError:
+    with pytest.raises(InputError) as info:
+        build_sketch(start, segs)
+    return info.value
+
+
+def test_errors_name_the_segment_and_field() -> None:
+    e = _bad([0.0, 60.0], [{"type": "line", "to_mm": [100.0, 60.0]}, {"type": "line", "to_mm": [200.0, 40.0]}])
+    assert e.location.field == "segments[1].corner" and "segment 2" in e.message and "tangent" in e.message
+    e = _bad([0.0, 60.0], [{"type": "line", "to_mm": [100.0, 60.0]},
+                           {"type": "line", "to_mm": [200.0, 40.0], "corner": True}])
+    assert e.location.field == "segments[1].fillet_mm"
+    e = _bad([0.0, 60.0], [{"type": "line", "to_mm": [100.0, 60.0]},
+                           {"type": "arc", "center_mm": [100.0, 0.0], "to_mm": [150.0, 10.0]}])
+    assert e.location.field == "segments[1].to_mm" and "not on the arc" in e.message
+    e = _bad([0.0, 60.0], [{"type": "line", "to_mm": [-10.0, 60.0]}])
+    assert e.location.field == "segments[0].to_mm" and "increase" in e.message
+    e = _bad([0.0, 60.0], [{"type": "line", "to_mm": [10.0, 60.0], "points_mm": [[1, 2]]}])
+    assert e.location.field == "segments[0].points_mm"
+    e = _bad([0.0, 20.0], [{"type": "arc", "to_mm": [40.0, 60.0]}])
+    assert e.location.field == "segments[0].center_mm"
+    e = _bad([0.0, 60.0], [{"type": "line", "to_mm": [100.0, 60.0]},
+                           {"type": "line", "to_mm": [110.0, 0.0], "corner": True, "fillet_mm": 500.0}])
+    assert e.location.field == "segments[1].fillet_mm" and "no fillet" in e.message
+
+
+def test_job_file_errors_name_file_line_and_segment(tmp_path: Path) -> None:
+    text = (
+        'schema_version = 1\n[mandrel]\nkind = "segments"\nstart_mm = [0.0, 60.0]\n'
+        '[[mandrel.segments]]\ntype = "line"\nto_mm = [100.0, 60.0]\n'
+        '[[mandrel.segments]]\ntype = "arc"\ncenter_mm = [100.0, 0.0]\nto_mm = [150.0, 10.0]\n'
+    )
+    p = tmp_path / "s.toml"
+    p.write_text(text)
+    with pytest.raises(InputError) as info:
+        build_mandrel(load_job(p), p)
+    e = info.value
+    assert e.location.field == "mandrel.segments[1].to_mm"
+    assert e.location.line == text.splitlines().index("to_mm = [150.0, 10.0]") + 1
+    bad = text.replace('type = "arc"', 'type = "circle"')
+    with pytest.raises(InputError) as info:
+        parse_job(bad, file="s.toml")
+    assert info.value.location.field == "mandrel.segments[1].type"
+    assert info.value.location.line == bad.splitlines().index('type = "circle"') + 1
+    ok = text.replace("to_mm = [150.0, 10.0]", "to_mm = [160.0, 0.0]").replace('center_mm = [100.0, 0.0]',
+                                                                                 "center_mm = [100.0, 0.0]")
+    job = parse_job(ok.replace('center_mm = [100.0, 0.0]\n', ''))
+    m = build_mandrel(job)
+    assert isinstance(m.segments[1], ArcSegment) and m.pole_radii[1] == pytest.approx(0.0, abs=1e-9)
+    out = save_job(job, tmp_path / "again.toml")
+    assert load_job(out) == job
+
+
+def test_spline_segment_is_clamped_tangent_to_its_neighbours() -> None:
+    m = build_sketch([0.0, 60.0], [
+        {"type": "line", "to_mm": [100.0, 60.0]},
+        {"type": "spline", "points_mm": [[120.0, 55.0], [140.0, 45.0], [160.0, 40.0]]},
+        {"type": "line", "to_mm": [200.0, 30.0]},
+    ])
+    assert isinstance(m.segments[0], LineSegment)
+    for j in (1, 2):
+        z = m.segments[j].z0
+        assert abs(m.segments[j - 1].eval(np.array([z]))[1][0] - m.segments[j].eval(np.array([z]))[1][0]) < 1e-12
