@@ -63,12 +63,17 @@ class WindingLine:
 
     Circuit k occupies ``circuit_slice(k)``: it starts where circuit k−1 ended (the shared point
     belongs to circuit k), and the slice includes the closing point.  Dwell points (extra mandrel
-    rotation at a turnaround, or the turn on pins at an open end) lie on the end parallel with
-    β = π/2, C = r, λ = 0 and τ along the parallel.
+    rotation at a turnaround, or the turn on pins at an open end) lie on a parallel with β = π/2,
+    C = r and τ along the parallel: on the polar boss next to a polar opening (a cylinder, λ = 0),
+    else on the turnaround / end parallel of the mandrel, where λ = k_g/k_n = r' (reported as slip
+    when |r'| > μ).  The last point of a dwell arc is the first point of the pass that follows and
+    carries that pass's labels.
 
     Metadata: ``lambda_`` (the constant λ, or a list of pieces {z_from, z_to, lambda}; key
-    ``lambda`` in :meth:`summary`), ``max_abs_lambda`` and ``z_at_max_lambda``, ``mu``, ``slips``
-    and ``bridging`` (z ranges, mm), pattern ``pattern_p``/``pattern_q``/``lead``,
+    ``lambda`` in :meth:`summary`), ``max_abs_lambda`` and ``z_at_max_lambda`` (of the line between
+    the turnarounds; a dwell's λ is in ``turnarounds``), ``mu``, ``slips`` (every z range where
+    |λ| > μ, dwell parallels included) and ``bridging`` (z ranges, mm), ``turnarounds`` (how each end
+    is realised), pattern ``pattern_p``/``pattern_q``/``lead``,
     ``twist_per_circuit_rad`` (Δv, unwrapped), ``dwell_rad`` (left, right, including the closure),
     ``coverage``, ``circuit_order`` (pattern slot of circuit k), ``z_turn``/``end_kinds``.
     """
@@ -109,6 +114,8 @@ class WindingLine:
     points_per_circuit: int
     band_width_mm: float
     notes: list[str] = field(default_factory=list)
+    turnarounds: list[dict[str, Any]] = field(default_factory=list)
+    """How each turnaround (left, right) is realised: kind, z, dwell, where the dwell lies, its λ, stable."""
 
     @property
     def ok(self) -> bool:
@@ -168,6 +175,7 @@ class WindingLine:
             "band_length_mm": float(self.s[-1]),
             "beta_deg_range": [math.degrees(float(self.beta.min())), math.degrees(float(self.beta.max()))],
             "notes": self.notes,
+            "turnarounds": self.turnarounds,
         }
 
 
@@ -757,12 +765,33 @@ def winding_line(
     raw = 2.0 * pl.v[-1] + dwell[0] + dwell[1]
     if close_by == "angle":
         pl, dwell, q, m, target = _close_by_angle(mandrel, b, spec, ctx, pl, dwell, p, notes)
+        places = _turnaround_places(mandrel, pl, b, mu)
     else:
+        places = _turnaround_places(mandrel, pl, b, mu)
         q, m, target = choose_pattern(raw, p, spec.lead, spec.pattern_q, ctx)
         extra = target - raw
-        dwell = (dwell[0] + 0.5 * extra, dwell[1] + 0.5 * extra)
+        stable = (places[0]["stable"], places[1]["stable"])
+        share = (0.5, 0.5) if stable[0] == stable[1] else ((1.0, 0.0) if stable[0] else (0.0, 1.0))
+        dwell = (dwell[0] + share[0] * extra, dwell[1] + share[1] * extra)
         if extra > 1e-12:
-            notes.append(f"pattern closed by adding {math.degrees(extra):.4f}° of dwell (half at each end)")
+            where = ("half at each end" if share == (0.5, 0.5) else
+                     f"all at the {'left' if share[0] else 'right'} end, where a dwell is stable")
+            notes.append(f"pattern closed by adding {math.degrees(extra):.4f}° of dwell ({where})")
+    turns: list[dict[str, Any]] = []
+    for side, (pc, d) in enumerate(zip(places, dwell)):
+        name = "left" if side == 0 else "right"
+        turns.append({"side": name, "kind": pc["kind"], "z_mm": pc["z_turn"], "r_mm": pc["r_turn"],
+                      "dwell_deg": math.degrees(d), "dwell_on": pc["on"] if d > 0 else "none",
+                      "dwell_z_mm": pc["z"], "dwell_r_mm": pc["r"], "dwell_lambda": pc["lam"],
+                      "stable": bool(pc["stable"] or d <= 0), "how": pc["how"] if d > 0 else pc["how_plain"]})
+        if d > 0 and not pc["stable"]:
+            slips.append((pc["z"], pc["z"]))
+            hint = ("close the pattern by the winding angle (close_by = 'angle') or turn on a polar boss"
+                    if pl.mode == "geodesic" else "turn on a polar boss or move the dwell to the other end")
+            notes.append(f"{name} turnaround: the dwell of {math.degrees(d):.4g}° lies on the parallel "
+                         f"z = {pc['z']:.6g} mm where k_g/k_n = r' = {pc['lam']:.4g}, |λ| > μ = {mu:g}: the band "
+                         f"slips there; {hint}")
+    slips.sort()
     cov = _coverage(pl, b, p)
     if cov["fraction"] < 1.0 - 1e-9:
         notes.append(f"{p} circuits leave gaps of {cov['gap_mm']:.3g} mm; full coverage needs "
@@ -772,7 +801,7 @@ def winding_line(
     if state is not None:
         state.progress(0.7, "winding line: circuits")
     check_cancel(state)
-    line = _assemble(pl, dwell, total, target)
+    line = _assemble(pl, dwell, total, target, (places[0], places[1]))
     lam_desc: float | list[dict[str, float]]
     if len({pc["lambda"] for pc in pl.pieces}) == 1:
         lam_desc = float(pl.pieces[0]["lambda"])
@@ -801,7 +830,51 @@ def winding_line(
         end_kinds=(pl.left, pl.right),
         band_width_mm=b,
         notes=notes,
+        turnarounds=turns,
     )
+
+
+def _turnaround_places(mandrel: Any, pl: PassLine, b: float, mu: float) -> list[dict[str, Any]]:
+    """Where a dwell at each end (left, right) lies and whether it holds without slipping.
+
+    * a tangential turnaround next to a polar opening (the band's edge, b/2 from the turnaround
+      parallel, reaches the opening radius): the dwell wraps the polar boss / shaft at the opening
+      (a parallel of a cylinder: k_g = 0, stable);
+    * any other turnaround: the dwell lies on the turnaround parallel of the mandrel, where
+      k_g/k_n = r' (a parallel's geodesic curvature over its normal curvature); it holds only if
+      |r'| <= μ, else the band slips there;
+    * an open end (pins): the dwell lies on the end parallel, again with λ = r' there.
+    """
+    out = []
+    for side in (0, 1):
+        i = 0 if side == 0 else -1
+        kind = pl.left if side == 0 else pl.right
+        z_t, r_t, dr_t = float(pl.z[i]), float(pl.r[i]), float(pl.dr[i])
+        z_end = mandrel.z_min if side == 0 else mandrel.z_max
+        r_end = float(mandrel.pole_radii[side])
+        base = {"kind": kind, "z_turn": z_t, "r_turn": r_t}
+        if (kind == wc.TURN and r_end > 0 and _end_is_dome(mandrel, side)
+                and r_t - r_end <= 0.5 * b * (1.0 + 1e-9) + 1e-9):
+            out.append({**base, "on": "polar boss", "z": float(z_end), "r": r_end, "dr": 0.0, "lam": 0.0,
+                        "stable": True,
+                        "how": f"tangential turn on the parallel r = {r_t:.6g} mm; the dwell wraps the polar boss "
+                               f"(r = {r_end:.6g} mm at z = {z_end:.6g} mm), where the band's edge rests",
+                        "how_plain": f"tangential turn on the parallel r = {r_t:.6g} mm (no dwell)"})
+            continue
+        stable = abs(dr_t) <= mu + 1e-12
+        if kind == wc.TURN:
+            how = (f"tangential turn on the parallel r = {r_t:.6g} mm; the dwell lies on that parallel "
+                   f"(k_g/k_n = r' = {dr_t:.4g}, {'holds' if stable else 'slips'} with μ = {mu:g})")
+            plain = f"tangential turn on the parallel r = {r_t:.6g} mm (no dwell)"
+            on = "turnaround parallel"
+        else:
+            how = (f"the line leaves the open end z = {z_t:.6g} mm; the turn and dwell on the end parallel / pins "
+                   f"(k_g/k_n = r' = {dr_t:.4g}, {'holds' if stable else 'slips'} with μ = {mu:g})")
+            plain = f"the line leaves the open end z = {z_t:.6g} mm and turns on pins (no dwell)"
+            on = "end parallel"
+        out.append({**base, "on": on, "z": z_t, "r": r_t, "dr": dr_t, "lam": dr_t, "stable": stable, "how": how,
+                    "how_plain": plain})
+    return out
 
 
 def _close_by_angle(
@@ -846,38 +919,53 @@ def _dwell_values(d: float) -> FloatArray:
     return np.linspace(0.0, d, k + 1)[1:]
 
 
-def _assemble(pl: PassLine, dwell: tuple[float, float], total: int, twist_circ: float) -> dict[str, Any]:
-    """Arrays of all circuits: circuit 0 built from the pass, the others rotated by k·Δv."""
+def _assemble(pl: PassLine, dwell: tuple[float, float], total: int, twist_circ: float,
+              places: tuple[dict[str, float], dict[str, float]] | None = None) -> dict[str, Any]:
+    """Arrays of all circuits: circuit 0 built from the pass, the others rotated by k·Δv.
+
+    ``places`` says where each dwell lies (left, right): ``z``, ``r``, ``dr`` of its parallel and the
+    ``lam`` = k_g/k_n of that parallel (r' on the mandrel's turnaround parallel, 0 on a polar boss);
+    default the turnaround parallel.  The last point of each dwell arc is the first point of the
+    pass that follows (the return pass, or the next circuit's outgoing pass) and carries that pass's
+    labels (β, C, λ, direction, pass) -- with or without a dwell, a pass starts with the line's labels.
+    """
     V = float(pl.v[-1])
     S = float(pl.s[-1])
     dl, dr = dwell
-    ra, rb = float(pl.r[0]), float(pl.r[-1])
+    if places is None:
+        places = ({"z": float(pl.z[0]), "r": float(pl.r[0]), "dr": float(pl.dr[0]), "lam": float(pl.dr[0])},
+                  {"z": float(pl.z[-1]), "r": float(pl.r[-1]), "dr": float(pl.dr[-1]), "lam": float(pl.dr[-1])})
+    PL, PR = places
     dR = _dwell_values(dr)
     dL = _dwell_values(dl)
+    nR, nL = max(len(dR) - 1, 0), max(len(dL) - 1, 0)  # dwell points proper; the last value starts a pass
+    hR, hL = (1 if len(dR) else 0), (1 if len(dL) else 0)
     ret = slice(None, None, -1)
     z_ret = pl.z[ret][1:]
-    parts_z = [pl.z, np.full(len(dR), pl.z[-1]), z_ret, np.full(len(dL), pl.z[0])]
-    parts_r = [pl.r, np.full(len(dR), rb), pl.r[ret][1:], np.full(len(dL), ra)]
-    parts_dr = [pl.dr, np.full(len(dR), pl.dr[-1]), pl.dr[ret][1:], np.full(len(dL), pl.dr[0])]
+    n_ret = len(z_ret)
+    i0 = 0  # pl index of the point that starts the next outgoing pass
+
+    def cat(out_pass: Any, r_dw: Any, r_start: Any, ret_pass: Any, l_dw: Any, l_start: Any, dtype: Any = float
+            ) -> NDArray[Any]:
+        return np.concatenate([np.asarray(out_pass, dtype=dtype), np.full(nR, r_dw, dtype=dtype),
+                               np.full(hR, r_start, dtype=dtype), np.asarray(ret_pass, dtype=dtype),
+                               np.full(nL, l_dw, dtype=dtype), np.full(hL, l_start, dtype=dtype)])
+
     v_ret = V + dr + (V - pl.v[ret][1:])
-    parts_v = [pl.v, V + dR, v_ret, 2.0 * V + dr + dL]
-    s_ret = S + rb * dr + (S - pl.s[ret][1:])
-    S2 = 2.0 * S + rb * dr
-    parts_s = [pl.s, S + rb * dR, s_ret, S2 + ra * dL]
-    parts_b = [pl.beta, np.full(len(dR), 0.5 * math.pi), pl.beta[ret][1:], np.full(len(dL), 0.5 * math.pi)]
-    parts_c = [pl.C, np.full(len(dR), rb), pl.C[ret][1:], np.full(len(dL), ra)]
-    parts_l = [pl.lam, np.zeros(len(dR)), pl.lam[ret][1:], np.zeros(len(dL))]
-    parts_dir = [np.ones(len(pl.z), dtype=np.int64), np.ones(len(dR), dtype=np.int64),
-                 -np.ones(len(z_ret), dtype=np.int64), -np.ones(len(dL), dtype=np.int64)]
-    parts_pass = [np.zeros(len(pl.z), dtype=np.int64), np.zeros(len(dR), dtype=np.int64),
-                  np.ones(len(z_ret), dtype=np.int64), np.ones(len(dL), dtype=np.int64)]
-    parts_dw = [np.zeros(len(pl.z), dtype=bool), np.ones(len(dR), dtype=bool), np.zeros(len(z_ret), dtype=bool),
-                np.ones(len(dL), dtype=bool)]
+    s_ret = S + PR["r"] * dr + (S - pl.s[ret][1:])
+    S2 = 2.0 * S + PR["r"] * dr
     c0 = {
-        "z": np.concatenate(parts_z), "r": np.concatenate(parts_r), "dr": np.concatenate(parts_dr),
-        "v": np.concatenate(parts_v), "s": np.concatenate(parts_s), "beta": np.concatenate(parts_b),
-        "C": np.concatenate(parts_c), "lam": np.concatenate(parts_l), "direction": np.concatenate(parts_dir),
-        "pass_id": np.concatenate(parts_pass), "dwell": np.concatenate(parts_dw),
+        "z": cat(pl.z, PR["z"], pl.z[-1], z_ret, PL["z"], pl.z[i0]),
+        "r": cat(pl.r, PR["r"], pl.r[-1], pl.r[ret][1:], PL["r"], pl.r[i0]),
+        "dr": cat(pl.dr, PR["dr"], pl.dr[-1], pl.dr[ret][1:], PL["dr"], pl.dr[i0]),
+        "beta": cat(pl.beta, 0.5 * math.pi, pl.beta[-1], pl.beta[ret][1:], 0.5 * math.pi, pl.beta[i0]),
+        "C": cat(pl.C, PR["r"], pl.C[-1], pl.C[ret][1:], PL["r"], pl.C[i0]),
+        "lam": cat(pl.lam, PR["lam"], pl.lam[-1], pl.lam[ret][1:], PL["lam"], pl.lam[i0]),
+        "direction": cat(np.ones(len(pl.z)), 1, -1, -np.ones(n_ret), -1, 1, dtype=np.int64),
+        "pass_id": cat(np.zeros(len(pl.z)), 0, 1, np.ones(n_ret), 1, 2, dtype=np.int64),
+        "dwell": cat(np.zeros(len(pl.z)), True, False, np.zeros(n_ret), True, False, dtype=bool),
+        "v": np.concatenate([pl.v, V + dR, v_ret, 2.0 * V + dr + dL]),
+        "s": np.concatenate([pl.s, S + PR["r"] * dR, s_ret, S2 + PL["r"] * dL]),
     }
     # the closing point: the last one (v = Δv); make it exact
     c0["v"][-1] = 2.0 * V + dr + dl

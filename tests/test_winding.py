@@ -70,8 +70,10 @@ def test_cylinder_geodesic_is_helix() -> None:
     sel1 = outgoing(wl, 1)
     off = wl.v[sel1] - (1000.0 - wl.z[sel1]) * math.tan(beta) / R
     assert np.ptp(off) < 1e-9
-    end_of_dwell = wl.v[np.flatnonzero(sel1)[0] - 1]
-    assert off[0] == pytest.approx(end_of_dwell, abs=1e-9)
+    # the return pass starts at the end of the dwell (its first point carries the line's labels)
+    first = int(np.flatnonzero(sel1)[0])
+    assert wl.dwell[first - 1] and wl.z[first] == 1000.0 and wl.beta[first] == pytest.approx(beta, abs=1e-12)
+    assert off[0] == pytest.approx(wl.v[sel][-1] + wl.dwell_rad[1], abs=1e-9)
 
 
 @pytest.mark.parametrize("poles", [0.0, 30.0])
@@ -370,8 +372,13 @@ def test_bad_inputs_raise_clear_errors() -> None:
         winding_line(vessel, 700.0, 0.2, WindingSpec())
     with pytest.raises(InputError, match="not determined"):
         winding_line(pipe, 10.0, 0.2, WindingSpec())
-    # a geodesic through the poles of a closed sphere works even with μ = 0
-    assert winding_line(Mandrel.vessel(50.0, 0.0), 4.0, 0.0, WindingSpec(points_per_pass=100)).ok
+    # a geodesic through the poles of a closed sphere works even with μ = 0; the pattern closed by a dwell on
+    # the turnaround parallel (no boss at a closed pole; every great circle twists π) slips there, reported
+    sphere = Mandrel.vessel(50.0, 0.0)
+    wl = winding_line(sphere, 4.0, 0.0, WindingSpec(points_per_pass=100))
+    assert wl.lambda_ == 0.0 and not wl.ok
+    assert [t["dwell_on"] for t in wl.turnarounds if t["dwell_deg"] > 0] == ["turnaround parallel"] * 2
+    assert all(a == b and abs(a) == pytest.approx(math.sqrt(50.0**2 - 4.0)) for a, b in wl.slips)
 
 
 def test_job_errors_name_the_field(tmp_path: Path) -> None:

@@ -36,7 +36,9 @@ def check_invariants(wl, mandrel: Mandrel) -> None:
     assert abs((frac - math.floor(frac)) - (wl.pattern_q % wl.pattern_p) / wl.pattern_p) < 1e-9 or wl.pattern_p == 1
     assert math.gcd(wl.pattern_p, wl.pattern_q) == 1
     # slips are reported exactly when λ exceeds μ
-    assert bool(wl.slips) == (wl.max_abs_lambda > wl.mu + 1e-12)
+    # (the line's λ at every integration node, and each dwell arc's λ = r' of its parallel)
+    worst = max(wl.max_abs_lambda, float(np.abs(wl.lam[wl.dwell]).max(initial=0.0)))
+    assert bool(wl.slips) == (worst > wl.mu + 1e-12)
 
 
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
