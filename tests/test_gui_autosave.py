@@ -172,7 +172,7 @@ def test_killed_instance_copy_is_offered_only_after_it_died(qtbot, tmp_path, ask
 
 def test_failed_autosave_releases_the_lock_it_took(qtbot, monkeypatch) -> None:
     """A write that fails (disk full, permissions) leaves no lock on a name without a copy."""
-    import winder_gui.main_window as mw
+    import winder_gui.document as mw
 
     w = _instance(qtbot)
     w.set_dirty(True)

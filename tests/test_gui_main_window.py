@@ -138,7 +138,7 @@ def test_template_field_edit_updates_job_and_views(window, qtbot) -> None:
     assert "not a number" in panel.error_text("cylinder_length_mm")
     panel.set_value("pole_radius_mm.0", 130)
     assert "smaller than the radius" in panel.error_text("pole_radius_mm.0")
-    assert not w._edit_timer.isActive()
+    assert not w.ctl.edit_timer.isActive()
     assert w.job == before
 
     # a value only the engine rejects (isotensoid pole below 2 % of R): message at the field, job kept
@@ -156,7 +156,7 @@ def test_edits_are_debounced(window, qtbot) -> None:
     w.mandrel_updated.connect(builds.append)
     for rad in (101, 102, 103, 104, 105):
         w.mandrel_panel.set_value("radius_mm", rad)
-    assert w._edit_timer.isActive() and not w.runner.is_busy()  # nothing built on the GUI thread yet
+    assert w.ctl.edit_timer.isActive() and not w.runner.is_busy()  # nothing built on the GUI thread yet
     qtbot.waitUntil(lambda: len(builds) == 1, timeout=10000)
     assert w.wait_idle()
     assert len(builds) == 1 and w.job.mandrel.radius_mm == 105.0

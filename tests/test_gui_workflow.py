@@ -201,7 +201,7 @@ def test_pipe_workflow(pipe_window, tmp_path, monkeypatch) -> None:
     # cancel a run in flight: the window is idle at once and keeps the finished stages
     before = w.result
     w.winding_panel.set_value("winding.dwell_deg.1", 170)
-    w._run_timer.stop()
+    w.ctl.run_timer.stop()
     assert w.run_pipeline_now()
     assert w.pipe_runner.is_busy() and w.cancel_button.isVisible()
     w.cancel_button.click()
@@ -579,7 +579,7 @@ def test_every_example_end_to_end(qtbot, tmp_path, example: Path) -> None:
         # cancel a run in flight, re-run: only the NC stage depends on the dialect
         w.machine_panel.post_combo.setCurrentText("fanuc")
         w.machine_panel._on_edited()
-        w._run_timer.stop()
+        w.ctl.run_timer.stop()
         assert w.run_pipeline_now()
         w.cancel_run()
         assert not w.busy() and "Cancelled" in w.status_msg.text()

@@ -109,7 +109,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return app.exec()
     finally:
-        from winder_gui.main_window import process_autosave_owner
+        from winder_gui.autosave import process_autosave_owner
 
         process_autosave_owner().release_all()  # normally done by the window's close already
 

@@ -6,13 +6,20 @@ the views.  Every task takes ``state`` (progress, cancellation, partial results)
 
 from __future__ import annotations
 
+import importlib.util
+import os
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from engine.errors import InputError
-from engine.job import Job, TimeLawSpec
+from engine.job import FileSpec, Job, PointsSpec, TimeLawSpec, build_mandrel, load_job
 from engine.state import SubState, check_cancel
+from winder_gui.views.geometry import MandrelViewData, mandrel_view_data, sketch_points
+from winder_gui.workers import cad_call
+
+if TYPE_CHECKING:  # engine.mandrel (scipy) is first imported by the build worker, off the start-up path
+    from engine.mandrel import Mandrel
 
 COMPARED_LAWS: tuple[str, ...] = ("parallel", "equidistant", "equal-tangent", "min-range")
 """Payout laws shown side by side in the pull-speed plot (``curve`` only when the job gives a curve)."""
@@ -39,6 +46,106 @@ def pipeline_task(job: Job, job_path: Path | None, previous: Any, upto: str, *, 
     check_cancel(state)
     paths = paths_view_data(res.line, res.eye, MAX_DISPLAY_POINTS, MAX_FRAMES) if res.line is not None else None
     return RunOutput(res, res.warnings(), list(res.violations), paths)
+
+
+@dataclass(frozen=True)
+class BuildResult:
+    """A job whose mandrel was built, with the data the views show."""
+
+    job: Job
+    path: Path | None
+    mandrel: Mandrel
+    data: MandrelViewData
+
+
+@dataclass(frozen=True)
+class JobTimeLawResult:
+    """One of the job's own time laws (``PipelineResult.timelaw_laws[index]``) with the classical DP
+    and TOPP-RA laws on the same path and limits."""
+
+    source: str
+    index: int
+    law: Any
+    dp: Any
+    toppra: Any
+    s_offset: float
+    key: str
+
+
+def job_timelaw_task(result: Any, index: int, *, state: Any) -> JobTimeLawResult:
+    """:func:`engine.pipeline.compare_time_laws` of the job's law ``index`` (DP and TOPP-RA)."""
+    from engine.pipeline import compare_time_laws
+
+    state.progress(0.0, "time law: DP and TOPP-RA on the job's path")
+    cmp = compare_time_laws(result, index, ("dp", "toppra"), state=state)
+    state.progress(1.0, "")
+    law = result.timelaw_laws[index]
+    n = int(result.timelaw_paths[index].s.size)
+    return JobTimeLawResult(f"job: {result.timelaw_labels[index]} ({law.method}, N = {n})", index, law,
+                            cmp["dp"], cmp["toppra"], float(result.timelaw_paths[index].iteration_s_offset),
+                            str(result.keys.get("blocks", "")))
+
+
+def mandrel_io_available() -> bool:
+    """True when :mod:`engine.mandrel_io` (CSV/DXF/STEP import, STEP/STL export) is installed."""
+    return importlib.util.find_spec("engine.mandrel_io") is not None
+
+
+def build_task(job: Job, path: Path | None, *, state: Any) -> BuildResult:
+    """Build ``job``'s mandrel and sample it for the views (worker thread)."""
+    state.progress(0.0, "building the mandrel")
+    spec = job.mandrel
+    if isinstance(spec, FileSpec):
+        if not mandrel_io_available():
+            raise InputError(
+                "reading profile files needs engine.mandrel_io, which this build does not have yet",
+                file=path,
+                field="mandrel.path",
+            )
+        step = Path(spec.path).suffix.lower() in (".step", ".stp")
+        mandrel = (cad_call(build_mandrel) if step else build_mandrel)(job, path)
+    else:
+        mandrel = build_mandrel(job, path)
+    check_cancel(state)
+    sketch = (list(spec.z_mm), list(spec.r_mm)) if isinstance(spec, PointsSpec) else None
+    data = mandrel_view_data(mandrel, sketch)
+    state.progress(1.0, "")
+    return BuildResult(job, path, mandrel, data)
+
+
+def convert_task(job: Job, mandrel: Mandrel, path: Path | None, *, state: Any) -> BuildResult:
+    """``job`` with its mandrel replaced by a sketch whose spline is within 0.01 mm of ``mandrel``
+    (:func:`winder_gui.views.geometry.sketch_points`), built (worker thread)."""
+    state.progress(0.0, "converting the generatrix to sketch points")
+    z, r, _dev = sketch_points(mandrel, state=state)
+    spec = PointsSpec(z_mm=[float(v) for v in z], r_mm=[float(v) for v in r])
+    return build_task(job.replace(mandrel=spec), path, state=state)
+
+
+def open_task(path: Path, *, state: Any) -> BuildResult:
+    """Read a job file and build its mandrel (worker thread)."""
+    return build_task(load_job(path), path, state=state)
+
+
+def export_task(mandrel: Mandrel, path: Path, *, state: Any) -> Path:
+    """Write the mandrel solid as STEP or mesh as STL, by suffix (worker thread, CAD lock)."""
+    from engine import mandrel_io
+
+    state.progress(0.0, f"exporting {path.name}")
+    fn = mandrel_io.export_stl if path.suffix.lower() == ".stl" else mandrel_io.export_step
+    cad_call(fn)(mandrel, path)
+    return path
+
+
+def profile_ref(profile: Path, job_path: Path | None) -> str:
+    """How a job refers to a profile file: relative to the job's folder if saved, else absolute."""
+    profile = profile.resolve()
+    if job_path is None:
+        return profile.as_posix()
+    try:
+        return Path(os.path.relpath(profile, job_path.resolve().parent)).as_posix()
+    except ValueError:  # another drive (Windows)
+        return profile.as_posix()
 
 
 def laws_task(result: Any, *, state: Any) -> dict[str, Any]:

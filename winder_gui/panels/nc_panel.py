@@ -27,6 +27,7 @@ from PySide6.QtWidgets import (
 )
 
 from winder_gui.panels.section_panel import TIMELAW_FIELDS, SectionPanel
+from winder_gui.texts import STALE_RESULTS
 
 PREVIEW_LINES = 400
 """Lines of NC text shown in the preview (the whole program is written on export)."""
@@ -92,6 +93,12 @@ class NCPanel(QWidget):
         self.run_reason.setWordWrap(True)
         self.run_reason.setStyleSheet("color: #c01010;")
         lay.addWidget(self.run_reason)
+        self.stale = QLabel(STALE_RESULTS)
+        self.stale.setObjectName("nc.stale")
+        self.stale.setWordWrap(True)
+        self.stale.setStyleSheet("color: #a05a00; font-weight: bold;")
+        self.stale.hide()
+        lay.addWidget(self.stale)
         self.summary = QLabel("Not run yet.")
         self.summary.setObjectName("nc.summary")
         self.summary.setWordWrap(True)
@@ -122,13 +129,24 @@ class NCPanel(QWidget):
         self.run_reason.setText(f"Run disabled: {reason}" if reason else "")
         self.cancel_button.setEnabled(running)
 
+    def set_stale(self, stale: bool, reason: str = "") -> None:
+        """Grey and label the summary, warnings and preview while they describe an earlier job."""
+        self.stale.setText(reason or STALE_RESULTS)
+        self.stale.setVisible(stale)
+        for w in (self.summary, self.warnings, self.preview):
+            w.setEnabled(not stale)
+
+    def set_export_state(self, reason: str) -> None:
+        """Enable Export unless ``reason`` says why not (shown as the tooltip)."""
+        self.export_button.setEnabled(not reason)
+        self.export_button.setToolTip(reason)
+
     def set_result(self, res: Any, warns: list[str] | None = None) -> None:
         """Show the program summary, ``warns`` and the first lines of the NC text of ``res``."""
         self.warnings.clear()
         if res is None or res.nc_text is None:
             self.summary.setText("Not run yet." if res is None else "The pipeline stopped before the NC stage.")
             self.preview.setPlainText("")
-            self.export_button.setEnabled(False)
             return
         b = res.blocks
         text = res.nc_text
@@ -148,4 +166,3 @@ class NCPanel(QWidget):
         if len(head) > PREVIEW_LINES:
             shown += f"\n… ({lines - PREVIEW_LINES} more lines)"
         self.preview.setPlainText(shown)
-        self.export_button.setEnabled(True)

@@ -456,9 +456,7 @@ class ProfilePlot(QWidget):
 
 
 def _settings():  # noqa: ANN202 - QSettings | None
-    """The application's settings (:func:`winder_gui.main_window.app_settings`), or ``None`` outside the app."""
-    try:
-        from winder_gui.main_window import app_settings  # the window imports this module: import late
-    except ImportError:
-        return None
+    """The application's settings (:func:`winder_gui.settings.app_settings`)."""
+    from winder_gui.settings import app_settings
+
     return app_settings()

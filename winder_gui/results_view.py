@@ -1,0 +1,212 @@
+"""The result views of a window: plots, 3D paths, NC page and time-law page fed from the run controller.
+
+:class:`ResultsPresenter` observes the :class:`~winder_gui.document.JobDocument` and the
+:class:`~winder_gui.run_controller.RunController` and draws what they computed.  View updates are
+queued and run one per event-loop turn, so the window stays responsive; each stage is redrawn only
+when its cache key changed.  When the job changes after a run, the NC page and the plots are marked
+out of date (greyed, labelled) until the next run finishes.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+from PySide6.QtCore import QObject, QTimer, Signal
+
+from winder_gui import texts
+from winder_gui.document import JobDocument
+from winder_gui.run_controller import RunController
+from winder_gui.tasks import JobTimeLawResult
+
+
+class ResultsPresenter(QObject):
+    """Shows the pipeline's results in the window's views (``views``: the window, for its plot widgets)."""
+
+    laws_shown = Signal(object)
+    timelaw_shown = Signal(object)
+    status = Signal(str, bool)
+
+    def __init__(self, doc: JobDocument, ctl: RunController, views: Any) -> None:
+        super().__init__(views)
+        self.doc, self.ctl, self.v = doc, ctl, views
+        self.laws: dict[str, Any] | None = None
+        self.timelaw: Any = None
+        """The paper example's time laws (Time law step, "paper example")."""
+        self.job_timelaw: JobTimeLawResult | None = None
+        """The chosen job time law with its DP / TOPP-RA comparison (Time law step, "job: …")."""
+        self._tl_laws: tuple[Any, ...] = ()
+        self._shown: dict[str, str] = {}
+        self._paths_key: str | None = None
+        self._queue: list[Callable[[], Any]] = []
+        self._timer = QTimer(self)
+        self._timer.setInterval(0)
+        self._timer.timeout.connect(self._next)
+        ctl.partial.connect(self.show_result)
+        ctl.run_done.connect(self._on_run_done)
+        ctl.laws_done.connect(self._on_laws_done)
+        ctl.timelaw_done.connect(self._on_timelaw_done)
+        doc.stale_changed.connect(self._on_stale)
+
+    # -- queue -------------------------------------------------------------------------------------
+    def queue(self, *updates: Callable[[], Any]) -> None:
+        self._queue.extend(updates)
+        self._timer.start()
+
+    def _next(self) -> None:
+        if self._queue:
+            self._queue.pop(0)()
+        if not self._queue:
+            self._timer.stop()
+
+    def pending(self) -> bool:
+        """True while queued view updates are still to be drawn."""
+        return bool(self._queue)
+
+    # -- results -------------------------------------------------------------------------------------
+    def clear(self) -> None:
+        """No results (a new document)."""
+        v = self.v
+        self.laws = None
+        self._paths_key = None
+        self._shown.clear()
+        self._queue.clear()
+        for page in (v.winding_plots, v.eye_plot, v.axes_plot, v.coverage_plot):
+            page.clear_data(texts.NO_DATA)
+        v.pull_plot.set_laws({}, "", "s")
+        v.pull_plot.set_message(texts.NO_DATA)
+        v.nc_panel.set_result(None)
+        v.view3d.set_paths(None)
+        self._tl_laws = ()
+        self.job_timelaw = None
+        v.timelaw_plot.set_law_choices([], -1)
+
+    def show_result(self, res: Any) -> None:
+        """Update the views of every stage of ``res`` that changed since they were last drawn."""
+        keys = res.keys
+        v = self.v
+        todo: list[Any] = []
+
+        def fresh(stage: str, have: Any) -> bool:
+            if have is None or stage not in keys or self._shown.get(stage) == keys[stage]:
+                return False
+            self._shown[stage] = keys[stage]
+            return True
+
+        if fresh("winding", res.line):
+            todo += [lambda: v.winding_plots.set_line(res.line), lambda: v.coverage_plot.set_line(res.line)]
+        if fresh("payout", res.eye):
+            todo.append(lambda: v.eye_plot.set_eye(res.eye_circuit, res.mandrel))
+        if fresh("blocks", res.blocks):
+            todo += v.axes_plot.updates(res.blocks, res.machine)
+        if todo:
+            self.queue(*todo)
+
+    def _on_run_done(self, out: Any) -> None:
+        res = out.result
+        v = self.v
+        self.show_result(res)
+        if out.paths is not None and (v.view3d.paths is None or self._paths_key != res.keys.get("payout")):
+            self._paths_key = res.keys.get("payout")
+            self.queue(lambda: v.view3d.set_paths(out.paths))
+        warns = list(self.doc.run_warnings)
+        self.queue(lambda: v.nc_panel.set_result(res, warns), lambda: self._on_stale(self.doc.is_stale()))
+        took = time.monotonic() - self.ctl.run_t0
+        reused = f" (re-used: {', '.join(res.reused)})" if res.reused else ""
+        program = f"; program time {res.blocks.total:.2f} s" if res.blocks is not None else ""
+        n = len(warns)
+        self.status.emit(f"Pipeline done in {took:.1f} s{reused}{program}"
+                         + (f"; {n} warning{'s' if n != 1 else ''} (NC step)" if n else ""), False)
+        info = getattr(res, "timelaw", None)  # the time law that set the block times (method tube/dp/toppra)
+        v.timelaw_panel.program_label.setText(
+            f"Program block times: {info.get('method')} law over the job's axis path, "
+            f"{float(info.get('total_time_s', 0.0)):.2f} s, {info.get('iterations', 0)} iterations"
+            if isinstance(info, dict) else
+            f"Program block times: (17)/(18), {res.blocks.total:.2f} s" if res.blocks is not None else "")
+        self.offer_job_laws(res)
+
+    def _on_stale(self, stale: bool) -> None:
+        """Grey and label the NC page and the plots while the results do not describe the job shown."""
+        self.v.nc_panel.set_stale(stale)
+        for page in (self.v.winding_plots, self.v.eye_plot, self.v.axes_plot, self.v.coverage_plot,
+                     self.v.pull_plot):
+            page.setToolTip(texts.STALE_RESULTS if stale else "")
+        self.v.stale_label.setVisible(stale)
+
+    def _on_laws_done(self, laws: dict[str, Any]) -> None:
+        self.laws = laws
+        res = self.doc.result
+        v = self.v
+        job_law = res.eye_circuit.law if res is not None and res.eye_circuit is not None else ""
+        param = res.job.payout.parameter if res is not None else "s"
+        self.queue(*v.pull_plot.plan(list(laws)), *v.pull_plot.updates(laws, job_law, param),
+                   lambda: self.laws_shown.emit(laws))
+
+    # -- time law ------------------------------------------------------------------------------------
+    def offer_job_laws(self, res: Any) -> None:
+        """Offer the job's time laws of ``res`` in the Law chooser (default: the main law); the chosen
+        law is shown at once when the Time law step is open."""
+        laws = tuple(getattr(res, "timelaw_laws", ()) or ())
+        if len(laws) == len(self._tl_laws) and all(a is b for a, b in zip(laws, self._tl_laws, strict=True)):
+            return
+        self._tl_laws = laws
+        self.v.timelaw_plot.set_law_choices(res.timelaw_labels if laws else [], res.timelaw_main if laws else -1)
+        if laws and self.v.steps.current_step() == "timelaw":
+            self.show_chosen_law()
+
+    def show_chosen_law(self) -> None:
+        """Show the law of the chooser: a job law is (re-)computed unless shown already."""
+        i = self.v.timelaw_plot.selected_law()
+        if i < 0:
+            if self.timelaw is not None:
+                self._on_timelaw_done(self.timelaw)
+            return
+        jt = self.job_timelaw
+        res = self.doc.result
+        if jt is not None and jt.index == i and res is not None and i < len(res.timelaw_laws) \
+                and jt.law is res.timelaw_laws[i]:
+            self._on_timelaw_done(jt)
+            return
+        self.compute_timelaw()
+
+    def law_shown(self) -> bool:
+        """True when the chosen job law of the current result is the one shown."""
+        jt, res = self.job_timelaw, self.doc.result
+        return jt is not None and res is not None and any(jt.law is x for x in res.timelaw_laws)
+
+    def compute_timelaw(self) -> None:
+        """Run the time parametrization (tube, DP, TOPP-RA) of the chosen law in the worker: the paper
+        example, or the job's law with the classical DP and TOPP-RA on its path and limits."""
+        i = self.v.timelaw_plot.selected_law()
+        res = self.doc.result
+        panel = self.v.timelaw_panel
+        if i >= 0 and res is not None and i < len(getattr(res, "timelaw_laws", ())):
+            panel.summary.setText("computing…")
+            self.ctl.compute_job_timelaw(i)
+            self.status.emit("Computing DP and TOPP-RA on the job's time-law path…", False)
+            return
+        if panel.errors():
+            self.status.emit(f"Time law: {panel.errors()}", True)
+            return
+        panel.summary.setText("computing…")
+        self.ctl.compute_paper_timelaw()
+        self.status.emit("Computing the time law…", False)
+
+    def _on_timelaw_done(self, r: Any) -> None:
+        v = self.v
+        if isinstance(r, JobTimeLawResult):
+            self.job_timelaw = r
+            self.queue(*v.timelaw_plot.updates(r.law, r.dp, r.toppra, r.source, f"job {r.law.method}", r.s_offset))
+            v.timelaw_panel.summary.setText(
+                f"{r.source}: {r.law.method} {r.law.total_time_s:.3f} s in {len(r.law.iterations)} iterations; "
+                f"single DP {r.dp.total_time_s:.3f} s; TOPP-RA bound {r.toppra.total_time_s:.3f} s")
+            self.status.emit("Time law comparison computed", False)
+        else:
+            self.timelaw = r
+            self.queue(*v.timelaw_plot.updates(r.tube, r.dp, r.toppra, r.source))
+            v.timelaw_panel.summary.setText(
+                f"{r.source}: tube {r.tube.total_time_s:.3f} s in {len(r.tube.iterations)} iterations; "
+                f"single DP {r.dp.total_time_s:.3f} s; TOPP-RA bound {r.toppra.total_time_s:.3f} s")
+            self.status.emit("Time law computed", False)
+        self.queue(lambda: self.timelaw_shown.emit(r))

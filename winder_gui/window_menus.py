@@ -1,0 +1,227 @@
+"""Menus, toolbar and the dialogs of the main window's commands (open/save/export file choosers,
+About, keyboard shortcuts, tool dialogs).  The commands themselves are methods of the window."""
+
+from __future__ import annotations
+
+import importlib
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from PySide6.QtCore import Qt
+from PySide6.QtGui import QAction, QKeySequence
+from PySide6.QtWidgets import QFileDialog, QMessageBox, QToolBar, QWidget
+
+from engine import __version__
+from winder_gui.autosave import autosave_origin
+from winder_gui.panels.steps import STEPS
+from winder_gui.settings import recent_files
+
+if TYPE_CHECKING:
+    from winder_gui.main_window import MainWindow
+
+NC_FILTER = "NC programs (*.ngc *.nc *.gcode *.mpf *.csv *.txt);;All files (*)"
+JOB_FILTER = "Winding jobs (*.toml);;All files (*)"
+PROFILE_FILTER = "Generatrix profiles (*.csv *.txt *.dxf *.step *.stp);;All files (*)"
+EXPORT_FILTER = "STEP solid (*.step *.stp);;STL mesh (*.stl)"
+REPORT_FILTER = "PDF report (*.pdf);;HTML report (*.html)"
+
+
+def build_menus(w: MainWindow) -> None:
+    """The menu bar; every command is also in ``w.actions`` by key."""
+    mb = w.menuBar()
+    w.menu_file = mb.addMenu("&File")
+    w.actions = {}
+
+    def add(menu: Any, key: str, text: str, slot: Any, shortcut: Any = None) -> QAction:
+        act = QAction(text, w)
+        if shortcut is not None:
+            act.setShortcut(QKeySequence(shortcut))
+        act.triggered.connect(slot)
+        menu.addAction(act)
+        w.actions[key] = act
+        return act
+
+    f = w.menu_file
+    add(f, "new", "&New", w.action_new, QKeySequence.StandardKey.New)
+    add(f, "open", "&Open…", lambda: action_open(w), QKeySequence.StandardKey.Open)
+    w.menu_recent = f.addMenu("Open &Recent")
+    add(f, "save", "&Save", lambda: w.save_job(), QKeySequence.StandardKey.Save)
+    add(f, "save_as", "Save &As…", w._action_save_as, QKeySequence.StandardKey.SaveAs)
+    f.addSeparator()
+    add(f, "import", "&Import generatrix…", lambda: action_import(w), "Ctrl+I")
+    add(f, "export", "&Export mandrel…", lambda: action_export_mandrel(w), "Ctrl+E")
+    add(f, "export_nc", "Export &NC program…", w.action_export_nc, "Ctrl+Shift+E")
+    add(f, "export_plot", "Export current &plot…", lambda: action_export_plot(w), "Ctrl+Shift+P")
+    f.addSeparator()
+    add(f, "quit", "&Quit", w.close, QKeySequence.StandardKey.Quit)
+
+    w.menu_edit = mb.addMenu("&Edit")
+    undo = w.undo_stack.createUndoAction(w, "&Undo")
+    undo.setShortcut(QKeySequence.StandardKey.Undo)
+    redo = w.undo_stack.createRedoAction(w, "&Redo")
+    redo.setShortcuts([QKeySequence.StandardKey.Redo, QKeySequence("Ctrl+Shift+Z")])
+    w.menu_edit.addAction(undo)
+    w.menu_edit.addAction(redo)
+    w.actions["undo"], w.actions["redo"] = undo, redo
+
+    w.menu_run = mb.addMenu("&Run")
+    add(w.menu_run, "run", "&Run pipeline", lambda: w.run_pipeline_now(), "F5")
+    add(w.menu_run, "cancel", "&Cancel", w.cancel_run, "Esc")
+    add(w.menu_run, "timelaw", "Compute &time law", w.compute_timelaw, "F6")
+    auto = add(w.menu_run, "auto_run", "Re-run &automatically after edits", w._toggle_auto_run)
+    auto.setCheckable(True)
+    auto.setChecked(True)
+
+    w.menu_view = mb.addMenu("&View")
+    for i, (key, title) in enumerate(STEPS):
+        add(w.menu_view, f"step_{key}", f"&{i + 1} {title}", lambda _c=False, k=key: w.go_to_step(k), f"Ctrl+{i + 1}")
+    w.menu_view.addSeparator()
+    add(w.menu_view, "play", "&Play / pause the winding", w._toggle_play, "Space")
+
+    w.menu_tools = mb.addMenu("&Tools")
+    add(w.menu_tools, "turning", "&Turning optimiser…",
+        lambda: open_tool(w, "turning", "winder_gui.dialogs.turning", "TurningDialog"))
+    add(w.menu_tools, "slotting", "&Slot forming…",
+        lambda: open_tool(w, "slotting", "winder_gui.dialogs.slotting", "SlotDialog"))
+
+    w.menu_help = mb.addMenu("&Help")
+    add(w.menu_help, "shortcuts", "&Keyboard shortcuts", lambda: show_box(w, "shortcuts", "Keyboard shortcuts",
+                                                                          shortcuts_text(w)), "F1")
+    add(w.menu_help, "about", "&About winder", lambda: show_box(
+        w, "about", "About winder", f"<b>winder {__version__}</b><br>Open CAD/CAM for filament winding:<br>"
+        "mandrel → winding line → payout eye → machine axes → NC.<br><br>GPL-3.0-or-later",
+        QMessageBox.Icon.Information))
+
+
+def build_toolbar(w: MainWindow) -> None:
+    tb = QToolBar("Main")
+    tb.setObjectName("mainToolbar")
+    tb.setMovable(False)
+    for key in ("new", "open", "save", None, "undo", "redo", None, "run", "cancel", "export_nc"):
+        if key is None:
+            tb.addSeparator()
+        else:
+            tb.addAction(w.actions[key])
+    w.toolbar = tb
+    w.addToolBar(tb)
+    rebuild_recent_menu(w)
+
+
+def rebuild_recent_menu(w: MainWindow) -> None:
+    w.menu_recent.clear()
+    rec = recent_files()
+    for i, p in enumerate(rec):
+        act = w.menu_recent.addAction(f"&{i + 1} {Path(p).name}")
+        act.setToolTip(p)
+        act.triggered.connect(lambda _c=False, path=p: w._may_discard() and w.open_job(path))
+    w.menu_recent.setEnabled(bool(rec))
+
+
+def show_box(w: MainWindow, key: str, title: str, text: str,
+             icon: QMessageBox.Icon = QMessageBox.Icon.NoIcon) -> None:
+    box = QMessageBox(icon, title, text, QMessageBox.StandardButton.Ok, w)
+    box.setAttribute(Qt.WidgetAttribute.WA_DeleteOnClose)
+    box.open()
+    w.dialogs[key] = box
+
+
+def shortcuts_text(w: MainWindow) -> str:
+    """Every menu command with a keyboard shortcut, as an HTML table."""
+    rows = []
+    for act in w.actions.values():
+        keys = ", ".join(k.toString(QKeySequence.SequenceFormat.NativeText) for k in act.shortcuts())
+        if keys:
+            rows.append(f"<tr><td><b>{keys}</b></td><td>{act.text().replace('&', '').rstrip('…')}</td></tr>")
+    return "<table cellspacing=4>" + "".join(rows) + "</table>"
+
+
+def open_tool(w: MainWindow, key: str, module: str, cls_name: str) -> QWidget | None:
+    """Open a tool dialog ``module.cls_name(parent)`` (imported lazily); a message if unavailable."""
+    dlg = w.dialogs.get(key)
+    if dlg is not None:
+        try:
+            dlg.show()
+            dlg.raise_()
+            return dlg
+        except RuntimeError:  # deleted by Qt
+            w.dialogs.pop(key, None)
+    try:
+        cls = getattr(importlib.import_module(module), cls_name)
+        dlg = cls(w)
+    except Exception as exc:  # noqa: BLE001 - a tool that cannot load must not take the app down
+        w.report_dialog("Tool not available", f"{cls_name} could not be loaded ({type(exc).__name__}: {exc}).")
+        return None
+    w.dialogs[key] = dlg
+    dlg.show()
+    return dlg
+
+
+def action_open(w: MainWindow) -> None:
+    if not w._may_discard():
+        return
+    path, _ = QFileDialog.getOpenFileName(w, "Open job", str(w.doc.start_dir()), JOB_FILTER)
+    if path:
+        w.open_job(path)
+
+
+def ask_save_path(w: MainWindow) -> str:
+    start = str(w.job_path) if w.job_path else str(w.doc.start_dir() / "job.toml")
+    path, _ = QFileDialog.getSaveFileName(w, "Save job as", start, JOB_FILTER)
+    return path
+
+
+def action_import(w: MainWindow) -> None:
+    path, _ = QFileDialog.getOpenFileName(w, "Import generatrix", str(w.doc.start_dir()), PROFILE_FILTER)
+    if path:
+        w.import_generatrix(path)
+    else:
+        w.mandrel_panel.set_spec(w.job.mandrel)
+
+
+def action_export_mandrel(w: MainWindow) -> None:
+    stem = w.job_path.stem if w.job_path else "mandrel"
+    path, _ = QFileDialog.getSaveFileName(w, "Export mandrel", str(w.doc.start_dir() / f"{stem}.step"), EXPORT_FILTER)
+    if path:
+        w.export_mandrel(path)
+
+
+def ask_nc_path(w: MainWindow, extension: str) -> str:
+    path, _ = QFileDialog.getSaveFileName(w, "Export NC program",
+                                          str(w.doc.start_dir() / f"{w.doc.file_stem()}{extension}"), NC_FILTER)
+    return path
+
+
+def action_export_plot(w: MainWindow) -> None:
+    page = w.plot_tabs.currentWidget()
+    if hasattr(page, "_ask_export"):
+        page._ask_export()
+
+
+def offer_autosaves(w: MainWindow) -> None:
+    """Ask, for each leftover autosave copy, whether to restore it (the first accepted is loaded).
+
+    A copy is locked while the question is open, so two instances starting together never both
+    restore or delete it; the live copies of other running instances are not offered.
+    """
+    owner = w.doc.autosave_owner
+    for p in w.pending_autosaves():
+        owned = owner.holds(p)
+        if not owned and not owner.claim(p):
+            continue  # another instance took it meanwhile
+        origin = autosave_origin(p)
+        ans = QMessageBox.question(
+            w, "Restore autosaved job?",
+            f"winder found unsaved changes from an earlier session:\n{p.name}"
+            + (f" (job {origin})" if origin else " (never saved)") + "\n\nRestore them?",
+            QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.Discard | QMessageBox.StandardButton.Ignore,
+            QMessageBox.StandardButton.Yes)
+        if ans == QMessageBox.StandardButton.Yes:
+            w.restore_autosave(p)
+            return
+        if ans == QMessageBox.StandardButton.Discard:
+            try:
+                p.unlink(missing_ok=True)
+            except OSError as exc:
+                w._status(f"Could not delete the autosaved copy {p}: {exc}", error=True)
+        if not owned:
+            owner.release(p)
