@@ -25,7 +25,6 @@ Example::
 from __future__ import annotations
 
 import re
-import tomllib
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -33,7 +32,7 @@ import tomli_w
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from engine.errors import InputError
-from engine.fileio import atomic_write_text
+from engine.fileio import MAX_TOML_BYTES, atomic_write_text, loads_toml
 
 SCHEMA_VERSION = 1
 
@@ -243,7 +242,8 @@ class TimeLawSpec(_Model):
     """
 
     method: Literal["blocks", "tube", "dp", "toppra"] = "tube"
-    levels: Annotated[int, Field(ge=5, le=5000)] = 100
+    levels: Annotated[int, Field(ge=5, le=4096)] = 100
+    """M, speed levels per node (the engine packs the level index into 12 bits: at most 4096)."""
     penalty: NonNegMM = 0.5e-11
     tube_share: Annotated[float, Field(gt=0, lt=1)] = 0.1
     stop_percent: Annotated[float, Field(gt=0)] = 0.5
@@ -298,12 +298,7 @@ def _order(data: dict[str, Any]) -> dict[str, Any]:
 # ------------------------------------------------------------------------------------------------
 def parse_job(text: str, file: str | Path | None = None) -> Job:
     """Parse and validate TOML text; errors name ``file``, the line and the field."""
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        msg = str(exc)
-        m = re.search(r"line (\d+)", msg)
-        raise InputError(f"not valid TOML: {msg}", file=file, line=int(m.group(1)) if m else None) from None
+    data = loads_toml(text, file)  # size, nesting and every parser failure -> InputError with the line
     if "schema_version" in data and data["schema_version"] != SCHEMA_VERSION:
         raise InputError(
             f"schema_version {data['schema_version']!r} is not supported (this program reads {SCHEMA_VERSION})",
@@ -321,6 +316,8 @@ def load_job(path: str | Path) -> Job:
     """Read a job file (.toml)."""
     p = Path(path)
     try:
+        if p.stat().st_size > MAX_TOML_BYTES:
+            raise InputError(f"the job file is {p.stat().st_size} bytes (at most {MAX_TOML_BYTES})", file=p)
         raw = p.read_bytes()
     except FileNotFoundError:
         raise InputError("file not found", file=p) from None

@@ -56,6 +56,11 @@ MAX_COORD_MM = 1e7
 MIN_LENGTH_MM = 1e-3
 """Shortest winding zone accepted (1 µm)."""
 
+MAX_SPLINE_POINTS = 4000
+"""A profile with more points than this (a scanned or densely exported curve) is decimated before the
+spline is built: the spline through the kept points passes within :func:`decimation_tolerance_mm`
+of every point of the file (all later stages cost in proportion to the spline's points)."""
+
 # Profile points handed to the spline by the DXF/STEP importers: about this many along the zone.
 _PROFILE_POINTS = 1200
 # Spline segments up to this many points are exported exactly; denser ones are re-fitted.
@@ -108,6 +113,13 @@ def _mandrel_from_profile(
     if r.max() < MIN_LENGTH_MM:
         raise InputError(f"the largest radius is {r.max():.3g} mm (at least {MIN_LENGTH_MM:g} mm); check the units",
                          file=file, field="r")
+    decimated: dict[str, Any] | None = None
+    if len(z) > MAX_SPLINE_POINTS:
+        keep, err, tol = decimate_profile(z, r)
+        decimated = {"points_in_file": int(len(z)), "points_kept": int(keep.size), "tolerance_mm": tol,
+                     "max_deviation_mm": err}
+        z, r = z[keep], r[keep]
+        lines = [lines[i] for i in keep] if lines is not None else None
     _check_spline_off_axis(z, r, file=file, lines=lines)
     try:
         m = Mandrel.from_points(z, r, name=path.stem, source=source, file=file)
@@ -117,7 +129,52 @@ def _mandrel_from_profile(
         m.meta.update(meta)
     m.meta.setdefault("file", file)
     m.meta.setdefault("points", int(len(z)))
+    if decimated is not None:
+        m.meta["decimated"] = decimated
+        dev = decimated["max_deviation_mm"]
+        m.meta["note"] = (f"the profile's {decimated['points_in_file']} points were decimated to "
+                          f"{decimated['points_kept']}: the spline passes within {dev:.3g} mm of every point "
+                          f"(tolerance {decimated['tolerance_mm']:g} mm)")
     return m
+
+
+def decimation_tolerance_mm(z: FloatArray, r: FloatArray) -> float:
+    """Largest deviation allowed by :func:`decimate_profile`: 0.001 mm, or 1e-6 of the profile's size."""
+    return max(1e-3, 1e-6 * float(max(np.ptp(z), np.max(np.abs(r)))))
+
+
+def decimate_profile(z: FloatArray, r: FloatArray, tol_mm: float | None = None,
+                     max_points: int = 20 * MAX_SPLINE_POINTS) -> tuple[NDArray[np.int64], float, float]:
+    """Indices of a subset of the points whose cubic spline passes within ``tol_mm`` of all of them.
+
+    Greedy refinement: start from :data:`MAX_SPLINE_POINTS` / 4 points evenly spread, then add, in
+    every interval that deviates by more than ``tol_mm``, its worst point, until none does or
+    ``max_points`` are kept (noisy data).  Returns ``(indices, max deviation mm, tol_mm)``; the
+    end points are always kept.
+    """
+    from scipy.interpolate import CubicSpline
+
+    n = len(z)
+    tol = decimation_tolerance_mm(z, r) if tol_mm is None else float(tol_mm)
+    keep = np.unique(np.linspace(0, n - 1, min(n, MAX_SPLINE_POINTS // 4)).round().astype(np.int64))
+    err_max = math.inf
+    for _ in range(64):
+        spl = CubicSpline(z[keep], r[keep], bc_type="not-a-knot")
+        err = np.abs(spl(z) - r)
+        err_max = float(err.max())
+        if err_max <= tol or keep.size >= max_points:
+            break
+        seg = np.searchsorted(keep, np.arange(n), side="right") - 1
+        bad = err > tol
+        if not bad.any():
+            break
+        idx = np.flatnonzero(bad)
+        order = np.lexsort((-err[idx], seg[idx]))
+        first = np.ones(order.size, dtype=bool)
+        first[1:] = seg[idx][order][1:] != seg[idx][order][:-1]
+        add = idx[order][first]
+        keep = np.union1d(keep, add[: max(0, max_points - keep.size)])
+    return keep, err_max, tol
 
 
 def _check_spline_off_axis(z: FloatArray, r: FloatArray, *, file: str, lines: Sequence[int] | None) -> None:
@@ -821,8 +878,8 @@ def export_stl(mandrel: Mandrel, path: str | Path, tolerance_mm: float = 0.01, a
     ascii:
         Write ASCII STL instead of binary.
     """
-    if not (math.isfinite(tolerance_mm) and tolerance_mm > 0):
-        raise InputError(f"STL tolerance must be > 0 mm, got {tolerance_mm}", field="tolerance_mm")
+    if not (math.isfinite(tolerance_mm) and tolerance_mm >= 1e-4):
+        raise InputError(f"STL tolerance must be at least 0.0001 mm, got {tolerance_mm}", field="tolerance_mm")
     if not (math.isfinite(angular_tolerance_rad) and 0 < angular_tolerance_rad <= 1.0):
         raise InputError(f"STL angular tolerance must be in (0, 1] rad, got {angular_tolerance_rad}",
                          field="angular_tolerance_rad")
@@ -922,7 +979,7 @@ _PROBE_ANGLES_DEG = (37.0, 90.0, 127.0, 217.0, 270.0, 307.0)
 _PROBE_Z = 48  # heights probed per half-plane
 
 
-def load_step(path: str | Path) -> Mandrel:
+def load_step(path: str | Path, *, isolated: bool = True, timeout_s: float | None = None) -> Mandrel:
     """Read a solid of revolution from a STEP file and return a C2 spline mandrel of its outer profile.
 
     The axis is taken from the faces of revolution (cylinders, cones, tori, surfaces of revolution,
@@ -936,11 +993,16 @@ def load_step(path: str | Path) -> Mandrel:
     z is measured along the axis from the foot of the global origin, so a solid revolved about Z
     keeps its z coordinates.
 
+    The CAD kernel runs in a child process (``isolated``, :func:`engine.sandbox.run_isolated`) with
+    the memory budget and a time limit (``timeout_s``, default 120 s): a file that crashes it, loops
+    or allocates without bound is an :class:`InputError` naming the file, and the caller keeps running.
+
     Raises
     ------
     InputError
         Unreadable file, no solid or several solids, not a solid of revolution (which profiles
-        differ, by how much, where), a step in the profile.
+        differ, by how much, where), a step in the profile; the reader crashed, gave up after the
+        time limit or exceeded the memory budget on this file.
     """
     p = Path(path)
     file = str(p)
@@ -951,14 +1013,25 @@ def load_step(path: str | Path) -> Mandrel:
         raise InputError("not a STEP file: it does not start with 'ISO-10303-21;' (export the mandrel as STEP "
                          "AP203/AP214)", file=file)
     try:
-        solid = _read_step_solid(file)
-        axis_o, axis_d, how = _revolution_axis(solid)
-        z, r = _step_profile(solid, axis_o, axis_d, how)
+        if isolated:
+            from engine.sandbox import run_isolated
+
+            z, r, meta = run_isolated("engine.mandrel_io:_step_profile_of_file", file, what="the STEP reader",
+                                      file=file, timeout_s=timeout_s)
+        else:
+            z, r, meta = _step_profile_of_file(file)
     except InputError as exc:
         raise exc.at(file=file) from None
-    return _mandrel_from_profile(z, r, path=p, source="step",
-                                 meta={"axis_origin": axis_o.tolist(), "axis_direction": axis_d.tolist(),
-                                       "axis_from": how})
+    return _mandrel_from_profile(np.asarray(z, dtype=float), np.asarray(r, dtype=float), path=p, source="step",
+                                 meta=meta)
+
+
+def _step_profile_of_file(file: str) -> tuple[FloatArray, FloatArray, dict[str, Any]]:
+    """(z, r, meta) of the STEP solid in ``file``: every OCP call of :func:`load_step` (the sandboxed part)."""
+    solid = _read_step_solid(file)
+    axis_o, axis_d, how = _revolution_axis(solid)
+    z, r = _step_profile(solid, axis_o, axis_d, how)
+    return z, r, {"axis_origin": axis_o.tolist(), "axis_direction": axis_d.tolist(), "axis_from": how}
 
 
 def _read_step_solid(file: str) -> Any:

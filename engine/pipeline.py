@@ -281,6 +281,10 @@ def run_pipeline(
         job = job.replace(post={**job.post.model_dump(), "post": post_name})
     keys = stage_keys(job)
     jp = str(job_path) if job_path is not None else None
+    if STAGES.index(upto) >= STAGES.index("blocks"):
+        from engine.budget import check_post
+
+        check_post(job.post.min_block_time_s, file=jp)  # before the minutes of the stages ahead of it
     res = PipelineResult(job=job, job_path=jp, keys={})
     times: dict[str, float] = {}
     reused: list[str] = []
@@ -296,7 +300,10 @@ def run_pipeline(
             times[stage] = 0.0
         else:
             t0 = time.perf_counter()
-            res = _run_stage(res, stage, sub)
+            try:
+                res = _run_stage(res, stage, sub)
+            except InputError as exc:  # every message names the job file (and the field's line)
+                raise _locate(exc, jp) from None
             times[stage] = time.perf_counter() - t0
         res = replace(res, keys={**res.keys, stage: keys[stage]})
         done += w
@@ -305,6 +312,18 @@ def run_pipeline(
             state.partial(res)
         del i
     return replace(res, stage_times=times, reused=tuple(reused))
+
+
+def _locate(exc: InputError, job_path: str | None) -> InputError:
+    """``exc`` with the job file and the line of its field filled in (a profile file's own place wins)."""
+    if job_path is None or exc.location.file not in (None, job_path):
+        return exc
+    line = exc.location.line
+    if line is None and exc.location.field:
+        from engine.budget import field_line
+
+        line = field_line(job_path, exc.location.field)
+    return exc.at(file=job_path, line=line)
 
 
 _STAGE_FIELDS = {
@@ -352,6 +371,9 @@ def _run_stage(res: PipelineResult, stage: str, state: State | None) -> Pipeline
         return replace(res, machine=machine, axes=axes)
     if stage == "blocks":
         from engine.blocks import make_blocks, optimise_block_times
+        from engine.budget import check_post
+
+        check_post(job.post.min_block_time_s, file=jp)
 
         blocks = make_blocks(
             res.machine, res.axes, tol_mm=job.post.tolerance_mm, min_block_time=job.post.min_block_time_s,
@@ -903,4 +925,13 @@ def write_program(result: PipelineResult, path: str | Path, force: bool = False)
 
     if result.nc_text is None:
         raise InputError("no NC program was produced (the pipeline stopped before the NC stage)")
+    b = result.blocks
+    if b is not None and b.n:
+        t = np.asarray(b.time, dtype=float)
+        bad = np.flatnonzero(~(np.isfinite(t) & (t > 0)))
+        if bad.size or not np.all(np.isfinite(np.asarray(b.q, dtype=float))):
+            i = int(bad[0]) if bad.size else 0
+            raise InputError(f"not written: {bad.size} block(s) have a non-finite or zero duration (block {i}: "
+                             f"{t[i]!r} s), which would be an infinite or zero feed", file=path,
+                             field="post.min_block_time_s")
     return write_nc(path, result.nc_text, result.violations, force=force)

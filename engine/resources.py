@@ -9,9 +9,7 @@ to ``<bundle>/<package>/<module>.pyc``); new code should call :func:`resource_pa
 
 from __future__ import annotations
 
-import re
 import sys
-import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -52,19 +50,10 @@ def read_toml(path: str | Path, what: str = "file") -> dict[str, Any]:
     what : str
         What the file is, for the not-found message (``"machine template file"``).
     """
+    from engine.fileio import loads_toml, read_text_limited
+
     p = Path(path)
-    try:
-        with open(p, "rb") as fh:
-            return tomllib.load(fh)
-    except FileNotFoundError:
-        raise InputError(f"{what} not found", file=p) from None
-    except IsADirectoryError:
-        raise InputError(f"{what} expected, found a folder", file=p) from None
-    except UnicodeDecodeError:
-        raise InputError("not a UTF-8 text file", file=p) from None
-    except tomllib.TOMLDecodeError as exc:
-        m = re.search(r"line (\d+)", str(exc))
-        raise InputError(f"not valid TOML: {exc}", file=p, line=int(m.group(1)) if m else None) from None
+    return loads_toml(read_text_limited(p, what=what), file=p)
 
 
 def list_named(directory: Path) -> list[str]:

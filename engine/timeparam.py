@@ -371,18 +371,15 @@ def limits_from_toml(path: str | Path) -> TimeLimits:
 
 def load_path_npz(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Read ``s`` (N,), ``X``, ``dX``, ``ddX`` (N, p) from an ``.npz`` file."""
+    from engine.fileio import load_npz_arrays
+
     path = Path(path)
+    arrs = load_npz_arrays(path, {"s": 1, "X": 2, "dX": 2, "ddX": 2})
     try:
-        with np.load(path, allow_pickle=False) as z:
-            missing = [k for k in ("s", "X", "dX", "ddX") if k not in z]
-            if missing:
-                raise InputError(f"arrays {missing} missing (has {sorted(z.files)})", file=path)
-            return (np.asarray(z["s"], float), np.asarray(z["X"], float),
-                    np.asarray(z["dX"], float), np.asarray(z["ddX"], float))
-    except FileNotFoundError:
-        raise InputError("file not found", file=path) from None
-    except (OSError, ValueError) as exc:
-        raise InputError(f"not a readable .npz file: {exc}", file=path) from None
+        s, X, dX, ddX = _validate(arrs["s"], arrs["X"], arrs["dX"], arrs["ddX"], None)
+    except InputError as exc:
+        raise exc.at(file=path) from None
+    return s, X, dX, ddX
 
 
 # --------------------------------------------------------------------------------------------------
@@ -417,7 +414,7 @@ class _Problem:
     point_nodes: list[tuple[TechPoint, np.ndarray]]
 
 
-def _validate(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits) -> tuple[np.ndarray, ...]:
+def _validate(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits | None) -> tuple[np.ndarray, ...]:
     s = np.asarray(path_s, dtype=float)
     if s.ndim != 1 or s.size < 2:
         raise InputError(f"s must be a 1-D array of at least 2 values, got shape {s.shape}", field="s")
@@ -439,6 +436,8 @@ def _validate(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits) -> tup
     if not np.all(np.isfinite(s)) or np.any(np.diff(s) <= 0):
         i = int(np.argmax(~(np.diff(s) > 0)))
         raise InputError(f"s must increase strictly; s[{i}] = {s[i]} >= s[{i + 1}] = {s[i + 1]}", field="s")
+    if limits is None:  # the arrays alone (load_path_npz)
+        return s, arrs[0], arrs[1], arrs[2]
     if len(limits.v_max) != p or len(limits.a_max) != p:
         raise InputError(f"the path has p = {p} coordinates but v_max has {len(limits.v_max)} and "
                          f"a_max has {len(limits.a_max)} values", field="v_max")

@@ -729,6 +729,9 @@ def winding_line(
     if b >= circ:
         raise _err(f"band width {b:g} mm is wider than the largest circumference of the mandrel ({circ:.6g} mm)",
                    "band.width_mm", ctx)
+    from engine import budget
+
+    budget.check_winding_spec(spec, float(mandrel.r_max), b, ctx=ctx)  # sizes before work
     if state is not None:
         state.progress(0.0, "winding line: Clairaut function")
     pl = solve_pass(mandrel, b, spec, ctx, state)
@@ -1027,6 +1030,10 @@ def winding_line_for_job(job: Any, job_path: str | Path | None = None, state: An
 
     mandrel = build_mandrel(job, job_path)
     try:
+        from engine import budget
+
+        budget.check_winding_spec(job.winding, float(mandrel.r_max), job.band.width_mm, job.band.thickness_mm,
+                                  ctx={"file": job_path})
         return winding_line(mandrel, job.band.width_mm, job.band.friction, job.winding, state,
                             _ctx={"file": job_path, "job": True})
     except InputError as exc:

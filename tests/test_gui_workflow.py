@@ -152,6 +152,8 @@ def test_steps_pages_and_units(pipe_window) -> None:
 
 def test_pipe_workflow(pipe_window, tmp_path, monkeypatch) -> None:
     w = pipe_window
+    w.payout_panel.set_value("payout.law", "parallel")  # the example uses min-range; this test checks R
+    assert w.wait_idle() and w.job.payout.law == "parallel"
     # edit the mandrel, then run
     w.mandrel_panel.set_value("radius_mm", 70)
     assert w.wait_idle()

@@ -42,6 +42,9 @@ def build_parser() -> argparse.ArgumentParser:
     for mod in _subcommand_modules():
         p = sub.add_parser(mod.NAME, help=mod.HELP, description=mod.HELP)
         mod.add_arguments(p)
+        p.add_argument("--max-memory", metavar="SIZE", default=None,
+                       help="memory budget of the run, e.g. 8G (default 4G, or $WINDER_MAX_MEMORY); larger jobs "
+                            "are refused before they start")
         p.set_defaults(_run=mod.run)
     return parser
 
@@ -65,14 +68,60 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not getattr(args, "_run", None):
         parser.print_help()
         return 2
+    import warnings
+
+    from engine import budget
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            if getattr(args, "max_memory", None) is not None:
+                budget.set_max_memory(budget.parse_size(args.max_memory))
+            rc = int(args._run(args) or 0)
+        except InputError as exc:
+            print(f"winder {args.command}: error: {exc}", file=sys.stderr)
+            rc = 2
+        except KeyboardInterrupt:
+            print("winder: interrupted", file=sys.stderr)
+            rc = 130
+        except BrokenPipeError:
+            rc = _broken_pipe()
+        except MemoryError:
+            print(f"winder {args.command}: error: out of memory; the job is larger than this machine can hold "
+                  f"(budget {budget.fmt_bytes(budget.max_memory_bytes())}); lower the number of circuits, layers "
+                  "or points", file=sys.stderr)
+            rc = 2
+        finally:
+            budget.set_max_memory(None)
+    if rc in (0, 1):  # after an input error the message says it all
+        _report_warnings(args.command, caught)
+    return rc
+
+
+def _broken_pipe() -> int:
+    """The reader of stdout went away (``winder ... | head -1``): end quietly, as other tools do."""
+    import os
+
     try:
-        return int(args._run(args) or 0)
-    except InputError as exc:
-        print(f"winder {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("winder: interrupted", file=sys.stderr)
-        return 130
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # the interpreter's final flush must not fail again
+    except (OSError, ValueError):
+        pass
+    return 0
+
+
+def _report_warnings(command: str, caught: list[Any]) -> None:
+    """Warnings are messages: one line each (not Python's file:line form), repeated ones once."""
+    seen: set[str] = set()
+    for w in caught:
+        text = str(w.message).strip().splitlines()[0] if str(w.message).strip() else w.category.__name__
+        if text in seen:
+            continue
+        seen.add(text)
+        try:
+            print(f"winder {command}: note: numerical warning ({w.category.__name__}): {text}", file=sys.stderr)
+        except (OSError, ValueError):
+            return
 
 
 def _json_default(obj: Any) -> Any:

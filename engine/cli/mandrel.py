@@ -37,13 +37,15 @@ def load_any_mandrel(path: str | Path) -> Any:
 def run(args: argparse.Namespace) -> int:
     from engine.cli import dump_json
 
-    mandrel = load_any_mandrel(args.file)
     for opt, suffixes in (("step", {".step", ".stp"}), ("stl", {".stl"})):
         out = getattr(args, opt)
         if out and Path(out).suffix.lower() not in suffixes:
             raise InputError(f"--{opt} needs a file ending in {' or '.join(sorted(suffixes))}", file=out)
-        if out and not Path(out).resolve().parent.is_dir():
-            raise InputError("the output folder does not exist", file=out)
+        if out:
+            from engine.fileio import check_output_path
+
+            check_output_path(out, opt.upper())
+    mandrel = load_any_mandrel(args.file)
     if args.step or args.stl:
         from engine import mandrel_io
 
@@ -52,6 +54,8 @@ def run(args: argparse.Namespace) -> int:
         if args.stl:
             mandrel_io.export_stl(mandrel, args.stl, tolerance_mm=args.stl_tolerance)
     summary = mandrel.summary()
+    if mandrel.meta.get("decimated"):
+        summary["decimated"] = mandrel.meta["decimated"]
     if args.json:
         dump_json(summary)
     else:
@@ -60,6 +64,8 @@ def run(args: argparse.Namespace) -> int:
               f"{summary['r_max']:.3f} mm")
         print(f"  pole radii: {summary['pole_radii'][0]:.3f}, {summary['pole_radii'][1]:.3f} mm")
         print(f"  area {summary['area_mm2']:.1f} mm2, volume {summary['volume_mm3']:.1f} mm3")
+        if mandrel.meta.get("note"):
+            print(f"  note: {mandrel.meta['note']}")
         zones = summary["concave_zones"] or "none"
         print(f"  concave zones: {zones}")
         for opt in ("step", "stl"):

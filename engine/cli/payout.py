@@ -47,8 +47,10 @@ def run(args: argparse.Namespace) -> int:
     from engine.winding import winding_line_for_job
 
     path = Path(args.job)
-    if args.csv and not Path(args.csv).resolve().parent.is_dir():
-        raise InputError("the output folder does not exist", file=args.csv)
+    if args.csv:
+        from engine.fileio import check_output_path
+
+        check_output_path(args.csv, "CSV")
     job = load_job(path)
     upd: dict[str, Any] = {}
     if args.k is not None:

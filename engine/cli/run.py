@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from pathlib import Path
+from typing import Any
 
-from engine.errors import InfeasibleError, InputError
+from engine.errors import InfeasibleError
 
 NAME = "run"
 HELP = "Run the whole pipeline (mandrel -> line -> eye -> axes -> blocks -> NC) and write the NC program."
@@ -22,23 +22,45 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bar, no stage times")
 
 
+def process_refusals(result: Any) -> list[str]:
+    """Why the process itself fails, as ``winder trajectory`` (slip, bridging) and ``winder payout``
+    (an infeasible eye path) report it with exit code 1; empty when it does not."""
+    from engine.pipeline import _payout_warnings
+
+    out: list[str] = []
+    line = result.line
+    if line is not None:
+        for z0, z1 in getattr(line, "slips", ()) or ():
+            out.append(f"the band slips (|λ| up to {line.max_abs_lambda:.4g} > μ = {line.mu:g}) for z in "
+                       f"[{z0:.2f}, {z1:.2f}] mm")
+        for z0, z1 in getattr(line, "bridging", ()) or ():
+            out.append(f"the band bridges (does not lie on the mandrel) for z in [{z0:.2f}, {z1:.2f}] mm")
+    eye = result.eye_circuit
+    if eye is not None and not eye.feasible:
+        out += _payout_warnings(eye)
+    return out
+
+
 def run(args: argparse.Namespace) -> int:
     t_start = time.perf_counter()
     from engine.cli import dump_json
-    from engine.fileio import atomic_write_text
+    from engine.fileio import atomic_write_text, check_output_path
     from engine.job import load_job
     from engine.pipeline import run_pipeline, write_program
     from engine.state import CliState
 
-    out = Path(args.output)
-    if not out.resolve().parent.is_dir():
-        raise InputError("the output folder does not exist", file=out)
+    out = check_output_path(args.output, "NC program")
+    if args.report:
+        check_output_path(args.report, "report")
     job = load_job(args.job)
     result = run_pipeline(job, args.job, post_name=args.post, state=CliState(quiet=args.quiet))
     report = result.report()
     report["output"] = str(out)
     rc = 0
     try:
+        refusals = process_refusals(result)  # what `trajectory` / `payout` report as failing (exit 1)
+        if refusals and not args.force:
+            raise InfeasibleError(f"not written: {'; '.join(refusals)}. Use --force to write it anyway.", file=out)
         write_program(result, out, force=args.force)
         report["written"] = True
     except InfeasibleError as exc:

@@ -24,9 +24,12 @@ import numpy as np
 
 from engine.cli import dump_json
 from engine.errors import InputError
-from engine.fileio import atomic_write_bytes
+from engine.fileio import atomic_write_bytes, check_output_path
 from engine.state import CliState
 from engine.timeparam import METHODS, limits_from_toml, load_path_npz, parametrize
+
+DP_BYTES_PER_CELL = 64
+"""Memory of the DP per node and speed level (bytes; an upper estimate: costs, predecessors, caps)."""
 
 NAME = "timeparam"
 HELP = "Time law of a path under axis/technological limits: DP + tube (seed 003), DP or TOPP-RA"
@@ -44,6 +47,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.npz_out:
+        check_output_path(args.npz_out, ".npz")
     if args.example:
         from engine.timeparam_example import EXAMPLE_LIMITS, example_path
 
@@ -60,7 +65,18 @@ def run(args: argparse.Namespace) -> int:
         if not 2 <= args.levels <= 4096:
             raise InputError(f"must be in 2..4096, got {args.levels}", field="--levels")
         limits = replace(limits, levels=args.levels)
-    law = parametrize(s, X, dX, ddX, limits, method=args.method, state=CliState(quiet=args.json))
+    from engine import budget
+
+    budget.check(budget.Estimate("DP cells", float(s.size) * float(limits.levels), DP_BYTES_PER_CELL,
+                                 field="levels", detail=f"{s.size} nodes × {limits.levels} speed levels"),
+                 file=args.limits)
+    try:
+        law = parametrize(s, X, dX, ddX, limits, method=args.method, state=CliState(quiet=args.json))
+    except InputError as exc:
+        if args.example or exc.location.file:
+            raise
+        where = args.path if exc.location.field in ("s", "X", "dX", "ddX") else args.limits
+        raise exc.at(file=where) from None
     if args.npz_out:
         buf = io.BytesIO()
         its = law.iterations

@@ -42,6 +42,10 @@ def run(args: argparse.Namespace) -> int:
     from engine.state import CliState
     from engine.winding import winding_line_for_job
 
+    if args.csv:
+        from engine.fileio import check_output_path
+
+        check_output_path(args.csv, "CSV")
     job = load_job(args.job)
     line = winding_line_for_job(job, args.job, state=CliState(quiet=args.json))
     if args.csv:

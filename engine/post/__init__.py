@@ -27,7 +27,8 @@ def _registry() -> dict[str, type[PostProcessor]]:
             continue
         mod = importlib.import_module(f"{__name__}.{info.name}")
         for obj in vars(mod).values():
-            if isinstance(obj, type) and issubclass(obj, PostProcessor) and obj.__module__ == mod.__name__:
+            if (isinstance(obj, type) and issubclass(obj, PostProcessor) and obj.__module__ == mod.__name__
+                    and obj.name):  # a shared base class (e.g. gcode's) has no name and is no dialect
                 reg[obj.name] = obj
     return reg
 

@@ -1,0 +1,238 @@
+"""Budgets before work: estimate a stage's size from the job, refuse what exceeds the budget.
+
+Every stage that allocates in proportion to a number the user typed (circuits, layers, pattern p,
+dwell, band width, points per pass, ...) first calls this module with an estimate of its size.  An
+estimate above the budget is an :class:`~engine.errors.InputError` that names the field, the
+estimate and the budget, *before* anything is allocated; a physically absurd value (a band narrower
+than a fibre, a dwell of many turns) is an input error whatever the budget.
+
+The budget
+----------
+One number, the memory a run may use (bytes).  Default :data:`DEFAULT_MAX_MEMORY_BYTES` = 4 GiB,
+sized for the 2-core, 8–16 GB class of machine the program is tested on (it leaves room for the GUI,
+the 3D view and the system).  Raise it with ``winder --max-memory 12G ...`` (any sub-command), the
+environment variable ``WINDER_MAX_MEMORY`` or, in the desktop application, Settings → Memory budget
+(:func:`set_max_memory`).
+
+Stage estimates (measured, see ``benchmarks/bench_budget.py``): the whole pipeline keeps about
+:data:`BYTES_PER_LINE_POINT` bytes per point of the winding line (line, eye path, axes, blocks, time
+law and NC text together); the fixed cost of the interpreter and libraries is not counted.
+
+Other stages call :func:`check` with their own :class:`Estimate` (``count`` items × ``bytes_each``),
+so new layer kinds use the same mechanism::
+
+    from engine import budget
+    budget.check(budget.Estimate("hoop layer points", n, budget.BYTES_PER_LINE_POINT, field="layer[2].turns"),
+                 file=job_path)
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from engine.errors import InputError
+
+DEFAULT_MAX_MEMORY_BYTES = 4 * 2**30
+"""Default memory budget of one run (4 GiB)."""
+
+MIN_MAX_MEMORY_BYTES = 64 * 2**20
+"""Smallest budget that can be set (64 MiB)."""
+
+BYTES_PER_LINE_POINT = 1000
+"""Memory the pipeline keeps per point of the winding line, all stages together (bytes; measured
+about 700 on the example vessel with the tube time law, rounded up)."""
+
+FIBRE_DIAMETER_MM = 0.005
+"""The thinnest reinforcing fibre (carbon, about 5 µm): no band is narrower, no band thinner, and
+neighbouring circuits of a pattern are never closer (mm)."""
+
+MAX_DWELL_DEG = 1080.0
+"""Largest dwell (extra mandrel rotation) at one turnaround: three turns (deg)."""
+
+MAX_MIN_BLOCK_TIME_S = 10.0
+"""Largest minimal block time ``[post].min_block_time_s`` (s): a block lasting longer than this at
+its shortest is not a winding program."""
+
+MAX_RADIUS_MM = 1e5
+"""Largest mandrel radius (mm): 100 m; anything larger is a unit mistake."""
+
+_ENV = "WINDER_MAX_MEMORY"
+_override: int | None = None
+
+
+# ------------------------------------------------------------------------------------------------
+# The budget
+# ------------------------------------------------------------------------------------------------
+_SIZE_RE = re.compile(r"^\s*([0-9]*\.?[0-9]+(?:[eE][+-]?[0-9]+)?)\s*([kKmMgGtT]?)(i?[bB])?\s*$")
+_UNITS = {"": 1, "k": 2**10, "m": 2**20, "g": 2**30, "t": 2**40}
+
+
+def parse_size(text: str, field: str = "--max-memory") -> int:
+    """Bytes from ``"4G"``, ``"512M"``, ``"12GB"``, ``"1.5g"`` or a plain number of bytes (binary units)."""
+    m = _SIZE_RE.match(str(text))
+    if not m:
+        raise InputError(f"{text!r} is not a size; use e.g. 4G, 512M or 12GB", field=field)
+    value = float(m.group(1)) * _UNITS[m.group(2).lower()]
+    if not math.isfinite(value) or value < MIN_MAX_MEMORY_BYTES:
+        raise InputError(f"{text!r} is below the smallest budget {fmt_bytes(MIN_MAX_MEMORY_BYTES)}", field=field)
+    if value > 2**50:
+        raise InputError(f"{text!r} is more memory than any machine has", field=field)
+    return int(value)
+
+
+def set_max_memory(n_bytes: int | None) -> None:
+    """Set the memory budget of this process (``None``: back to the environment / the default)."""
+    global _override
+    if n_bytes is not None and n_bytes < MIN_MAX_MEMORY_BYTES:
+        raise InputError(f"memory budget {fmt_bytes(n_bytes)} is below {fmt_bytes(MIN_MAX_MEMORY_BYTES)}",
+                         field="max_memory")
+    _override = None if n_bytes is None else int(n_bytes)
+
+
+def max_memory_bytes() -> int:
+    """The memory budget in force: :func:`set_max_memory`, else ``$WINDER_MAX_MEMORY``, else the default."""
+    if _override is not None:
+        return _override
+    env = os.environ.get(_ENV)
+    if env:
+        try:
+            return parse_size(env, field=_ENV)
+        except InputError:
+            pass  # a bad environment value must not break every command; the default applies
+    return DEFAULT_MAX_MEMORY_BYTES
+
+
+def fmt_bytes(n: float) -> str:
+    """``1.5 GB`` style (binary units)."""
+    for unit, f in (("TB", 2**40), ("GB", 2**30), ("MB", 2**20), ("kB", 2**10)):
+        if n >= f:
+            return f"{n / f:.3g} {unit}"
+    return f"{n:.0f} B"
+
+
+def _fmt_count(n: float) -> str:
+    return f"{n:,.0f}" if n < 1e12 else f"{n:.3g}"
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """Size of one stage's work: ``count`` items of ``bytes_each`` bytes.
+
+    ``what`` names the items (``"winding-line points"``), ``field`` the job field that drives the
+    size, ``detail`` how the count follows from the job (shown in the message).
+    """
+
+    what: str
+    count: float
+    bytes_each: float
+    field: str | None = None
+    detail: str = ""
+
+    @property
+    def bytes(self) -> float:
+        """Estimated memory (bytes)."""
+        return float(self.count) * float(self.bytes_each)
+
+
+def check(est: Estimate, *, file: str | Path | None = None, line: int | None = None,
+          budget_bytes: int | None = None) -> None:
+    """Raise :class:`InputError` (naming ``est.field``) when ``est`` exceeds the memory budget."""
+    if line is None and file is not None and est.field:
+        line = field_line(file, est.field)
+    limit = max_memory_bytes() if budget_bytes is None else int(budget_bytes)
+    need = est.bytes
+    if not (math.isfinite(need) and need <= limit):
+        size = fmt_bytes(need) if math.isfinite(need) and need < 2**70 else "more than any machine has"
+        detail = f" ({est.detail})" if est.detail else ""
+        raise InputError(
+            f"too large: about {_fmt_count(est.count)} {est.what}{detail} would need about {size} of memory; "
+            f"the memory budget is {fmt_bytes(limit)} (raise it with --max-memory or Settings → Memory budget "
+            "if the machine has the memory)", file=file, line=line, field=est.field)
+
+
+# ------------------------------------------------------------------------------------------------
+# The winding line (engine.winding), the size every later stage follows
+# ------------------------------------------------------------------------------------------------
+def dwell_points(dwell_deg: float) -> int:
+    """Points of one dwell arc (engine.winding: one per 2°, at least 2)."""
+    return 0 if dwell_deg <= 0 else max(2, math.ceil(dwell_deg / 2.0))
+
+
+def check_winding_spec(spec: Any, r_max_mm: float, band_width_mm: float, thickness_mm: float | None = None,
+                       ctx: dict[str, Any] | None = None) -> Estimate:
+    """Physical sanity and size of the winding line of ``spec`` (:class:`engine.job.WindingSpec`).
+
+    Raises :class:`InputError` (with ``ctx['file']`` and the field) for a band narrower or thinner
+    than a fibre, a dwell beyond :data:`MAX_DWELL_DEG`, a pattern whose neighbouring circuits would be
+    closer than a fibre, a radius beyond :data:`MAX_RADIUS_MM`, or a line whose estimated memory
+    exceeds the budget.  Returns the estimate.
+    """
+    file = (ctx or {}).get("file")
+    b = float(band_width_mm)
+    if not b >= FIBRE_DIAMETER_MM:
+        raise InputError(f"band width {b:g} mm is narrower than a single fibre ({FIBRE_DIAMETER_MM:g} mm); "
+                         "check the units", file=file, field="band.width_mm")
+    if thickness_mm is not None and not float(thickness_mm) >= FIBRE_DIAMETER_MM:
+        raise InputError(f"band thickness {thickness_mm:g} mm is thinner than a single fibre "
+                         f"({FIBRE_DIAMETER_MM:g} mm); check the units", file=file, field="band.thickness_mm")
+    if not r_max_mm <= MAX_RADIUS_MM:
+        raise InputError(f"the mandrel's largest radius {r_max_mm:g} mm is beyond any winding machine "
+                         f"({MAX_RADIUS_MM:g} mm); check the units", file=file, field="mandrel")
+    for side, d in zip(("left", "right"), spec.dwell_deg, strict=True):
+        if not float(d) <= MAX_DWELL_DEG:
+            raise InputError(f"the {side} dwell {float(d):g}° is more than {MAX_DWELL_DEG / 360:g} turns "
+                             f"({MAX_DWELL_DEG:g}°)", file=file, field="winding.dwell_deg")
+    circ = 2.0 * math.pi * r_max_mm
+    p_max = max(1, int(circ / FIBRE_DIAMETER_MM))
+    p_eff, p_field = (spec.pattern_p, "winding.pattern_p") if spec.pattern_p is not None else \
+        (spec.circuits, "winding.circuits")
+    if p_eff is not None and p_eff > p_max:
+        raise InputError(f"{p_field.split('.')[1]} = {p_eff}: the circuits of the pattern would lie {circ / p_eff:.3g} "
+                         f"mm apart on the largest circumference ({circ:.6g} mm), closer than a fibre "
+                         f"({FIBRE_DIAMETER_MM:g} mm); at most {p_max}", file=file, field=p_field)
+    n_full = max(1, math.ceil(circ / b - 1e-9))  # circuits for full coverage at most (cos β <= 1)
+    if spec.circuits is not None:
+        per_layer, fld, why = int(spec.circuits), "winding.circuits", f"circuits = {spec.circuits}"
+    elif spec.pattern_p is not None:
+        per_layer, fld, why = int(spec.pattern_p), "winding.pattern_p", f"pattern_p = {spec.pattern_p}"
+    else:
+        per_layer, fld = n_full, "band.width_mm"
+        why = f"up to {n_full} circuits to cover radius {r_max_mm:.6g} mm with a {b:g} mm band"
+    layers = int(spec.layers)
+    if layers > 1 and layers >= per_layer:
+        fld = "winding.layers"
+    per_circuit = 2 * int(spec.points_per_pass) + sum(dwell_points(float(d) + 180.0) for d in spec.dwell_deg)
+    count = float(per_layer) * float(layers) * float(per_circuit)
+    est = Estimate("winding-line points", count, BYTES_PER_LINE_POINT, field=fld,
+                   detail=f"{why} × {layers} layer{'s' * (layers != 1)} × about {per_circuit} points a circuit")
+    check(est, file=file)
+    return est
+
+
+def field_line(file: str | Path, field: str) -> int | None:
+    """Line of ``field`` (dotted, e.g. ``"winding.circuits"``) in the job file ``file``, if it is one."""
+    p = Path(file)
+    if p.suffix.lower() != ".toml":
+        return None
+    from engine.job import _find_line
+
+    try:
+        text = p.read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return None
+    loc = tuple(x for x in field.replace("]", "").replace("[", ".").split(".") if x and not x.isdigit())
+    return _find_line(text, loc)
+
+
+def check_post(min_block_time_s: float, *, file: str | Path | None = None) -> None:
+    """A minimal block time beyond :data:`MAX_MIN_BLOCK_TIME_S` is an input error."""
+    if not float(min_block_time_s) <= MAX_MIN_BLOCK_TIME_S:
+        raise InputError(f"min_block_time_s = {min_block_time_s:g} s: a block of at least that long is not a "
+                         f"winding program (at most {MAX_MIN_BLOCK_TIME_S:g} s)", file=file,
+                         line=field_line(file, "post.min_block_time_s") if file is not None else None,
+                         field="post.min_block_time_s")
