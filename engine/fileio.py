@@ -286,7 +286,26 @@ def load_npz_arrays(path: str | Path, ndims: dict[str, int], max_bytes: int | No
     try:
         with zipfile.ZipFile(p) as zf:
             total = sum(i.file_size for i in zf.infolist())
-    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
+            for name in ndims:  # the size each array header declares, before numpy allocates it
+                if f"{name}.npy" not in zf.namelist():
+                    continue
+                with zf.open(f"{name}.npy") as fh:
+                    version = np.lib.format.read_magic(fh)
+                    if version == (1, 0):
+                        shape, _fortran, dtype = np.lib.format.read_array_header_1_0(fh)
+                    elif version == (2, 0):
+                        shape, _fortran, dtype = np.lib.format.read_array_header_2_0(fh)
+                    else:
+                        raise InputError(f"array {name!r}: .npy format version {version} is not supported", file=p,
+                                         field=name)
+                declared = float(np.prod([float(x) for x in shape])) * dtype.itemsize
+                if declared > limit:
+                    raise InputError(f"array {name!r} declares shape {shape} ({budget.fmt_bytes(declared)}), more "
+                                     f"than {budget.fmt_bytes(limit)} (a quarter of the memory budget)", file=p,
+                                     field=name)
+    except InputError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - zip and npy headers of arbitrary bytes
         raise InputError(f"not a readable .npz file (a zip archive of arrays): {exc}", file=p) from None
     if total > limit:
         raise InputError(f"the arrays expand to {budget.fmt_bytes(total)}, more than {budget.fmt_bytes(limit)} "

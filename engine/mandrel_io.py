@@ -979,6 +979,10 @@ _PROBE_ANGLES_DEG = (37.0, 90.0, 127.0, 217.0, 270.0, 307.0)
 _PROBE_Z = 48  # heights probed per half-plane
 
 
+STEP_READER = "engine.mandrel_io:_step_profile_of_file"
+"""The function :func:`load_step` runs in the sandboxed child process (``module:function``)."""
+
+
 def load_step(path: str | Path, *, isolated: bool = True, timeout_s: float | None = None) -> Mandrel:
     """Read a solid of revolution from a STEP file and return a C2 spline mandrel of its outer profile.
 
@@ -1016,8 +1020,7 @@ def load_step(path: str | Path, *, isolated: bool = True, timeout_s: float | Non
         if isolated:
             from engine.sandbox import run_isolated
 
-            z, r, meta = run_isolated("engine.mandrel_io:_step_profile_of_file", file, what="the STEP reader",
-                                      file=file, timeout_s=timeout_s)
+            z, r, meta = run_isolated(STEP_READER, file, what="the STEP reader", file=file, timeout_s=timeout_s)
         else:
             z, r, meta = _step_profile_of_file(file)
     except InputError as exc:
