@@ -65,6 +65,24 @@ class Segment:
         """r, dr/dz, d2r/dz2 at ``z`` (mm, -, 1/mm)."""
         raise NotImplementedError
 
+    def breakpoints(self) -> FloatArray:
+        """Interior z (mm) where r'' has a kink or an extremum: nodes for the line integration and the
+        no-bridging check (a knot of a spline, the crest of an arc, a zero of r''').
+
+        Generic: local extrema of r'' on 2049 samples, refined by a parabola through three samples.
+        """
+        z = np.linspace(self.z0, self.z1, 2049)
+        d2 = self.eval(z)[2]
+        d = np.diff(d2)
+        k = np.flatnonzero(np.sign(d[:-1]) * np.sign(d[1:]) < 0) + 1
+        if not k.size:
+            return np.zeros(0)
+        h = z[1] - z[0]
+        den = d2[k - 1] - 2.0 * d2[k] + d2[k + 1]
+        off = np.divide(0.5 * (d2[k - 1] - d2[k + 1]), den, out=np.zeros(k.size), where=den != 0)
+        out = z[k] + np.clip(off, -1.0, 1.0) * h
+        return out[(out > self.z0) & (out < self.z1) & np.isfinite(out)]
+
     def param_nodes(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         """Quadrature in a smooth parameter: (r, dz/dp, ds/dp, weights) for area and volume."""
         z, w = _gauss(self.z0, self.z1)
@@ -88,6 +106,9 @@ class LineSegment(Segment):
         k = (self.r1 - self.r0) / (self.z1 - self.z0)
         return self.r0 + k * (z - self.z0), np.full_like(z, k), np.zeros_like(z)
 
+    def breakpoints(self) -> FloatArray:
+        return np.zeros(0)
+
 
 @dataclass(frozen=True)
 class SmoothStepSegment(Segment):
@@ -108,6 +129,11 @@ class SmoothStepSegment(Segment):
         dp = 30.0 * u**2 * (1.0 - u) ** 2
         d2p = 60.0 * u * (1.0 - u) * (1.0 - 2.0 * u)
         return self.r0 + d * p, d * dp / h, d * d2p / (h * h)
+
+    def breakpoints(self) -> FloatArray:
+        # the zeros of P''' = 60(1 − 6u + 6u²): u = 1/2 ∓ sqrt(3)/6
+        u = np.array([0.5 - math.sqrt(3.0) / 6.0, 0.5 + math.sqrt(3.0) / 6.0])
+        return self.z0 + u * (self.z1 - self.z0)
 
 
 @dataclass(frozen=True)
@@ -132,6 +158,9 @@ class ArcSegment(Segment):
             dr = -sd * u / q
             d2r = -sd * (self.a * self.a) / (q * q * q)
         return self.rc + sd * q, dr, d2r
+
+    def breakpoints(self) -> FloatArray:
+        return np.array([self.zc]) if self.z0 < self.zc < self.z1 else np.zeros(0)
 
     def _angles(self) -> tuple[float, float]:
         t0 = math.acos(np.clip((self.z0 - self.zc) / self.a, -1, 1))
@@ -167,6 +196,9 @@ class EllipseSegment(Segment):
             dr = -self.b * u / (self.a * q)
             d2r = -self.b / (self.a * self.a * q * q * q)
         return self.rc + self.b * q, dr, d2r
+
+    def breakpoints(self) -> FloatArray:
+        return np.array([self.zc]) if self.z0 < self.zc < self.z1 else np.zeros(0)
 
     def param_nodes(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         t0 = math.acos(np.clip((self.z0 - self.zc) / self.a, -1, 1))
@@ -208,9 +240,9 @@ class SplineSegment(Segment):
             bc = ("not-a-knot" if s0 is None else (1, s0), "not-a-knot" if s1 is None else (1, s1))
         return CubicSpline(np.asarray(self.z_pts), np.asarray(self.r_pts), bc_type=bc)
 
-    def knots(self) -> FloatArray:
-        """The spline's knots (mm): r'' is linear between them and has its extrema there."""
-        return np.asarray(self.z_pts, dtype=float)
+    def breakpoints(self) -> FloatArray:
+        """The interior knots (mm): r'' is linear between them, so its kinks and extrema are there."""
+        return np.asarray(self.z_pts[1:-1], dtype=float)
 
     def eval(self, z: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         s = self._spline
@@ -419,6 +451,10 @@ class Mandrel:
             if m.any():
                 r[m], dr[m], d2r[m] = seg.eval(zz[m])
         return r.reshape(shape), dr.reshape(shape), d2r.reshape(shape)
+
+    def breakpoints(self) -> FloatArray:
+        """Interior z (mm) of knots and r'' extrema of every segment (not the joints), increasing."""
+        return np.unique(np.concatenate([s.breakpoints() for s in self.segments]))
 
     def r(self, z: ArrayLike) -> FloatArray:
         """Radius r(z) in mm."""

@@ -463,7 +463,9 @@ def solve_pass(
             Cp, lp = wc.tube_path(grid, tb, lam_star)
             C[i0 : i1 + 1] = Cp[i0 : i1 + 1]
             lam[i0:i1] = lp[i0:i1]
-            touch = np.flatnonzero(C[inner] >= hi[inner] * (1.0 - 1e-7)) + inner.start
+            # a node held on the upper bound (C = r, β = 90°) inside the pass; nodes next to a turnaround come
+            # within 1e-7·r of r by themselves at fine grids (r − C ∝ distance), they are not touches
+            touch = np.flatnonzero(C[inner] >= hi[inner] * (1.0 - 1e-12)) + inner.start
             if touch.size:
                 k = int(touch[0])
                 raise _err(
@@ -480,8 +482,7 @@ def solve_pass(
         v, s, _ = wc.twist(grid, C, lam)
     except ValueError as exc:
         raise _err(f"the winding line is not realisable: {exc}", "winding.mode", ctx, InfeasibleError) from None
-    F = _bracket(grid, C)
-    bridging = _ranges(grid.z, F < -1e-9 * np.maximum(1.0, rn))
+    bridging = _bridging(grid, C, lam)
     return _finish(grid, C, lam, v, s, mode, pieces, bridging, notes)
 
 
@@ -544,11 +545,48 @@ def _geodesic_pass(
         v, s, _ = wc.twist(grid, C, lam)
     except ValueError as exc:
         raise _err(f"the geodesic is not realisable: {exc}", fld, ctx, InfeasibleError) from None
-    rn, _, _ = wc.node_geometry(grid)
-    F = _bracket(grid, C)
-    bridging = _ranges(grid.z, F < -1e-9 * np.maximum(1.0, rn))
+    bridging = _bridging(grid, C, lam)
     pieces = [{"z_from": za, "z_to": zb, "lambda": 0.0}]
     return _finish(grid, C, lam, v, s, "geodesic", pieces, bridging, notes)
+
+
+def _bridging(grid: wc.PassGrid, C: FloatArray, lam: FloatArray, k: int = 10) -> list[tuple[float, float]]:
+    """Every z range (mm) where the band bridges (constraint (6), the bracket of (3) below 0).
+
+    Checked at the nodes (knots, joints and r'' extrema among them) and at ``k`` points inside every
+    step, with C between the nodes from the cubic Hermite interpolant of ODE (3) in t.
+    """
+    rn, _, _ = wc.node_geometry(grid)
+    F = _bracket(grid, C)
+    bad_node = F < -1e-9 * np.maximum(1.0, rn)
+    t = grid.t
+    h = np.diff(t)
+    th = np.arange(1, k + 1) / (k + 1.0)
+    tt = t[:-1, None] + h[:, None] * th[None, :]
+    z, dzdt, _, _ = wc.t_map(grid.kind, grid.za, grid.L, tt.ravel())
+    z = np.clip(z, grid.za, grid.zb)
+    r, dr, d2r = wc.eval_on_segments(grid.mandrel, z, np.repeat(grid.seg, k))
+    rl, drl, d2l = grid.geo["L"]
+    rr, drr, d2rr = grid.geo["R"]
+    al, bl = wc.riccati_ab(rl, drl, d2l)
+    ar, br = wc.riccati_ab(rr, drr, d2rr)
+    cl, cr = C[:-1], C[1:]
+    fl = lam * grid.dzdt[:-1] * (al * cl * cl + bl) * h
+    fr = lam * grid.dzdt[1:] * (ar * cr * cr + br) * h
+    u = th[None, :]
+    cs = ((2 * u**3 - 3 * u**2 + 1) * cl[:, None] + (u**3 - 2 * u**2 + u) * fl[:, None]
+          + (-2 * u**3 + 3 * u**2) * cr[:, None] + (u**3 - u**2) * fr[:, None]).ravel()
+    a, b = wc.riccati_ab(r, dr, d2r)
+    with np.errstate(invalid="ignore"):
+        bad_in = (a * cs * cs + b) * r * r < -1e-9 * np.maximum(1.0, r)
+    n = grid.n
+    zz = np.empty(n + (n - 1) * k)
+    bad = np.zeros(zz.size, dtype=bool)
+    idx = np.arange(n) * (k + 1)
+    zz[idx], bad[idx] = grid.z, bad_node
+    sub = (idx[:-1, None] + np.arange(1, k + 1)[None, :]).ravel()
+    zz[sub], bad[sub] = z, bad_in
+    return _ranges(zz, bad)
 
 
 def _bracket(grid: wc.PassGrid, C: FloatArray) -> FloatArray:

@@ -185,10 +185,17 @@ def build_grid(
     tu = np.linspace(t0, t1, n_uni)
     is_out = np.zeros(n_uni, dtype=bool)
     is_out[::refine] = True
-    bz = [z for z in joints(mandrel) + list(extra_z) if za + 1e-9 * max(1.0, L) < z < zb - 1e-9 * max(1.0, L)]
+    inside = 1e-9 * max(1.0, L)
+    bz = [z for z in joints(mandrel) + list(extra_z) if za + inside < z < zb - inside]
+    # knots and r'' extrema: integration nodes too (not output points), so that neither the RK4 steps
+    # nor the no-bridging bound straddle a kink or a peak of r''
+    bp = getattr(mandrel, "breakpoints", None)
+    inner = [float(z) for z in (bp() if bp is not None else ()) if za + inside < z < zb - inside
+             and all(abs(z - x) > inside for x in bz)]
     exact_u = np.full(n_uni, np.nan)
-    if bz:
-        bza = np.array(bz)
+    if bz or inner:
+        bza = np.array(bz + inner)
+        b_out = np.array([True] * len(bz) + [False] * len(inner))
         tb = t_of_z(kind, za, L, bza)
         tol = 1e-9 * (t1 - t0)
         keep = np.array([np.min(np.abs(tu - x)) > tol for x in tb], dtype=bool)
@@ -198,7 +205,7 @@ def build_grid(
             tu[j] = x
             exact_u[j] = zx
         t = np.concatenate([tu, tb[keep]])
-        out = np.concatenate([is_out, np.ones(int(keep.sum()), dtype=bool)])
+        out = np.concatenate([is_out, b_out[keep]])
         exact = np.concatenate([exact_u, bza[keep]])
         order = np.argsort(t, kind="stable")
         t, out, exact = t[order], out[order], exact[order]
