@@ -884,6 +884,28 @@ def _pool() -> ThreadPoolExecutor:
     return _POOL[0]
 
 
+def _forward_compiled(chunks: list[tuple[int, int]], uniform_h: bool, two_h: np.ndarray, kq_h: np.ndarray,
+                      levf: np.ndarray, klo: np.ndarray, cnt: np.ndarray, bad: np.ndarray, use_k: bool, M: int,
+                      Jraw: np.ndarray) -> bool:
+    """The forward pass by the compiled kernel (engine.timeparam_jit), bit for bit the numpy pass's
+    result; False when it is not available (then the numpy pass runs)."""
+    if not _NUMBA:
+        return False
+    from engine import timeparam_jit
+
+    if uniform_h:  # the numpy pass costs a chunk with the 2h and K/4h² of its first interval
+        first = np.repeat([a for a, _ in chunks], [b - a for a, b in chunks])
+        th, kq = two_h[first], kq_h[first]
+    else:
+        th, kq = two_h, kq_h
+    return timeparam_jit.forward_pass(levf, klo, cnt, bad, np.ascontiguousarray(th, float),
+                                      np.ascontiguousarray(kq, float), use_k, M, int(_LOMASK), int(_HIMASK),
+                                      Jraw.reshape(-1), int(_STATS.get("candidates", 0)))
+
+
+_NUMBA = True  # False: always the numpy pass (the tested reference; tests switch it)
+
+
 def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | None = None,
         square: bool = False, cluster: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """One DP pass on the grid ``s_i × {M levels in [lo_i, hi_i]}``.
@@ -1034,9 +1056,11 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
         starts0 = seg[:, 0].tolist()
         return G, glow, cost, segl, starts0, ends
 
+    chunks = list(zip(bounds[:-1], bounds[1:]))
+    if _forward_compiled(chunks, uniform_h, two_h, kq_h, levf, klo_i, cnt_eff, bad, K > 0, M, Jraw):
+        chunks = []                                 # done by the compiled pass (same bits)
     fbuf = np.empty(int(per_int.max()))            # the sequential pass's scratch and its integer view
     ibuf = fbuf.view(np.int64)
-    chunks = list(zip(bounds[:-1], bounds[1:]))
     pool = _pool() if len(chunks) > 1 and _threads_wanted() else None
     fut = pool.submit(build, *chunks[0], 0) if pool is not None else None
     for c, (i0, i1) in enumerate(chunks):
