@@ -152,6 +152,11 @@ class TimeLimits:
         Placement of the M levels inside the tube: ``ṡ = lo + (hi - lo)·(1 + (ξ + aξ³)/(1 + a))/2``
         for ξ uniform in [-1, 1]; ``a = 0`` is uniform, the default ``a = 8`` makes the levels near the
         tube's centre (the previous solution) 9x denser (the paper does not fix the placement).
+    coarse:
+        Tube method: when the nodes are denser than one level step per interval (see
+        :func:`_group_length`), solve on groups of consecutive intervals with constant s̈ in each group
+        (every node's constraints kept exactly) and interpolate ṡ² to the nodes; ``False`` = always on
+        the given nodes (docs/timeparam.md, "Node density").
     """
 
     v_max: tuple[float, ...]
@@ -168,6 +173,7 @@ class TimeLimits:
     max_iterations: int = 60
     accel_check: str = "interval"
     tube_cluster: float = 8.0
+    coarse: bool = True
 
 
 @dataclass(frozen=True)
@@ -246,6 +252,8 @@ class TimeLaw:
     compute_s: float
     levels: int
     energy_mm: float = float("nan")
+    node_group: int = 1
+    """Consecutive intervals per DP interval (1 = the DP ran on the given nodes; see ``TimeLimits.coarse``)."""
 
     @property
     def sddot(self) -> np.ndarray:
@@ -412,6 +420,9 @@ class _Problem:
     rows: np.ndarray         # (N-1, R, 2) all normalised rows n.(x_k, u) <= 1 (for brute force)
     limits: TimeLimits
     point_nodes: list[tuple[TechPoint, np.ndarray]]
+    hull_rows: np.ndarray | None = None   # rows with the provably redundant ones zeroed (for the hull)
+    ipos: np.ndarray | None = None        # the ± pairs of rows: rows[:, ineg] == -rows[:, ipos]
+    ineg: np.ndarray | None = None
 
 
 def _validate(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits | None) -> tuple[np.ndarray, ...]:
@@ -646,8 +657,34 @@ def _drop_parallel(allr: np.ndarray, order: np.ndarray, m: np.ndarray) -> tuple[
     return order, m
 
 
+def _box_rows(rows: np.ndarray, h: np.ndarray, xn_prev: np.ndarray, xn_cur: np.ndarray, ipos: np.ndarray,
+              ineg: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``rows`` with the box rows ``|x_k| <= xn_prev``, ``|x_j| <= xn_cur`` appended, and the ± pairs."""
+    B = rows.shape[0]
+    box = np.zeros((B, 4, 2))
+    box[:, 0, 0] = 1.0 / xn_prev
+    box[:, 1, 0] = -1.0 / xn_prev
+    box[:, 2, 0] = 1.0 / xn_cur
+    box[:, 2, 1] = 2.0 * h / xn_cur
+    box[:, 3] = -box[:, 2]
+    R = rows.shape[1]
+    return np.concatenate([rows, box], axis=1), np.r_[ipos, R, R + 2], np.r_[ineg, R + 1, R + 3]
+
+
+def _hulls(allr: np.ndarray, ipos: np.ndarray, ineg: np.ndarray, compiled: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Hull vertex rows of every row set: the compiled monotone chain when asked for and available
+    (node groups, many rows), else :func:`_hull_sym` (the reference, used on the given nodes)."""
+    if compiled and _NUMBA:
+        from engine import timeparam_jit
+
+        out = timeparam_jit.hulls(allr)
+        if out is not None:
+            return out
+    return _hull_sym(allr, ipos, ineg)
+
+
 def _chains(rows: np.ndarray, h: np.ndarray, xn_prev: np.ndarray, xn_cur: np.ndarray,
-            ipos: np.ndarray, ineg: np.ndarray) -> dict[str, np.ndarray]:
+            ipos: np.ndarray, ineg: np.ndarray, compiled: bool = False) -> dict[str, np.ndarray]:
     """The feasible polygon of every interval in the ``(x_k, x_j) = (ṡ²_{i-1}, ṡ²_i)`` plane.
 
     ``rows`` (B, R, 2) are normalised constraints ``n·(x_k, u) <= 1`` with ``u = (x_j - x_k)/(2h)``,
@@ -658,15 +695,8 @@ def _chains(rows: np.ndarray, h: np.ndarray, xn_prev: np.ndarray, xn_cur: np.nda
     ``x_j / xn_cur + 3·i``), and the x_j range of each polygon.
     """
     B = rows.shape[0]
-    box = np.zeros((B, 4, 2))
-    box[:, 0, 0] = 1.0 / xn_prev
-    box[:, 1, 0] = -1.0 / xn_prev
-    box[:, 2, 0] = 1.0 / xn_cur
-    box[:, 2, 1] = 2.0 * h / xn_cur
-    box[:, 3] = -box[:, 2]
-    allr = np.concatenate([rows, box], axis=1)
-    R = rows.shape[1]
-    order, m = _hull_sym(allr, np.r_[ipos, R, R + 2], np.r_[ineg, R + 1, R + 3])
+    allr, ip2, in2 = _box_rows(rows, h, xn_prev, xn_cur, ipos, ineg)
+    order, m = _hulls(allr, ip2, in2, compiled)
     V = int(m.max())
     order = order[:, :V]
     br = np.arange(B)[:, None]
@@ -815,10 +845,20 @@ def _prepare(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, chains:
         drop = drop.reshape(n - 1, -1)
         keep = ~np.concatenate([drop, drop, np.zeros((n - 1, rows.shape[1] - 2 * drop.shape[1]), bool)], 1)
         hull_rows = rows * keep[..., None]
+    xn, cap_dp, ch = _polygons(cap, h, hull_rows, ipos, ineg, limits, chains)
+    return _Problem(s=s, h=h, p=p, d1=d1, d2=d2, cap_v=cap_v, cap_tech=cap_tech, cap=cap, cap_dp=cap_dp, xn=xn[1:],
+                    rows=rows, limits=limits, point_nodes=point_nodes, hull_rows=hull_rows, ipos=ipos, ineg=ineg,
+                    **ch)
+
+
+def _polygons(cap: np.ndarray, h: np.ndarray, hull_rows: np.ndarray, ipos: np.ndarray, ineg: np.ndarray,
+              limits: TimeLimits, chains: bool, compiled: bool = False
+              ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """Box sizes ``xn``, the reachable caps ``cap_dp`` and the polygon chains of every interval."""
     cap_box = np.minimum(cap, 1e9)
     xn = (1.5 * cap_box) ** 2 + 1.0
     if chains:
-        ch = _chains(hull_rows, h, xn[:-1], xn[1:], ipos, ineg)
+        ch = _chains(hull_rows, h, xn[:-1], xn[1:], ipos, ineg, compiled)
         cap_dp = _reachable(cap_box, h, ch, limits)
         # The box is a relaxation of the node caps.  Where no axis limits the speed (axes at rest or
         # moving linearly, large V, no sdot_max) it is orders of magnitude larger than the speeds any
@@ -828,15 +868,164 @@ def _prepare(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, chains:
         loose = (xn > 1e12) & (xn > 1e6 * xn_r)                 # ṡ > 670 m/s: no physical limit
         if loose.any():
             xn = np.where(loose, xn_r, xn)
-            ch = _chains(hull_rows, h, xn[:-1], xn[1:], ipos, ineg)
+            ch = _chains(hull_rows, h, xn[:-1], xn[1:], ipos, ineg, compiled)
             cap_dp = np.minimum(cap_dp, _reachable(cap_box, h, ch, limits))
     else:
         e = np.zeros(0)
         ch = {"rq": e, "rk": e, "lq": e, "lk": e, "xjb": e, "xjt": e}
         cap_dp = cap
     ch = {k: v for k, v in ch.items() if k not in ("uhi", "ulo", "xkt")}
-    return _Problem(s=s, h=h, p=p, d1=d1, d2=d2, cap_v=cap_v, cap_tech=cap_tech, cap=cap, cap_dp=cap_dp, xn=xn[1:],
-                    rows=rows, limits=limits, point_nodes=point_nodes, **ch)
+    return xn, cap_dp, ch
+
+
+_GROUP_SHARE = 1.0   # h* = share·ṡ_ref²/(M·a_ref): one level step per interval (docs/timeparam.md)
+_GROUP_WHEN = 5.0    # group only when the median interval is shorter than a fifth of a level step
+
+
+def _group_length(prob: _Problem) -> np.ndarray | None:
+    """Per interval, the path length (mm) one level step needs, or ``None`` to solve on the given nodes.
+
+    A DP transition changes ṡ by a whole level step or more, unless it stays on its level.  The
+    nominal run's step at a node is ``ṡ_i/M`` (its levels span ``[0, ṡ_i]``, ``ṡ_i`` the speed cap);
+    one step there is ``Δ(ṡ²) ≈ 2·ṡ_i²/M``, and at the largest path acceleration at rest,
+    ``a_i = min_c A_c/|X_c'|`` (and ``s̈_T``), it takes ``ℓ_i = ṡ_i²/(M·a_i)`` of path.  On intervals
+    much shorter than ``ℓ_i`` the levels cannot follow the acceleration limit and the tube stalls
+    (issue 16: at the iteration cap, 1.7 % slow on the paper's path at N = 30 000).  When the median
+    of ``h_i/ℓ_i`` is below 1/5 the tube runs on groups of consecutive intervals about ``ℓ`` long
+    (:func:`_coarse_problem`); otherwise on the given nodes.  Measured medians: the paper's example
+    0.40 / 0.53 (M = 74 / 100, given nodes: the pinned answers), resampled to N = 3 000 0.12 / 0.16
+    (grouped), the pressure vessel's law 0.23 / 0.31 (given nodes).
+    """
+    if not prob.limits.coarse or prob.s.size < 8:
+        return None
+    c = prob.rows[..., 1]                                  # u coefficients of the rows n.(x, u) <= 1
+    cmax = c.max(axis=1)
+    a0 = np.where(cmax > 0, 1.0 / np.where(cmax > 0, cmax, 1.0), np.inf)
+    cap = np.minimum(prob.cap, 1e9)
+    if not 0 < float(cap.max()) < 1e8:
+        return None
+    # the speed cap, at most the highest speed reachable anywhere at the acceleration at rest (an
+    # estimate for the group size only, not a constraint: it matters where no axis limits the speed)
+    x_cap = np.minimum(cap[:-1], cap[1:]) ** 2
+    ah = prob.h * np.where(np.isfinite(a0), a0, 0.0)
+    fwd = 2.0 * np.cumsum(ah) + prob.limits.sdot_start ** 2
+    bwd = 2.0 * np.cumsum(ah[::-1])[::-1] + prob.limits.sdot_end ** 2
+    x_i = np.minimum(x_cap, float(np.max(np.minimum(fwd, bwd))))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ell = _GROUP_SHARE * x_i / (prob.limits.levels * a0)
+    ell = np.where(np.isfinite(ell) & (ell > 0), ell, np.inf)    # no motion limit: no level step
+    ell = np.minimum(ell, (prob.s[-1] - prob.s[0]) / 16.0)       # at least 16 groups
+    ratio = prob.h / ell
+    return ell if float(np.median(ratio)) * _GROUP_WHEN < 1.0 else None
+
+
+def _coarse_problem(prob: _Problem, ell: np.ndarray) -> tuple[_Problem, np.ndarray]:
+    """The problem on groups of consecutive intervals about one level step ``ell`` long, constant s̈
+    in each.
+
+    Coarse nodes: the first node past every whole step of ``σ(s) = ∫ ds/ℓ`` (so a group spans about
+    one local ``ℓ``, and intervals longer than ``ℓ`` stay alone), the ends,
+    the first and last node of every technological point and every node with a zero speed cap.  On
+    a group ``[a, b]`` the law's ``x = ṡ²`` is linear in s, so at a node ``i`` of the group
+    ``x_i = x_a + 2u·(s_i - s_a)``: each row ``g·x_i + c·u <= 1`` of each interval of the group becomes
+    ``g·x_a + (c + 2g·(s_i - s_a))·u <= 1``, and each inner node's cap ``x_i <= cap_i²`` a row too.  The
+    group's polygon is exactly the set of (x_a, x_b) whose linear ṡ² keeps every constraint of every
+    interval in it.  Returns the coarse problem and the indices of its nodes among the given ones.
+    """
+    n = prob.s.size
+    sigma = np.concatenate([[0.0], np.cumsum(np.minimum(prob.h / ell, 1e6))])
+    bins = np.floor(sigma)
+    need = [np.array([0, n - 1]), np.flatnonzero(np.diff(bins) > 0) + 1]
+    for _, nodes in prob.point_nodes:
+        if nodes.size:
+            need.append(np.array([nodes[0], nodes[-1]]))
+    need.append(np.flatnonzero(prob.cap <= 0))
+    idx = np.unique(np.concatenate(need))
+    B = idx.size - 1
+    sizes = np.diff(idx)
+    mx = int(sizes.max())
+    # fine interval of every slot (B, mx); slots past a group's end repeat its last interval with
+    # zero rows
+    slot = np.arange(mx)[None, :]
+    valid = slot < sizes[:, None]
+    fi = np.minimum(idx[:-1, None] + slot, idx[1:, None] - 1)
+    off = prob.s[fi] - prob.s[idx[:-1], None]                         # s_i - s_a (mm)
+    # each interval's rows reduced to the vertices of their hull (with the box rows: valid, as the
+    # node caps imply them); the others are implied, also after the linear change to (x_a, u)
+    hr = prob.hull_rows if prob.hull_rows is not None else prob.rows
+    xn_f = (1.5 * np.minimum(prob.cap, 1e9)) ** 2 + 1.0
+    allr, ip_f, in_f = _box_rows(hr, prob.h, xn_f[:-1], xn_f[1:], prob.ipos, prob.ineg)
+    order, mv = _hulls(allr, ip_f, in_f, True)
+    R = max(int(mv.max()), 1)
+    order = order[:, :R]
+    keep = np.arange(R)[None, :] < mv[:, None]
+    # which rows they are: the box rows (implied by the node caps, kept as rows of their own) go; the
+    # row of a Bernstein coefficient at τ = 0 (the start node) repeats the previous interval's row at
+    # τ = 1 up to round-off, and such near-twins make ill-conditioned polygon vertices: it goes too,
+    # except in the first interval of a group
+    n_rows = hr.shape[1]
+    inner_rows = order < n_rows
+    pos_of = np.zeros(n_rows, np.int64)
+    pos_of[prob.ipos] = np.arange(prob.ipos.size)
+    pos_of[prob.ineg] = np.arange(prob.ineg.size)
+    n_bern = prob.d1.shape[-1] if prob.limits.accel_check != "arrival" else 1
+    n_acc = 2 * prob.p * n_bern                                      # acceleration rows (± pairs)
+    at_start = inner_rows & (order < n_acc) & (pos_of[np.minimum(order, n_rows - 1)] % n_bern == 0) & (n_bern > 1)
+    keep &= inner_rows
+    vert = allr[np.arange(allr.shape[0])[:, None], order] * keep[..., None]   # (N-1, R, 2)
+    vert_later = vert * ~at_start[..., None]
+    rr = np.where((slot >= 1)[..., None, None], vert_later[fi], vert[fi])   # (B, mx, R, 2)
+    g = rr[..., 0]
+    cc = rr[..., 1] + 2.0 * off[..., None] * g
+    rows = np.stack([g, cc], axis=-1) * valid[..., None, None]
+    rows = rows.reshape(B, mx * R, 2)
+    # both signs of every vertex row: the set stays centrally symmetric for _hull_sym (the compiled
+    # hull does not need it; a mirror that is not a vertex is dropped by it)
+    rows = np.concatenate([rows, -rows], axis=1)
+    ipos = np.arange(mx * R)
+    ineg = mx * R + ipos
+    # caps of the inner nodes (slot >= 1): x_a + 2u·off <= cap², as a ± pair (the minus side only cuts
+    # x < 0, outside every level range)
+    capf = prob.cap[fi]
+    inner = valid & (slot >= 1) & (capf < 1e9)
+    icap = np.where(inner, 1.0 / np.where(inner, capf * capf, 1.0), 0.0)
+    icap = np.where(inner & (capf <= 0), 0.0, icap)                    # zero caps are coarse nodes
+    crow = np.stack([icap, 2.0 * off * icap], axis=-1)                 # (B, mx, 2)
+    rows = np.concatenate([rows, crow, -crow], axis=1)
+    base = 2 * mx * R
+    ipos = np.r_[ipos, base + np.arange(mx)]
+    ineg = np.r_[ineg, base + mx + np.arange(mx)]
+    s = prob.s[idx]
+    h = np.diff(s)
+    cap = prob.cap[idx]
+    xn, cap_dp, ch = _polygons(cap, h, rows, ipos, ineg, prob.limits, True, compiled=True)
+    pos = {int(v): k for k, v in enumerate(idx)}
+    pnodes = []
+    for pt, nodes in prob.point_nodes:
+        cn = np.array(sorted({pos[int(v)] for v in nodes if int(v) in pos}), dtype=np.int64)
+        pnodes.append((pt, cn))
+    e = np.zeros((B, 0, 0))
+    coarse = _Problem(s=s, h=h, p=prob.p, d1=e, d2=e, cap_v=prob.cap_v[idx], cap_tech=prob.cap_tech[idx], cap=cap,
+                      cap_dp=cap_dp, xn=xn[1:], rows=rows, limits=prob.limits, point_nodes=pnodes,
+                      hull_rows=rows, ipos=ipos, ineg=ineg, **ch)
+    return coarse, idx
+
+
+def _with_chains(prob: _Problem) -> _Problem:
+    """``prob`` (prepared without chains) with its polygons and reachable caps."""
+    from dataclasses import replace as dc_replace
+
+    xn, cap_dp, ch = _polygons(prob.cap, prob.h, prob.hull_rows, prob.ipos, prob.ineg, prob.limits, True,
+                               compiled=True)
+    return dc_replace(prob, xn=xn[1:], cap_dp=cap_dp, **ch)
+
+
+def _refine_to_nodes(s: np.ndarray, idx: np.ndarray, sdot_c: np.ndarray) -> np.ndarray:
+    """ṡ at every node from the coarse law: ṡ² linear in s inside each group (constant s̈)."""
+    x = np.interp(s, s[idx], sdot_c * sdot_c)
+    out = np.sqrt(np.maximum(x, 0.0))
+    out[idx] = sdot_c
+    return out
 
 
 # --------------------------------------------------------------------------------------------------
@@ -930,60 +1119,71 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
         lev = np.sqrt(lev)
     else:
         xall = lev * lev
-    # --- windows (closed form): the feasible x_k of level j at node i form [L(x_j), R(x_j)] ------
-    xj = xall[1:]
-    q = xj / prob.xn[:, None]
-    q += 3.0 * np.arange(n - 1)[:, None]
-    q = q.ravel()
-    ub = np.interp(q, prob.rq, prob.rk).reshape(n - 1, M)
-    lb = np.interp(q, prob.lq, prob.lk).reshape(n - 1, M)
-    ok = xj >= prob.xjb[:, None]
-    ok &= xj <= prob.xjt[:, None]
-    ok &= ub >= lb
-    ok &= ub >= 0
-    ok[degenerate[1:], 1:] = False
-    if square:
-        pk_lo = np.maximum(lb, 0.0)
-        pk_hi = ub
-    else:
-        pk_lo = np.sqrt(np.maximum(lb, 0.0, out=lb), out=lb)
-        pk_hi = np.sqrt(np.maximum(ub, 0.0, out=ub), out=ub)
-    lo_p = plo[:-1, None]
-    sp_p = np.where(degenerate[:-1], 1.0, span[:-1])[:, None]
     # index of the first level >= / last level <= a fraction of the span, through a lookup table
     # whose bins hold at most one level each (the estimate is then exact or one off; corrected below)
     nb = int(2.0 / max(float(np.min(np.diff(frac))), 1e-9)) + 2
     edges = np.arange(nb + 1) / nb
     t_lo = np.searchsorted(frac, edges[:-1], side="left")
     t_hi = np.searchsorted(frac, edges[1:], side="right") - 1
-    y = pk_lo - lo_p
-    y /= sp_p                                                 # fraction of the span
-    y *= nb
-    klo = t_lo[np.clip(y.astype(np.int64), 0, nb - 1)]
-    np.subtract(pk_hi, lo_p, out=y)
-    y /= sp_p
-    y *= nb
-    khi = t_hi[np.clip(y.astype(np.int64), 0, nb - 1)]
-    # exact correction against the actual level values (the index maps are only rounded)
-    rowp = np.arange(0, (n - 1) * M, M, dtype=np.int64)[:, None]
-    levp = lev.ravel() if not square else xall.ravel()
-    kix = np.minimum(klo, M - 1)
-    kix += rowp
-    klo += (klo <= M - 1) & (levp[kix] < pk_lo)
-    np.maximum(khi, 0, out=kix)
-    kix += rowp
-    khi -= (khi >= 0) & (levp[kix] > pk_hi)
-    degp = degenerate[:-1]
-    if degp.any():
-        inside = (lo_p[degp] >= pk_lo[degp]) & (lo_p[degp] <= pk_hi[degp])
-        klo[degp] = 0
-        khi[degp] = np.where(inside, 0, -1)
-    cnt_eff = khi - klo
-    cnt_eff += 1
-    cnt_eff[~ok] = 0
-    bad = cnt_eff <= 0
-    cnt_eff[bad] = 1                                                     # (N-1, M)
-    klo[bad] = 0
+    sp_p = np.where(degenerate[:-1], 1.0, span[:-1])
+    win = None
+    if not square and _NUMBA:
+        from engine import timeparam_jit
+
+        L = prob.rq.size // max(n - 1, 1)
+        win = timeparam_jit.windows(lev, xall, prob.xn, (prob.rq, prob.rk, prob.lq, prob.lk), L, prob.xjb,
+                                    prob.xjt, degenerate, plo, sp_p, t_lo, t_hi, nb, (n - 1) * M * 8)
+    if win is not None:                      # the compiled windows: the same integers
+        klo, cnt_eff, bad = win
+    else:
+        # --- windows (closed form): the feasible x_k of level j at node i form [L(x_j), R(x_j)] ------
+        xj = xall[1:]
+        q = xj / prob.xn[:, None]
+        q += 3.0 * np.arange(n - 1)[:, None]
+        q = q.ravel()
+        ub = np.interp(q, prob.rq, prob.rk).reshape(n - 1, M)
+        lb = np.interp(q, prob.lq, prob.lk).reshape(n - 1, M)
+        ok = xj >= prob.xjb[:, None]
+        ok &= xj <= prob.xjt[:, None]
+        ok &= ub >= lb
+        ok &= ub >= 0
+        ok[degenerate[1:], 1:] = False
+        if square:
+            pk_lo = np.maximum(lb, 0.0)
+            pk_hi = ub
+        else:
+            pk_lo = np.sqrt(np.maximum(lb, 0.0, out=lb), out=lb)
+            pk_hi = np.sqrt(np.maximum(ub, 0.0, out=ub), out=ub)
+        lo_p = plo[:-1, None]
+        sp_p = np.where(degenerate[:-1], 1.0, span[:-1])[:, None]
+        y = pk_lo - lo_p
+        y /= sp_p                                                 # fraction of the span
+        y *= nb
+        klo = t_lo[np.clip(y.astype(np.int64), 0, nb - 1)]
+        np.subtract(pk_hi, lo_p, out=y)
+        y /= sp_p
+        y *= nb
+        khi = t_hi[np.clip(y.astype(np.int64), 0, nb - 1)]
+        # exact correction against the actual level values (the index maps are only rounded)
+        rowp = np.arange(0, (n - 1) * M, M, dtype=np.int64)[:, None]
+        levp = lev.ravel() if not square else xall.ravel()
+        kix = np.minimum(klo, M - 1)
+        kix += rowp
+        klo += (klo <= M - 1) & (levp[kix] < pk_lo)
+        np.maximum(khi, 0, out=kix)
+        kix += rowp
+        khi -= (khi >= 0) & (levp[kix] > pk_hi)
+        degp = degenerate[:-1]
+        if degp.any():
+            inside = (lo_p[degp] >= pk_lo[degp]) & (lo_p[degp] <= pk_hi[degp])
+            klo[degp] = 0
+            khi[degp] = np.where(inside, 0, -1)
+        cnt_eff = khi - klo
+        cnt_eff += 1
+        cnt_eff[~ok] = 0
+        bad = cnt_eff <= 0
+        cnt_eff[bad] = 1                                                     # (N-1, M)
+        klo[bad] = 0
     klo_i = klo
     # --- forward pass, in chunks of whole intervals of <= _CHUNK candidates ----------------------
     # Each candidate's cost has its position w in the window written into the low 12 bits of its
@@ -1427,10 +1627,19 @@ def parametrize(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, meth
     if method not in METHODS:
         raise InputError(f"unknown method {method!r}; use one of {', '.join(METHODS)}", field="method")
     t0 = time.perf_counter()
-    prob = _prepare(path_s, X, dX, ddX, limits, chains=method != "toppra")
+    prob = _prepare(path_s, X, dX, ddX, limits, chains=method == "dp")
     iterations: list[IterationLog] = []
+    group = 1
     if method == "tube":
-        sdot, iterations = _tube(prob, state)
+        ell = _group_length(prob)
+        if ell is not None:
+            coarse, idx = _coarse_problem(prob, ell)
+            sdot_c, iterations = _tube(coarse, state)
+            sdot = _refine_to_nodes(prob.s, idx, sdot_c)
+            group = max(1, round((prob.s.size - 1) / max(idx.size - 1, 1)))
+        else:
+            prob = _with_chains(prob)
+            sdot, iterations = _tube(prob, state)
     elif method == "dp":
         lo, hi = _bounds_check(prob)
         if state is not None:
@@ -1450,7 +1659,7 @@ def parametrize(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, meth
                    max_accel_ratio=ratios["accel"], max_speed_ratio=ratios["speed"],
                    max_sddot_ratio=ratios["sddot"], energy=curvature_energy(t, sdot), compute_s=compute,
                    levels=limits.levels if method != "toppra" else 0,
-                   energy_mm=curvature_energy(t, sdot, speed_unit=1.0))
+                   energy_mm=curvature_energy(t, sdot, speed_unit=1.0), node_group=group)
 
 
 def prepare(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits) -> _Problem:

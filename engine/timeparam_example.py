@@ -36,7 +36,8 @@ _HARMONICS: tuple[tuple[tuple[float, float, float], ...], ...] = (
 _TRACK_RAMP = 1200.0  # mm over the path
 
 
-def example_path(n: int = N_PAPER, s_end: float = S_N_PAPER) -> tuple[np.ndarray, ...]:
+def example_path(n: int = N_PAPER, s_end: float = S_N_PAPER, s_unit: float | None = None
+                 ) -> tuple[np.ndarray, ...]:
     """The example path: ``(s, X, dX, ddX)``, shapes (n,), (n, 7), (n, 7), (n, 7); mm and rad.
 
     Parameters
@@ -45,8 +46,13 @@ def example_path(n: int = N_PAPER, s_end: float = S_N_PAPER) -> tuple[np.ndarray
         Number of nodes (893 in the paper).
     s_end:
         Path length s_N (mm); the nodes are uniform on ``[0, s_end]``.
+    s_unit:
+        Path length (mm) over which the harmonics have their listed numbers (default ``s_end``: the
+        path is stretched to ``s_end``).  ``example_path(30 * 892 + 1, 30 * S_N_PAPER, S_N_PAPER)`` is
+        the paper's path continued 30 times as long at the paper's node spacing.
     """
     s = np.linspace(0.0, float(s_end), int(n))
+    s_end = float(s_unit) if s_unit is not None else float(s_end)
     u = s / s_end
     p = len(_HARMONICS)
     X = np.zeros((s.size, p))

@@ -71,6 +71,210 @@ def _build_kernel() -> Any:
     return _forward
 
 
+_WINDOWS: list[Any] = []
+
+
+def _build_windows() -> Any:
+    import numba
+
+    @numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+    def _interp_seg(q, xp, fp, a, e):  # pragma: no cover - compiled
+        # np.interp on one chain xp[..e] (non-decreasing) at xp[a] <= q <= xp[e]: the same index
+        # (the last j with xp[j] <= q, found by walking up from a: the queries increase) and the same
+        # arithmetic as numpy's arr_interp.  Returns (value, j).
+        if q >= xp[e]:
+            return fp[e], a
+        while xp[a + 1] <= q:
+            a += 1
+        if xp[a] == q:
+            return fp[a], a
+        slope = (fp[a + 1] - fp[a]) / (xp[a + 1] - xp[a])
+        r = slope * (q - xp[a]) + fp[a]
+        if r != r:
+            r = slope * (q - xp[a + 1]) + fp[a + 1]
+            if r != r and fp[a] == fp[a + 1]:
+                r = fp[a]
+        return r, a
+
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
+    def _windows(lev, xall, xn, rq, rk, lq, lk, L, xjb, xjt, degenerate, plo, sp_p, t_lo, t_hi, nb,
+                 klo, cnt, bad):  # pragma: no cover - compiled
+        n1, M = klo.shape
+        total = 0
+        for i in range(n1):
+            s0 = i * L
+            ar = s0
+            al = s0
+            off = 3.0 * i
+            lo_p = plo[i]
+            spi = sp_p[i]
+            degp = degenerate[i]
+            for j in range(M):
+                xj = xall[i + 1, j]
+                good = xj >= xjb[i] and xj <= xjt[i] and not (degenerate[i + 1] and j >= 1)
+                if good:
+                    q = xj / xn[i]
+                    q += off
+                    ub, ar = _interp_seg(q, rq, rk, ar, s0 + L - 1)
+                    lb, al = _interp_seg(q, lq, lk, al, s0 + L - 1)
+                    good = ub >= lb and ub >= 0
+                if not good:
+                    klo[i, j] = 0
+                    cnt[i, j] = 1
+                    bad[i, j] = True
+                    total += 1
+                    continue
+                pk_lo = np.sqrt(lb if lb > 0.0 else 0.0)
+                pk_hi = np.sqrt(ub if ub > 0.0 else 0.0)
+                if degp:
+                    kl = 0
+                    kh = 0 if (lo_p >= pk_lo and lo_p <= pk_hi) else -1
+                else:
+                    y = pk_lo - lo_p
+                    y /= spi
+                    y *= nb
+                    yi = 0 if y < 0 else (nb - 1 if y >= nb - 1 else int(y))
+                    kl = t_lo[yi]
+                    y = pk_hi - lo_p
+                    y /= spi
+                    y *= nb
+                    yi = 0 if y < 0 else (nb - 1 if y >= nb - 1 else int(y))
+                    kh = t_hi[yi]
+                    kix = kl if kl < M - 1 else M - 1
+                    if kl <= M - 1 and lev[i, kix] < pk_lo:
+                        kl += 1
+                    kix = kh if kh > 0 else 0
+                    if kh >= 0 and lev[i, kix] > pk_hi:
+                        kh -= 1
+                c = kh - kl + 1
+                if c <= 0:
+                    klo[i, j] = 0
+                    cnt[i, j] = 1
+                    bad[i, j] = True
+                    total += 1
+                else:
+                    klo[i, j] = kl
+                    cnt[i, j] = c
+                    bad[i, j] = False
+                    total += c
+        return total
+
+    return _windows
+
+
+def windows(lev: np.ndarray, xall: np.ndarray, xn: np.ndarray, ch: tuple[np.ndarray, ...], L: int,
+            xjb: np.ndarray, xjt: np.ndarray, degenerate: np.ndarray, plo: np.ndarray, sp_p: np.ndarray,
+            t_lo: np.ndarray, t_hi: np.ndarray, nb: int, candidates_hint: int
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The DP windows ``(klo, cnt, bad)`` of :func:`engine.timeparam._dp` (levels uniform in ṡ), the
+    same integers as its numpy code; ``None`` without numba."""
+    if not _WINDOWS:
+        if kernel(candidates_hint) is None:
+            return None
+        try:
+            _WINDOWS.append(_build_windows())
+        except Exception:  # noqa: BLE001 - see kernel()
+            _WINDOWS.append(None)
+    if _WINDOWS[0] is None:
+        return None
+    n1, M = lev.shape[0] - 1, lev.shape[1]
+    klo = np.empty((n1, M), np.int64)
+    cnt = np.empty((n1, M), np.int64)
+    bad = np.empty((n1, M), np.bool_)
+    rq, rk, lq, lk = ch
+    _WINDOWS[0](lev, xall, xn, rq, rk, lq, lk, int(L), xjb, xjt, degenerate, plo, sp_p, t_lo, t_hi, int(nb),
+                klo, cnt, bad)
+    return klo, cnt, bad
+
+
+_HULL: list[Any] = []
+
+
+def _build_hull() -> Any:
+    import numba
+
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
+    def _hulls(pts, order, m):  # pragma: no cover - compiled
+        B, R = pts.shape[0], pts.shape[1]
+        xs = np.empty(R)
+        ys = np.empty(R)
+        ids = np.empty(R, np.int64)
+        st = np.empty(2 * R + 1, np.int64)
+        for b in range(B):
+            sx = 0.0
+            sy = 0.0
+            for r in range(R):
+                sx = max(sx, abs(pts[b, r, 0]))
+                sy = max(sy, abs(pts[b, r, 1]))
+            sx = sx if sx > 0 else 1.0
+            sy = sy if sy > 0 else 1.0
+            c = 0
+            for r in range(R):                     # zero rows (0 <= 1) never bind
+                if pts[b, r, 0] != 0.0 or pts[b, r, 1] != 0.0:
+                    xs[c] = pts[b, r, 0] / sx      # hull membership is invariant under axis scaling
+                    ys[c] = pts[b, r, 1] / sy
+                    ids[c] = r
+                    c += 1
+            if c < 3:
+                for q in range(c):
+                    order[b, q] = ids[q]
+                m[b] = c
+                continue
+            # sort by x, then y (a stable sort by y, then by x)
+            o1 = np.argsort(ys[:c], kind="mergesort")
+            o2 = np.argsort(xs[:c][o1], kind="mergesort")
+            srt = o1[o2]
+            # Andrew's monotone chain, counter-clockwise; a point that does not turn strictly left
+            # (within round-off of the two edges' lengths, and by more than 1e-15 of the unit box) is
+            # dropped: collinear, duplicate and near-duplicate points
+            k = 0
+            for pass_ in range(2):
+                lo = k
+                for q in range(c):
+                    ii = srt[q] if pass_ == 0 else srt[c - 1 - q]
+                    while k >= lo + 2:
+                        a = st[k - 2]
+                        bb = st[k - 1]
+                        ax = xs[bb] - xs[a]
+                        ay = ys[bb] - ys[a]
+                        bx = xs[ii] - xs[a]
+                        by = ys[ii] - ys[a]
+                        cr = ax * by - ay * bx
+                        if cr > 1e-12 * (abs(ax) + abs(ay)) * (abs(bx) + abs(by)) + 1e-15:
+                            break
+                        k -= 1
+                    st[k] = ii
+                    k += 1
+                k -= 1                              # the last point starts the other chain
+            for q in range(k):
+                order[b, q] = ids[st[q]]
+            m[b] = k
+        return 0
+
+    return _hulls
+
+
+def hulls(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Convex hull (counter-clockwise vertex rows, strictly convex) of each row of ``pts`` (B, R, 2),
+    zero points ignored; ``(order, m)`` as :func:`engine.timeparam._hull_sym` returns them, or ``None``
+    without numba.  Any start vertex."""
+    if not _HULL:
+        if kernel(IMPORT_THRESHOLD) is None:
+            _HULL.append(None)
+        else:
+            try:
+                _HULL.append(_build_hull())
+            except Exception:  # noqa: BLE001 - see kernel()
+                _HULL.append(None)
+    if _HULL[0] is None:
+        return None
+    B, R = pts.shape[0], pts.shape[1]
+    order = np.zeros((B, max(R, 1)), np.int64)
+    m = np.zeros(B, np.int64)
+    _HULL[0](np.ascontiguousarray(pts, float), order, m)
+    return order, m
+
+
 def kernel(candidates: int) -> Any:
     """The compiled forward pass, or ``None`` when the numpy pass should run (see the module doc)."""
     if _KERNEL:
@@ -107,4 +311,4 @@ def forward_pass(levf: np.ndarray, klo: np.ndarray, cnt: np.ndarray, bad: np.nda
     return True
 
 
-__all__ = ["IMPORT_THRESHOLD", "forward_pass", "kernel"]
+__all__ = ["IMPORT_THRESHOLD", "forward_pass", "hulls", "kernel", "windows"]
