@@ -529,7 +529,8 @@ def test_settings_and_layout_persist(qtbot, tmp_path) -> None:
     assert not w.auto_run
     _close(w)
     w2 = _window(qtbot, None)
-    assert w2.plot_tabs.currentIndex() == 3
+    assert w2.plot_tabs.currentWidget() is w2.plot  # a new window opens on the first step's plot, not the last tab
+    assert w2.steps.current_step() == "mandrel"
     assert w2.height() == size[1] == 640  # (the offscreen screen is too narrow to test the width)
     assert w2.view3d.colour_by == "λ [–]" and not w2.auto_run
     assert w2.recent_files() == [str(PIPE.resolve())]

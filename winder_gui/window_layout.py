@@ -86,7 +86,7 @@ def build_layout(w: MainWindow) -> None:
     main.addWidget(w.properties)
     main.setStretchFactor(1, 1)
     main.setCollapsible(0, False)
-    main.setSizes([118, 940, 340])
+    main.setSizes([118, 920, 362])
     w.setCentralWidget(main)
 
     w.status_msg = QLabel("")
@@ -149,10 +149,9 @@ def restore_layout(w: MainWindow) -> None:
             w.view3d.set_colour_by(str(colour))
         except ValueError:
             pass
-    try:
-        w.plot_tabs.setCurrentIndex(int(st.value("window/plot_tab", 0)))
-    except (TypeError, ValueError):
-        pass
+    # a new window opens on the first step and its plot (the generatrix), whatever tab was open last:
+    # the result tabs are empty until the pipeline has run
+    w.go_to_step("mandrel")
 
 
 def save_layout(w: MainWindow) -> None:
@@ -162,7 +161,6 @@ def save_layout(w: MainWindow) -> None:
     st.setValue("window/state", w.saveState())
     st.setValue("window/splitter_main", w.centralWidget().saveState())
     st.setValue("window/splitter_center", w.center_splitter.saveState())
-    st.setValue("window/plot_tab", w.plot_tabs.currentIndex())
     st.setValue("run/auto", w.auto_run)
     st.setValue("view/colour_by", w.view3d.colour_by)
     st.sync()

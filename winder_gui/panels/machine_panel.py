@@ -27,9 +27,9 @@ from winder_gui.views.machine_schematic import MachineSchematic, axis_colour
 LIMIT_COLUMNS: tuple[tuple[str, str], ...] = (
     ("min", "min"),
     ("max", "max"),
-    ("max_speed", "speed /s"),
-    ("max_accel", "accel /s²"),
-    ("max_jump", "jump /s"),
+    ("max_speed", "speed"),
+    ("max_accel", "accel"),
+    ("max_jump", "jump"),
 )
 UNLIMITED = 1e11
 DEFAULT_CONTROLLER = "(post's own)"
@@ -67,6 +67,13 @@ class MachinePanel(SectionPanel):
         self.table.setSelectionBehavior(QTableWidget.SelectionBehavior.SelectRows)
         self.table.setSelectionMode(QTableWidget.SelectionMode.SingleSelection)
         self.table.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
+        self.table.setColumnHidden(1, True)  # rotary/linear: the units say it (deg or mm); shown as a tooltip
+        for j, tip in enumerate(("min position", "max position", "max speed [units/s]", "max acceleration [units/s²]",
+                                 "max speed jump between blocks [units/s]")):
+            self.table.horizontalHeaderItem(3 + j).setToolTip(tip)
+        font = self.table.font()
+        font.setPointSizeF(max(font.pointSizeF() - 1.0, 7.0))
+        self.table.setFont(font)
         self.table.setMinimumHeight(150)
         self.table.setToolTip("Limits in controller units (mm or deg, per s). Blank: the template's value.")
         form.addRow(self.table)
@@ -130,10 +137,14 @@ class MachinePanel(SectionPanel):
             self.schematic.set_machine(shown)
             self.title_label.setText(f"{self.template.title} ({self.template.kind})")
             self.table.setRowCount(len(shown.axes))
+            # every row and column in view: the page scrolls, not the table
+            rows_h = sum(self.table.rowHeight(i) for i in range(len(shown.axes)))
+            self.table.setMinimumHeight(min(self.table.horizontalHeader().height() + rows_h + 24, 600))
             for i, (ax, base) in enumerate(zip(shown.axes, self.template.axes, strict=True)):
                 for j, text in enumerate((ax.name, ax.type, ax.units)):
                     it = QTableWidgetItem(text)
                     it.setFlags(Qt.ItemFlag.ItemIsEnabled | Qt.ItemFlag.ItemIsSelectable)
+                    it.setToolTip(f"{ax.name}: {ax.type} axis [{ax.units}]")
                     if j == 0:   # the axis's colour in the schematic and the axis plots
                         pm = QPixmap(10, 10)
                         pm.fill(QColor(axis_colour(i)))

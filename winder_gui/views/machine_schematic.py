@@ -382,6 +382,54 @@ def build_schematic(machine: Any) -> Schematic:
                      radius, mandrel_z, size)
 
 
+def place_labels(anchors: list[tuple[float, float]], sizes: list[tuple[float, float]],
+                 obstacles: list[tuple[float, float, float, float]], bounds: tuple[float, float],
+                 gap: float = 2.0) -> list[tuple[float, float, float, float]]:
+    """Rectangles ``(x, y, w, h)`` for labels of ``sizes`` near their ``anchors`` (px) that overlap
+    neither each other nor ``obstacles`` and stay inside ``bounds`` (width, height).
+
+    Each label tries the eight places around its anchor, then rings farther out (a leader line joins
+    it to its anchor); the first place free of every rectangle placed so far wins.  Labels are placed
+    in the given order, so the earlier ones stay closest to their points.  Only when no place in
+    the widget is free (too many labels for the room) may a label overlap.
+    """
+    W, H = bounds
+    placed: list[tuple[float, float, float, float]] = []
+    fixed = [tuple(o) for o in obstacles]
+
+    def free(r: tuple[float, float, float, float]) -> bool:
+        x, y, w, h = r
+        for ox, oy, ow, oh in (*fixed, *placed):
+            if x < ox + ow + gap and ox < x + w + gap and y < oy + oh + gap and oy < y + h + gap:
+                return False
+        return True
+
+    def clamp(x: float, y: float, w: float, h: float) -> tuple[float, float, float, float]:
+        return (min(max(x, 1.0), max(W - w - 1.0, 1.0)), min(max(y, 1.0), max(H - h - 1.0, 1.0)), w, h)
+
+    for (ax, ay), (w, h) in zip(anchors, sizes, strict=True):
+        best = None
+        for ring in range(0, 14):
+            d = 4.0 + ring * 0.6 * h
+            cands = [(ax + d, ay - h / 2), (ax - w - d, ay - h / 2), (ax - w / 2, ay - h - d), (ax - w / 2, ay + d),
+                     (ax + d, ay - h - d / 2), (ax + d, ay + d / 2), (ax - w - d, ay - h - d / 2),
+                     (ax - w - d, ay + d / 2)]
+            for x, y in cands:
+                r = clamp(x, y, w, h)
+                if free(r):
+                    best = r
+                    break
+            if best is not None:
+                break
+        if best is None:  # scan the widget for any free place, nearest first
+            spots = [clamp(x, y, w, h) for y in np.arange(1.0, max(H - h, 2.0), h / 2)
+                     for x in np.arange(1.0, max(W - w, 2.0), 8.0)]
+            spots.sort(key=lambda r: (r[0] + r[2] / 2 - ax) ** 2 + (r[1] + r[3] / 2 - ay) ** 2)
+            best = next((r for r in spots if free(r)), clamp(ax + 4.0, ay - h / 2, w, h))
+        placed.append(best)
+    return placed
+
+
 def _alpha(colour: str, a: int) -> QColor:
     c = QColor(colour)
     c.setAlpha(a)
@@ -446,6 +494,9 @@ class MachineSchematic(QWidget):
         self.schematic: Schematic | None = None
         self.message = ""
         self.highlighted: str | None = None
+        self._queued: list[Any] = []
+        self.label_rects: dict[str, QRectF] = {}
+        """Where each label was drawn last (widget pixels), for tests: none overlaps another."""
         self._map: tuple[float, float, float] = (1.0, 0.0, 0.0)    # scale, x0, y0
         self.setToolTip("Kinematic scheme of the template drawn from its forward kinematics (mandrel "
                         "schematic, nominal size); each axis with its travel in controller units. "
@@ -556,6 +607,7 @@ class MachineSchematic(QWidget):
         self._draw_structure(p, sch)
         order = sorted(sch.axes, key=lambda g: g.name == self.highlighted)   # the highlighted one last
         boxes: list[QRectF] = []
+        self._queued = []
         z0, z1 = sch.mandrel_z
         c = self.to_pixels(project(np.array([0, -sch.mandrel_radius, z1 - 0.15 * (z1 - z0)])))
         self._label(p, "mandrel", QPointF(c.x(), c.y() + 10), boxes, QColor("#555"))
@@ -571,6 +623,7 @@ class MachineSchematic(QWidget):
         p.drawEllipse(e, 4.5, 4.5)
         p.setPen(QColor(EYE_COLOUR))
         self._label(p, "eye", QPointF(e.x() + 6, e.y() + 12), boxes, QColor(EYE_COLOUR))
+        self._draw_labels(p, [QRectF(e.x() - 6, e.y() - 6, 12, 12)])
         p.end()
 
     def _draw_mandrel(self, p: QPainter, sch: Schematic) -> None:
@@ -702,28 +755,36 @@ class MachineSchematic(QWidget):
         p.restore()
 
     def _label(self, p: QPainter, text: str, at: QPointF, boxes: list[QRectF], colour: QColor) -> None:
-        """Text near ``at``, nudged so it overlaps no earlier label and stays inside the widget."""
+        """Queue label ``text`` for the point ``at``; :meth:`_draw_labels` places and draws them all."""
         fm = QFontMetricsF(p.font())
-        w, h = fm.horizontalAdvance(text) + 4, fm.height()
-        cands = [(4, -4), (4, 4), (-w - 4, -4), (-w - 4, 4), (-w / 2, -h - 2), (-w / 2, h + 2)]
-        rect = None
-        for dx, dy in cands + [(dx, dy + s * h) for s in (1, -1, 2, -2) for dx, dy in cands[:4]]:
-            r = QRectF(at.x() + dx, at.y() + dy - h / 2, w, h)
-            r.moveLeft(min(max(r.left(), 1.0), self.width() - w - 1))
-            r.moveTop(min(max(r.top(), 1.0), self.height() - h - 1))
-            if not any(r.intersects(b) for b in boxes):
-                rect = r
-                break
-        if rect is None:
-            rect = QRectF(at.x() + 4, at.y() - h / 2, w, h)
-        boxes.append(rect)
-        p.save()
-        p.setPen(Qt.PenStyle.NoPen)
-        p.setBrush(QBrush(QColor(255, 255, 255, 200)))
-        p.drawRect(rect)
-        p.setPen(colour.darker(115))
-        p.drawText(rect, Qt.AlignmentFlag.AlignCenter, text)
-        p.restore()
+        self._queued.append((text, QPointF(at), QColor(colour), QFont(p.font()),
+                             fm.horizontalAdvance(text) + 4, fm.height()))
+
+    def _draw_labels(self, p: QPainter, obstacles: list[QRectF]) -> None:
+        """Place the queued labels (:func:`place_labels`: none overlaps another or an obstacle such as
+        the eye, all inside the widget) and draw them, with a leader line when moved off their point."""
+        q = self._queued
+        anchors = [(a.x(), a.y()) for _t, a, _c, _f, _w, _h in q]
+        sizes = [(w, h) for *_x, w, h in q]
+        obs = [(r.left(), r.top(), r.width(), r.height()) for r in obstacles]
+        rects = place_labels(anchors, sizes, obs, (self.width(), self.height()))
+        self.label_rects = {}
+        for (text, at, colour, font, _w, _h), (x, y, w, h) in zip(q, rects, strict=True):
+            rect = QRectF(x, y, w, h)
+            self.label_rects[text] = rect
+            p.save()
+            p.setFont(font)
+            near = QPointF(min(max(at.x(), rect.left()), rect.right()), min(max(at.y(), rect.top()), rect.bottom()))
+            if math.hypot(near.x() - at.x(), near.y() - at.y()) > 6.0:  # a leader line from its point
+                p.setPen(QPen(_alpha(colour.name(), 150), 0.8))
+                p.drawLine(at, near)
+            p.setPen(Qt.PenStyle.NoPen)
+            p.setBrush(QBrush(QColor(255, 255, 255, 215)))
+            p.drawRect(rect)
+            p.setPen(colour.darker(115))
+            p.drawText(rect, Qt.AlignmentFlag.AlignCenter, text)
+            p.restore()
+        self._queued = []
 
     def mousePressEvent(self, ev: Any) -> None:  # noqa: N802 - Qt API
         if self.schematic is None:

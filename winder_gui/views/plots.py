@@ -10,19 +10,25 @@ Units are in the axis labels (mm, deg, s).
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pyqtgraph as pg
-from PySide6.QtCore import Qt, Signal
+from PySide6.QtCore import QPointF, Qt, Signal
+from PySide6.QtGui import QAction
 from PySide6.QtWidgets import (
     QComboBox,
     QFileDialog,
+    QFrame,
     QHBoxLayout,
     QLabel,
+    QMenu,
     QPushButton,
+    QScrollArea,
     QSpinBox,
+    QToolButton,
     QVBoxLayout,
     QWidget,
 )
@@ -34,6 +40,48 @@ LAW_COLOURS = {"parallel": "#1f77b4", "equidistant": "#2ca02c", "equal-tangent":
                "min-range": "#d62728"}
 AXIS_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
 MAX_ITERATION_CURVES = 40
+MIN_PLOT_PX = 120
+"""Least height of a plot's data area (px); a page with more rows than fit scrolls."""
+LEFT_AXIS_PX = 64
+"""Width of every left axis, so that stacked plots with one x axis line up."""
+FLAT_REL = 1e-9
+"""A curve whose values span less than this (relative) is drawn in a fixed band around its value."""
+_LABEL = re.compile(r"^\s*(?P<name>.*?)\s*\[(?P<unit>[^\]]*)\]\s*$")
+
+
+class TickAxis(pg.AxisItem):
+    """An axis whose tick labels carry no more decimals than the tick spacing needs (no
+    ``18.000000000000005``) and never an SI prefix (the unit is in the label)."""
+
+    def tickStrings(self, values: list[float], scale: float, spacing: float) -> list[str]:  # noqa: N802 - Qt API
+        if not values:
+            return []
+        step = abs(spacing * scale) or 1.0
+        places = int(min(max(0, -math.floor(math.log10(step)) + (1 if str(step)[0] in "25" else 0)), 9))
+        big = max(abs(v * scale) for v in values)
+        if big >= 1e7 or (big < 1e-4 and big > 0):
+            return [f"{v * scale:.3g}" for v in values]
+        out = []
+        for v in values:
+            t = f"{v * scale:.{places}f}"
+            out.append("0" if t.strip("-0.") == "" else t)
+        return out
+
+
+def split_label(text: str) -> tuple[str, str]:
+    """``"z [mm]"`` -> ``("z", "mm")``; a label without a unit -> ``(text, "")``."""
+    m = _LABEL.match(text or "")
+    return (m.group("name"), m.group("unit")) if m else ((text or "").strip(), "")
+
+
+def readout_text(x_label: str, y_label: str, x: float, y: float) -> str:
+    """The crosshair read-out: ``"z = 12.5 mm · β = 55.01 deg"`` (units from the axis labels)."""
+    parts = []
+    for label, v in ((x_label, x), (y_label, y)):
+        name, unit = split_label(label)
+        unit = "" if unit in ("", "–", "-") else f" {unit}"
+        parts.append(f"{name or '?'} = {v:.6g}{unit}")
+    return " · ".join(parts)
 
 
 def _pen(colour: str, width: float = 1.5, dash: bool = False) -> Any:
@@ -58,6 +106,17 @@ class PlotPage(QWidget):
         self.message = QLabel("")
         self.message.setWordWrap(True)
         self.message.setStyleSheet("color: #555; padding: 2px 6px;")
+        self.readout = QLabel("")
+        self.readout.setObjectName("plotReadout")
+        self.readout.setStyleSheet("color: #204080; padding: 2px 6px;")
+        self.readout.setToolTip("The values under the mouse pointer")
+        self._cross: dict[str, tuple[Any, Any]] = {}
+        self.glw.scene().sigMouseMoved.connect(self._on_mouse)
+        self.scroll = QScrollArea()
+        self.scroll.setFrameShape(QFrame.Shape.NoFrame)
+        self.scroll.setWidgetResizable(True)
+        self.scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        self.scroll.setWidget(self.glw)
         self.export_button = QPushButton("Export…")
         self.export_button.setToolTip("Save this plot as PNG, SVG or CSV")
         self.export_button.clicked.connect(self._ask_export)
@@ -65,26 +124,103 @@ class PlotPage(QWidget):
         top = QHBoxLayout()
         top.setContentsMargins(0, 0, 4, 0)
         top.addWidget(self.message, 1)
+        top.addWidget(self.readout)
         top.addWidget(self.export_button)
+        self.top = top
         lay = QVBoxLayout(self)
         lay.setContentsMargins(0, 0, 0, 0)
         lay.setSpacing(0)
         lay.addLayout(top)
-        lay.addWidget(self.glw, 1)
+        lay.addWidget(self.scroll, 1)
         self.set_message("No data yet: run the pipeline (F5).")
 
     # -- building blocks -------------------------------------------------------------------------
+    @staticmethod
+    def plot_min_height(p: pg.PlotItem) -> float:
+        """The height plot ``p`` needs for a data area of :data:`MIN_PLOT_PX` (its title and x axis)."""
+        ax = p.getAxis("bottom")
+        h = MIN_PLOT_PX + 12.0
+        if p.titleLabel.isVisible() and p.titleLabel.text:
+            h += 24.0
+        if ax.isVisible():
+            h += (30.0 if ax.style.get("showValues", True) else 10.0) + (22.0 if ax.labelText else 0.0)
+        return h
+
+    def size_plot(self, p: pg.PlotItem) -> None:
+        """Give ``p`` its minimum height (:meth:`plot_min_height`) and re-fit the page."""
+        p.setMinimumHeight(self.plot_min_height(p))
+        self.fit_rows()
+
+    def fit_rows(self) -> None:
+        """Let the page scroll rather than squeeze its rows of plots below :data:`MIN_PLOT_PX`."""
+        heights: dict[int, float] = {}
+        for item, cells in self.glw.ci.items.items():
+            if isinstance(item, pg.PlotItem) and cells:
+                r = cells[0][0]
+                heights[r] = max(heights.get(r, 0.0), item.minimumHeight())
+        self.glw.setMinimumHeight(int(sum(heights.values()) + 16 + 6 * max(len(heights), 1)))
+
+    def _on_mouse(self, pos: QPointF) -> None:
+        for name, p in self.plots.items():
+            vb = p.getViewBox()
+            if p.isVisible() and vb.sceneBoundingRect().contains(pos):
+                pt = vb.mapSceneToView(pos)
+                x_label = p.getAxis("bottom").labelText or self._x_label(name)
+                self.readout.setText(readout_text(x_label, p.getAxis("left").labelText, pt.x(), pt.y()))
+                lines = self._cross.get(name)
+                if lines is None:
+                    pen = pg.mkPen("#7090c0", width=1, style=Qt.PenStyle.DotLine)
+                    lines = (pg.InfiniteLine(angle=90, pen=pen, movable=False),
+                             pg.InfiniteLine(angle=0, pen=pen, movable=False))
+                    for ln in lines:
+                        p.addItem(ln, ignoreBounds=True)
+                    self._cross[name] = lines
+                lines[0].setPos(pt.x())
+                lines[1].setPos(pt.y())
+                for other, ls in self._cross.items():
+                    for ln in ls:
+                        ln.setVisible(other == name)
+                return
+
+    def _x_label(self, name: str) -> str:
+        """The x label of plot ``name`` when its own axis shows none (stacked plots share the last one's)."""
+        for p in reversed(list(self.plots.values())):
+            if p.getAxis("bottom").labelText:
+                return p.getAxis("bottom").labelText
+        return "x"
+
+    def guard_flat(self) -> None:
+        """Give a plot whose curves are (nearly) constant a readable band around the value instead of
+        a range of 1e-15 (ticks such as ``18.000000000000005``)."""
+        for p in self.plots.values():
+            ys = [np.asarray(c.yData, dtype=float) for c in self.curves.values()
+                  if c in p.items and c.yData is not None]
+            ys = [y[np.isfinite(y)] for y in ys if y.size]
+            ys = [y for y in ys if y.size]
+            if not ys:
+                continue
+            lo, hi = min(float(y.min()) for y in ys), max(float(y.max()) for y in ys)
+            mid = 0.5 * (lo + hi)
+            if hi - lo <= FLAT_REL * max(1.0, abs(mid)):
+                half = max(0.05 * abs(mid), 1.0) if mid else 1.0
+                p.setYRange(mid - half, mid + half, padding=0)
+            else:
+                p.enableAutoRange(axis="y")
+
     def add_plot(self, name: str, row: int, col: int, left: str, bottom: str, **kw: Any) -> pg.PlotItem:
         """A plot with axis labels (units in the labels) at ``row``, ``col`` of the layout."""
-        p = self.glw.addPlot(row=row, col=col, **kw)
+        axes = {side: TickAxis(side) for side in ("left", "bottom")}
+        p = self.glw.addPlot(row=row, col=col, axisItems=axes, **kw)
+        p.getAxis("left").setWidth(LEFT_AXIS_PX)
         p.showGrid(x=True, y=True, alpha=0.25)
         p.setLabel("left", left)
         p.setLabel("bottom", bottom)
+        self.plots[name] = p
+        self.size_plot(p)
         p.setClipToView(True)
         p.setDownsampling(auto=True, mode="peak")
         for side in ("left", "bottom"):
             p.getAxis(side).enableAutoSIPrefix(False)  # the unit is in the label; no hidden ×1000
-        self.plots[name] = p
         return p
 
     def set_curve(self, plot: str, name: str, x: Any, y: Any, colour: str = "#1f77b4", width: float = 1.5,
@@ -108,6 +244,8 @@ class PlotPage(QWidget):
             if p.legend is not None:
                 p.legend.clear()
         self.curves.clear()
+        self._cross.clear()
+        self.readout.setText("")
         self.set_message(message)
         self.export_button.setEnabled(False)
 
@@ -180,6 +318,7 @@ class PlotPage(QWidget):
             self.export(path)
 
     def _done(self, message: str = "") -> None:
+        self.guard_flat()
         self.set_message(message)
         self.export_button.setEnabled(bool(self.curves))
 
@@ -192,11 +331,17 @@ class WindingPlots(PlotPage):
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
-        self.add_plot("beta", 0, 0, "β [deg]", "", title="winding angle β(z)")
-        self.add_plot("C", 1, 0, "C [mm]", "", title="Clairaut function C(z) = r·sin β")
-        self.add_plot("lam", 2, 0, "λ [–]", "z [mm]", title="slip tendency λ(z) (dashed: ±μ)")
-        self.plots["C"].setXLink(self.plots["beta"])
-        self.plots["lam"].setXLink(self.plots["beta"])
+        # no titles (the left labels say what each plot is); one x axis, shown under the last plot
+        self.add_plot("beta", 0, 0, "β [deg]", "")
+        self.add_plot("C", 1, 0, "C [mm]", "")
+        self.plots["C"].setToolTip("Clairaut function C(z) = r·sin β")
+        self.add_plot("lam", 2, 0, "λ [–]", "z [mm]")
+        self.plots["lam"].setToolTip("slip tendency λ(z); dashed: the friction limit ±μ")
+        for key in ("beta", "C"):
+            self.plots[key].setXLink(self.plots["lam"])
+            self.plots[key].getAxis("bottom").setStyle(showValues=False)
+            self.plots[key].getAxis("bottom").setHeight(8)
+            self.size_plot(self.plots[key])
 
     def set_line(self, line: Any) -> None:
         """Show ``line`` (engine.winding.WindingLine): its first circuit, and the friction limit ±μ."""
@@ -299,6 +444,20 @@ class AxesPlot(PlotPage):
 
     title = "axes"
 
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.axis_names: list[str] = []
+        self.hidden: set[str] = set()
+        """Axes the user chose not to show."""
+        self.chooser = QToolButton()
+        self.chooser.setObjectName("axes.chooser")
+        self.chooser.setText("Axes…")
+        self.chooser.setToolTip("Choose the axes to show (one row each: position and speed)")
+        self.chooser.setPopupMode(QToolButton.ToolButtonPopupMode.InstantPopup)
+        self.chooser_menu = QMenu(self.chooser)
+        self.chooser.setMenu(self.chooser_menu)
+        self.top.insertWidget(0, self.chooser)
+
     def plan(self, machine: Any) -> list[Any]:
         """Steps that lay out one row of plots per axis of ``machine`` (none when laid out already).
 
@@ -312,22 +471,62 @@ class AxesPlot(PlotPage):
             self.glw.clear()
             self.plots.clear()
             self.curves.clear()
-
-        last = len(machine.axes) - 1
+            self._cross.clear()
+            self.axis_names = [ax.name for ax in machine.axes]
+            self.hidden &= set(self.axis_names)
+            self.chooser_menu.clear()
+            for name in self.axis_names:
+                act = QAction(name, self.chooser_menu)
+                act.setCheckable(True)
+                act.setChecked(name not in self.hidden)
+                act.toggled.connect(lambda on, n=name: self.show_axis(n, on))
+                self.chooser_menu.addAction(act)
 
         def cell(k: int, ax: Any, speed: bool) -> None:
             # one PlotItem per step: building one (menus, axes, view box) costs ~20 ms of GUI-thread CPU
-            t_label = "t [s]" if k == last else ""
             if speed:
-                p = self.add_plot(f"{ax.name}.v", k, 1, f"{ax.name}' [{ax.units}/s]", t_label)
+                p = self.add_plot(f"{ax.name}.v", k, 1, f"{ax.name}' [{ax.units}/s]", "")
             else:
-                p = self.add_plot(f"{ax.name}.q", k, 0, f"{ax.name} [{ax.units}]", t_label)
+                p = self.add_plot(f"{ax.name}.q", k, 0, f"{ax.name} [{ax.units}]", "")
             first = next(iter(self.plots.values()))
             if p is not first:
                 p.setXLink(first)
 
         return [start, *[lambda k=k, ax=ax, v=v: cell(k, ax, v) for k, ax in enumerate(machine.axes)
-                         for v in (False, True)]]
+                         for v in (False, True)], self.relayout]
+
+    def visible_axes(self) -> list[str]:
+        """The axes shown, in the machine's order."""
+        return [n for n in self.axis_names if n not in self.hidden]
+
+    def show_axis(self, name: str, on: bool = True) -> None:
+        """Show or hide the row of axis ``name``."""
+        if on:
+            self.hidden.discard(name)
+        else:
+            self.hidden.add(name)
+        self.relayout()
+
+    def relayout(self) -> None:
+        """Put the rows of the visible axes one under the other; the time axis under the last one."""
+        ci = self.glw.ci
+        for p in self.plots.values():
+            if p in ci.items:
+                ci.removeItem(p)
+        shown = self.visible_axes()
+        for r, name in enumerate(shown):
+            for c, kind in enumerate(("q", "v")):
+                p = self.plots[f"{name}.{kind}"]
+                last = r == len(shown) - 1
+                p.setLabel("bottom", "t [s]" if last else "")
+                ax = p.getAxis("bottom")
+                ax.setStyle(showValues=last)
+                ax.setHeight(None if last else 8)
+                ci.addItem(p, r, c)
+                p.setMinimumHeight(self.plot_min_height(p))
+        for p in self.plots.values():
+            p.setVisible(p in ci.items)
+        self.fit_rows()
 
     def set_blocks(self, blocks: Any, machine: Any) -> None:
         """Show every axis of ``blocks`` (engine.blocks.Blocks) with the limits of ``machine``."""

@@ -276,6 +276,7 @@ class MandrelView3D(QWidget):
             self._render()
         if self.paths is not None:
             self._render_paths()
+            self.frame_all()
         return self.backend
 
     def _use_placeholder(self, why: str) -> None:
@@ -335,6 +336,8 @@ class MandrelView3D(QWidget):
             self.pause()
         if self.backend == "vtk":
             self._render_paths()
+            if paths is not None:
+                self.frame_all()   # the mandrel, the whole eye path and the head in view after a run
         elif self.backend == "placeholder":
             self._update_label()
         self.frame_label.setText(self._frame_text(short=True))
@@ -587,9 +590,56 @@ class MandrelView3D(QWidget):
             self.plotter.view_xz(negative=False)
             self.plotter.camera.elevation = 22.0
             self.plotter.camera.azimuth = -28.0
-            self.plotter.reset_camera()
-            self.plotter.camera.zoom(1.35)
+            self.frame_all(render=False)   # the whole mandrel (and eye path) in view, also after a STEP import
             self._reset_camera = False
+
+    def scene_points(self) -> np.ndarray:
+        """Points that must be in view (view frame, mm): the mandrel's surface, the eye trajectory and
+        the winding paths' extremes."""
+        pts = []
+        if self.data is not None:
+            d = self.data
+            pts.append(np.column_stack([d.surface_x.ravel(), d.surface_y.ravel(), d.surface_z.ravel()])[::7])
+        if self.paths is not None and self.paths.eye_xyz.size:
+            pts.append(self.paths.eye_xyz)
+        return np.vstack(pts) if pts else np.zeros((0, 3))
+
+    def frame_all(self, render: bool = True) -> None:
+        """Frame the mandrel, the whole eye trajectory and the head (auto-framing after a run; View ->
+        Frame all)."""
+        pts = self.scene_points()
+        if self.plotter is None or pts.shape[0] == 0:
+            return
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        pad = 0.04 * float(np.max(hi - lo))
+        bounds = (lo[0] - pad, hi[0] + pad, lo[1] - pad, hi[1] + pad, lo[2] - pad, hi[2] + pad)
+        self.plotter.reset_camera(render=False, bounds=bounds)
+        # VTK fits a sphere round the bounds: a long mandrel then fills a third of the view; zoom in
+        # while every point (a sample of them) stays inside the viewport
+        sample = pts[:: max(1, pts.shape[0] // 300)]
+        cam = self.plotter.camera
+        for _ in range(12):
+            cam.zoom(1.12)
+            if not self.points_in_view(sample, margin=0.03).all():
+                cam.zoom(1.0 / 1.12)
+                break
+        if render:
+            self.plotter.render()
+
+    def points_in_view(self, pts: np.ndarray, margin: float = 0.0) -> np.ndarray:
+        """For each point (view frame, mm): True when it projects inside the 3D viewport (less a
+        ``margin``, a fraction of its size, on every side)."""
+        if self.plotter is None:
+            return np.zeros(len(pts), dtype=bool)
+        ren = self.plotter.renderer
+        w, h = self.plotter.render_window.GetSize()
+        out = np.zeros(len(pts), dtype=bool)
+        for i, p in enumerate(np.asarray(pts, dtype=float)):
+            ren.SetWorldPoint(float(p[0]), float(p[1]), float(p[2]), 1.0)
+            ren.WorldToDisplay()
+            x, y, _z = ren.GetDisplayPoint()
+            out[i] = margin * w <= x <= (1 - margin) * w and margin * h <= y <= (1 - margin) * h
+        return out
 
     def render_image(self) -> QImage | None:
         """The 3D view rendered to an image (VTK draws with GL, which ``QWidget.grab`` may miss)."""

@@ -1,0 +1,190 @@
+"""Screens an engineer reads all day: every step of every machine template at 1280×800 and 1920×1080.
+
+For each template (pipe.toml on it; robot_cell with the csv post, the only one that addresses its
+axes), after a run: no label, button or field overlaps another (bounding boxes of the visible
+widgets, clipped by their scroll areas), the machine schematic's labels do not overlap, every plot's
+data area is at least :data:`winder_gui.views.plots.MIN_PLOT_PX` high, and the eye trajectory and the
+mandrel lie inside the 3D viewport.  Needs a real display: run under xvfb-run with QT_QPA_PLATFORM=xcb.
+
+Screenshots go to $WINDER_SCREENSHOTS (``WINDER_SCREENSHOTS=docs/screenshots`` refreshes the
+README's pictures), else to a temporary folder.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.gl
+
+ROOT = Path(__file__).resolve().parents[1]
+SHOTS_DIR = Path(os.environ.get("WINDER_SCREENSHOTS") or tempfile.mkdtemp(prefix="winder-screens-"))
+TEMPLATES = ("lathe2", "lathe3", "lathe4", "gantry6", "robot_cell")
+SIZES = ((1280, 800), (1920, 1080))
+STEPS = ("mandrel", "winding", "payout", "machine", "timelaw", "nc")
+
+
+def _visible_rect(w, top):
+    """``w``'s rectangle in ``top``'s coordinates, clipped by every ancestor (scroll areas); None if hidden."""
+    from PySide6.QtCore import QPoint, QRect
+
+    if not w.isVisibleTo(top) or w.width() <= 0 or w.height() <= 0:
+        return None
+    r = QRect(w.mapTo(top, QPoint(0, 0)), w.size())
+    p = w.parentWidget()
+    while p is not None and p is not top:
+        r = r.intersected(QRect(p.mapTo(top, QPoint(0, 0)), p.size()))
+        p = p.parentWidget()
+    return r if r.width() > 1 and r.height() > 1 else None
+
+
+def overlapping_widgets(top) -> list[tuple[str, str]]:
+    """Pairs of visible labels/buttons/fields of ``top`` whose boxes overlap (none is inside the other's
+    widget tree; item views' own editors are not counted)."""
+    from PySide6.QtWidgets import (
+        QAbstractButton,
+        QAbstractItemView,
+        QAbstractSpinBox,
+        QComboBox,
+        QLabel,
+        QLineEdit,
+    )
+
+    kinds = (QLabel, QAbstractButton, QLineEdit, QComboBox, QAbstractSpinBox)
+    items = []
+    for w in top.findChildren(QWidget_base()):
+        if not isinstance(w, kinds):
+            continue
+        if isinstance(w, QLabel) and not (w.text() or w.pixmap() is not None and not w.pixmap().isNull()):
+            continue
+        p, skip = w.parentWidget(), False
+        while p is not None:
+            if isinstance(p, QAbstractItemView | QComboBox | QAbstractSpinBox):
+                skip = True  # a cell editor, a combo's own line edit
+                break
+            p = p.parentWidget()
+        if skip:
+            continue
+        r = _visible_rect(w, top)
+        if r is not None:
+            items.append((w, r))
+    bad = []
+    for i, (a, ra) in enumerate(items):
+        for b, rb in items[i + 1:]:
+            if a.isAncestorOf(b) or b.isAncestorOf(a):
+                continue
+            x = ra.intersected(rb)
+            if x.width() > 1 and x.height() > 1:
+                bad.append((_name(a), _name(b)))
+    return bad
+
+
+def QWidget_base():  # noqa: N802 - a class
+    from PySide6.QtWidgets import QWidget
+
+    return QWidget
+
+
+def _name(w) -> str:
+    text = getattr(w, "text", lambda: "")()
+    return f"{type(w).__name__}({w.objectName() or text[:30]!r})"
+
+
+def short_plots(page, least: float) -> list[tuple[str, float]]:
+    """Plots of ``page`` whose data area is lower than ``least`` px."""
+    out = []
+    for name, p in page.plots.items():
+        if p.isVisible() and p in page.glw.ci.items:
+            h = p.getViewBox().sceneBoundingRect().height()
+            if h < least:
+                out.append((name, h))
+    return out
+
+
+@pytest.fixture(scope="module")
+def qt_display(qapp):
+    from PySide6.QtGui import QGuiApplication
+
+    if QGuiApplication.platformName() in ("offscreen", "minimal"):
+        pytest.skip("needs a real display (xvfb-run with QT_QPA_PLATFORM=xcb)")
+    return qapp
+
+
+@pytest.mark.parametrize("template", TEMPLATES)
+def test_every_step_is_readable(qt_display, qtbot, template, tmp_path) -> None:
+    from winder_gui.main_window import MainWindow
+    from winder_gui.views.plots import MIN_PLOT_PX
+
+    w = MainWindow(ROOT / "resources/examples/pipe.toml")
+    w.confirm_discard = False
+    w.auto_run = False
+    qtbot.addWidget(w)
+    w.resize(*SIZES[0])
+    w.show()
+    try:
+        assert w.wait_idle()
+        qtbot.waitUntil(lambda: w.view3d.backend != "pending", timeout=30000)
+        if template != w.job.machine.template:
+            w.machine_panel.select_template(template)
+            assert w.wait_idle()
+        if template == "robot_cell":
+            w.machine_panel.post_combo.setCurrentText("csv")
+            w.machine_panel._on_edited()
+        assert w.run_pipeline_now()
+        assert w.wait_idle(300000) and w.last_error == "", w.last_error
+        problems: list[str] = []
+        for size in SIZES:
+            w.resize(*size)
+            qtbot.wait(200)
+            v = w.view3d
+            if v.backend == "vtk":
+                mandrel = v.scene_points()
+                assert v.points_in_view(mandrel).all(), f"{template} {size}: part of the scene outside the 3D view"
+                assert v.points_in_view(v.paths.eye_xyz[:: max(1, v.paths.eye_xyz.shape[0] // 400)]).all()
+            for step in STEPS:
+                w.go_to_step(step)
+                qtbot.wait(150)
+                for a, b in overlapping_widgets(w):
+                    problems.append(f"{size} {step}: {a} overlaps {b}")
+                page = w.plot_tabs.currentWidget()
+                if hasattr(page, "glw"):
+                    for name, h in short_plots(page, MIN_PLOT_PX):
+                        problems.append(f"{size} {step}: plot {name} is {h:.0f} px high")
+                if step == "machine":
+                    rects = list(w.machine_panel.schematic.label_rects.items())
+                    for i, (ta, ra) in enumerate(rects):
+                        for tb, rb in rects[i + 1:]:
+                            if ra.intersects(rb):
+                                problems.append(f"{size} schematic: {ta!r} overlaps {tb!r}")
+                SHOTS_DIR.mkdir(parents=True, exist_ok=True)
+                assert w.screenshot().save(str(SHOTS_DIR / f"{template}_{size[0]}x{size[1]}_{step}.png"))
+            for i in range(w.plot_tabs.count()):
+                w.plot_tabs.setCurrentIndex(i)
+                qtbot.wait(60)
+                page = w.plot_tabs.currentWidget()
+                if hasattr(page, "glw"):
+                    for name, h in short_plots(page, MIN_PLOT_PX):
+                        problems.append(f"{size} tab {w.plot_tabs.tabText(i)}: plot {name} is {h:.0f} px high")
+        assert not problems, "\n".join(problems)
+    finally:
+        w.close()
+
+
+def test_label_placement_keeps_labels_apart() -> None:
+    """place_labels: many labels on one point end up without overlaps, inside the bounds."""
+    from winder_gui.views.machine_schematic import place_labels
+
+    anchors = [(100.0, 80.0)] * 8 + [(5.0, 5.0), (290.0, 190.0)]
+    sizes = [(60.0, 14.0)] * 10
+    rects = place_labels(anchors, sizes, [(95.0, 75.0, 10.0, 10.0)], (300.0, 200.0))
+    for i, a in enumerate(rects):
+        assert 0 <= a[0] and a[0] + a[2] <= 300 and 0 <= a[1] and a[1] + a[3] <= 200
+        assert not (a[0] < 105 and 95 < a[0] + a[2] and a[1] < 85 and 75 < a[1] + a[3])  # clear of the obstacle
+        for b in rects[i + 1:]:
+            assert not (a[0] < b[0] + b[2] and b[0] < a[0] + a[2] and a[1] < b[1] + b[3] and b[1] < a[1] + a[3])
+    # the first label sits right next to its point
+    assert np.hypot(rects[0][0] - 100.0, rects[0][1] + 7.0 - 80.0) < 20.0
