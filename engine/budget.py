@@ -214,6 +214,27 @@ def check_winding_spec(spec: Any, r_max_mm: float, band_width_mm: float, thickne
     return est
 
 
+DP_BYTES_PER_CELL = 64
+"""Memory of the time-law DP per node and speed level (bytes; an upper estimate)."""
+
+MAX_DP_WORK = 3e9
+"""Largest work of one time-law DP, nodes × levels² (about half a minute on the 2-core machine: the
+tube method's passes took 8 s for 893 nodes × 1000² levels)."""
+
+
+def check_dp(n_nodes: int, levels: int, *, field: str = "timelaw.levels", file: str | Path | None = None) -> None:
+    """Refuse a time-law DP (engine.timeparam, methods tube and dp) too slow or too large for the budget."""
+    work = float(n_nodes) * float(levels) ** 2
+    if work > MAX_DP_WORK:
+        m_max = int(math.sqrt(MAX_DP_WORK / max(n_nodes, 1)))
+        raise InputError(f"too slow: the time law's DP over {n_nodes} nodes × {levels} speed levels would take "
+                         f"about {work / MAX_DP_WORK * 30:.0f} s (the work budget is about 30 s); use at most "
+                         f"{m_max} levels", file=file, line=field_line(file, field) if file is not None else None,
+                         field=field)
+    check(Estimate("DP cells", float(n_nodes) * float(levels), DP_BYTES_PER_CELL, field=field,
+                   detail=f"{n_nodes} nodes × {levels} speed levels"), file=file)
+
+
 def field_line(file: str | Path, field: str) -> int | None:
     """Line of ``field`` (dotted, e.g. ``"winding.circuits"``) in the job file ``file``, if it is one."""
     p = Path(file)

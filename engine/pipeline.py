@@ -598,8 +598,11 @@ def _piece_arrays(s: np.ndarray, X: np.ndarray, a: int, b: int, V: np.ndarray, A
 
 
 def _parametrize(method: str, nodes: tuple[np.ndarray, ...], limits: Any, state: State | None) -> Any:
+    from engine.budget import check_dp
     from engine.timeparam import parametrize
 
+    if method != "toppra":
+        check_dp(nodes[0].size, limits.levels)
     with np.errstate(divide="ignore", invalid="ignore"):
         return parametrize(*nodes, limits, method=method, state=_NoPartial(state))
 

@@ -503,9 +503,13 @@ class Runner:
                                 text=True, env=env, preexec_fn=pre, cwd=str(ROOT))
 
     def close(self) -> None:
+        """End the worker (if any) and close its pipes."""
         if self.proc is not None:
             self.proc.kill()
             self.proc.wait()
+            for f in (self.proc.stdin, self.proc.stdout):
+                if f is not None:
+                    f.close()
             self.proc = None
 
     def run(self, case: Case, workdir: Path, time_budget_s: float) -> Outcome:
@@ -532,7 +536,7 @@ class Runner:
         if not line:
             code = self.proc.wait()
             res.problems["crash"] = f"worker died: {signal.Signals(-code).name if code < 0 else code}"
-            self.proc = None
+            self.close()
             return res
         ans = json.loads(line)
         res.rc, res.elapsed_s, res.peak_rss, res.stderr = ans["rc"], ans["elapsed"], ans["peak"], ans["err"]

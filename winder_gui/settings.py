@@ -45,3 +45,32 @@ def add_recent(path: str | Path) -> list[str]:
     rec = [p, *[r for r in recent_files() if r != p]][:MAX_RECENT]
     app_settings().setValue("recent", rec)
     return rec
+
+
+MEMORY_KEY = "memory_budget"
+"""Settings key of the memory budget (text such as ``8G``; absent: the engine's default)."""
+
+
+def apply_memory_budget() -> int:
+    """Give the engine the memory budget kept in the settings (:mod:`engine.budget`); the bytes in force."""
+    from engine import budget
+    from engine.errors import InputError
+
+    text = str(app_settings().value(MEMORY_KEY, "") or "")
+    try:
+        budget.set_max_memory(budget.parse_size(text) if text else None)
+    except InputError:
+        budget.set_max_memory(None)  # a damaged setting must not stop the application
+    return budget.max_memory_bytes()
+
+
+def set_memory_budget(text: str) -> int:
+    """Keep ``text`` (e.g. ``"8G"``; empty = the default) as the memory budget and apply it; the bytes.
+
+    Raises :class:`engine.errors.InputError` for text that is not a size (nothing changes)."""
+    from engine import budget
+
+    if text.strip():
+        budget.parse_size(text.strip(), field="Memory budget")
+    app_settings().setValue(MEMORY_KEY, text.strip())
+    return apply_memory_budget()

@@ -14,7 +14,7 @@ from PySide6.QtWidgets import QFileDialog, QMessageBox, QToolBar, QWidget
 from engine import __version__
 from winder_gui.autosave import autosave_origin
 from winder_gui.panels.steps import STEPS
-from winder_gui.settings import recent_files
+from winder_gui.settings import apply_memory_budget, recent_files, set_memory_budget
 
 if TYPE_CHECKING:
     from winder_gui.main_window import MainWindow
@@ -83,6 +83,9 @@ def build_menus(w: MainWindow) -> None:
         lambda: open_tool(w, "turning", "winder_gui.dialogs.turning", "TurningDialog"))
     add(w.menu_tools, "slotting", "&Slot forming…",
         lambda: open_tool(w, "slotting", "winder_gui.dialogs.slotting", "SlotDialog"))
+    w.menu_tools.addSeparator()
+    add(w.menu_tools, "memory_budget", "&Memory budget…", lambda: ask_memory_budget(w))
+    apply_memory_budget()
 
     w.menu_help = mb.addMenu("&Help")
     add(w.menu_help, "shortcuts", "&Keyboard shortcuts", lambda: show_box(w, "shortcuts", "Keyboard shortcuts",
@@ -225,3 +228,26 @@ def offer_autosaves(w: MainWindow) -> None:
                 w._status(f"Could not delete the autosaved copy {p}: {exc}", error=True)
         if not owned:
             owner.release(p)
+
+
+def ask_memory_budget(w: MainWindow) -> None:
+    """Tools → Memory budget: the largest job the engine accepts (engine.budget), kept in the settings."""
+    from PySide6.QtWidgets import QInputDialog
+
+    from engine import budget
+    from engine.errors import InputError
+
+    cur = budget.fmt_bytes(budget.max_memory_bytes()).replace(" ", "")
+    text, ok = QInputDialog.getText(
+        w, "Memory budget",
+        "Largest memory a computation may use (e.g. 4G, 12G; empty = the default "
+        f"{budget.fmt_bytes(budget.DEFAULT_MAX_MEMORY_BYTES)}).\nLarger jobs are refused before they start.",
+        text=cur)
+    if not ok:
+        return
+    try:
+        n = set_memory_budget(text)
+    except InputError as exc:
+        w._report_dialog("Memory budget", exc)
+        return
+    w.statusBar().showMessage(f"Memory budget {budget.fmt_bytes(n)}", 5000)

@@ -28,9 +28,6 @@ from engine.fileio import atomic_write_bytes, check_output_path
 from engine.state import CliState
 from engine.timeparam import METHODS, limits_from_toml, load_path_npz, parametrize
 
-DP_BYTES_PER_CELL = 64
-"""Memory of the DP per node and speed level (bytes; an upper estimate: costs, predecessors, caps)."""
-
 NAME = "timeparam"
 HELP = "Time law of a path under axis/technological limits: DP + tube (seed 003), DP or TOPP-RA"
 
@@ -67,9 +64,9 @@ def run(args: argparse.Namespace) -> int:
         limits = replace(limits, levels=args.levels)
     from engine import budget
 
-    budget.check(budget.Estimate("DP cells", float(s.size) * float(limits.levels), DP_BYTES_PER_CELL,
-                                 field="levels", detail=f"{s.size} nodes × {limits.levels} speed levels"),
-                 file=args.limits)
+    if args.method != "toppra":
+        budget.check_dp(s.size, limits.levels, field="--levels" if args.levels is not None else "levels",
+                        file=None if args.levels is not None or args.example and not args.limits else args.limits)
     try:
         law = parametrize(s, X, dX, ddX, limits, method=args.method, state=CliState(quiet=args.json))
     except InputError as exc:

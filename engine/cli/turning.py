@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -47,9 +46,11 @@ def _apply_set(doc: dict[str, Any], item: str) -> None:
     if "=" not in item:
         raise InputError(f"expected SECTION.KEY=VALUE, got {item!r}", field="--set")
     key, raw = item.split("=", 1)
+    from engine.fileio import loads_toml
+
     try:
-        value = tomllib.loads(f"v = {raw.strip()}")["v"]
-    except tomllib.TOMLDecodeError:
+        value = loads_toml(f"v = {raw.strip()}").get("v", raw.strip())
+    except InputError:
         value = raw.strip()  # a bare word is taken as text
     parts = [p for p in key.strip().split(".") if p]
     if not parts:
@@ -82,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if (args.case is None) == (args.example is None):
         raise InputError("give either a case file or --example NAME", field="CASE.toml")
-    path = example_case_path(args.example) if args.example else args.case
+    path = example_case_path(args.example) if args.example is not None else args.case
     doc = _read_toml(Path(path))
     for item in args.set:
         _apply_set(doc, item)

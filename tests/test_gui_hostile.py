@@ -1,0 +1,97 @@
+"""The GUI survives hostile files with the user's job intact (issue 19): open and import actions."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from gui_helpers import close_window, shown_window
+
+from engine import budget
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLES = ROOT / "resources" / "examples"
+
+
+@pytest.fixture
+def window(qtbot):
+    w = shown_window(qtbot, EXAMPLES / "bottle.toml")
+    yield w
+    close_window(w)
+    budget.set_max_memory(None)
+
+
+def _edited(w):
+    """Change the job without saving it (the user's unsaved work)."""
+    w.mandrel_panel.set_value("radius_mm", 61)
+    assert w.wait_idle()
+    return w.job
+
+
+def _assert_kept(w, job, shown: str, *words: str) -> None:
+    assert w.job == job and w.dirty
+    assert "Traceback" not in shown and "Internal error" not in shown
+    for word in words:
+        assert word in shown, shown
+    assert w.isVisible()
+
+
+def test_open_deeply_nested_job_keeps_the_job(window, tmp_path) -> None:
+    w = window
+    job = _edited(w)
+    bad = tmp_path / "deep.toml"
+    bad.write_text("schema_version = 1\nx = " + "[" * 100000 + "]" * 100000 + "\n")
+    w.open_job(bad)
+    assert w.wait_idle()
+    _assert_kept(w, job, w.error_box.text(), "deep.toml", "nested 100000 deep")
+
+
+def test_import_of_a_step_file_that_crashes_the_reader_keeps_the_job(window, tmp_path, monkeypatch) -> None:
+    import engine.mandrel_io as mio
+
+    w = window
+    job = _edited(w)
+    monkeypatch.setattr(mio, "STEP_READER", "sandbox_targets:crash")  # a segfault inside the CAD kernel
+    f = tmp_path / "evil.step"
+    f.write_bytes((EXAMPLES / "vessel.step").read_bytes())
+    w.import_generatrix(f)
+    assert w.wait_idle(120000)
+    _assert_kept(w, job, w.error_box.text(), "evil.step", "the STEP reader crashed on this file")
+    w.error_box.close()
+    # the application still works: a good import afterwards
+    monkeypatch.setattr(mio, "STEP_READER", "engine.mandrel_io:_step_profile_of_file")
+    w.import_generatrix(f)
+    assert w.wait_idle(120000) and w.last_error.count("crashed") <= 1
+    assert w.job.mandrel.kind == "file"
+
+
+def test_import_of_a_step_file_that_hangs_the_reader(window, tmp_path, monkeypatch) -> None:
+    import engine.mandrel_io as mio
+
+    w = window
+    job = _edited(w)
+    monkeypatch.setattr(mio, "STEP_READER", "sandbox_targets:hang")
+    monkeypatch.setenv("WINDER_IMPORT_TIMEOUT", "2")
+    f = tmp_path / "slow.step"
+    f.write_bytes((EXAMPLES / "vessel.step").read_bytes())
+    w.import_generatrix(f)
+    assert w.wait_idle(120000)
+    _assert_kept(w, job, w.error_box.text(), "slow.step", "gave up after 2 s")
+
+
+def test_absurd_job_is_refused_by_the_budget_and_the_setting_raises_it(window, tmp_path) -> None:
+    from winder_gui.settings import apply_memory_budget, set_memory_budget
+
+    w = window
+    text = (EXAMPLES / "bottle.toml").read_text()
+    p = tmp_path / "big.toml"
+    p.write_text(text.replace("[winding]", "[winding]\ncircuits = 300"))
+    set_memory_budget("64M")
+    w.open_job(p)
+    assert w.wait_idle()
+    w.run_pipeline_now()
+    assert w.wait_idle(120000)
+    assert "winding.circuits" in w.last_error and "64 MB" in w.last_error and "Memory budget" in w.last_error
+    assert w.job.winding.circuits == 300  # the job stays, the user can fix it
+    set_memory_budget("")
+    assert apply_memory_budget() == budget.DEFAULT_MAX_MEMORY_BYTES
