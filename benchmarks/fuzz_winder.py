@@ -37,8 +37,14 @@ def main() -> int:
     runner = Runner(pythonpath=args.engine, memory_budget_bytes=int(args.memory * 2**30))
     with tempfile.TemporaryDirectory(prefix="winder-fuzz-") as d:
         try:
+            def progress(outs: list) -> None:
+                c = summarise(outs)
+                print(f"after {len(outs)} cases ({time.monotonic() - t0:.0f} s): "
+                      + ", ".join(f"{k} {v}" for k, v in sorted(c.items()) if k != "cases"), flush=True)
+
             outs = run_fuzz(args.cases, args.seed, Path(d), time_budget_s=args.time, heavy=not args.light,
-                            runner=runner, log=print if args.verbose else None)
+                            runner=runner, log=(lambda t: print(t, flush=True)) if args.verbose else None,
+                            progress=progress)
         finally:
             runner.close()
     counts = summarise(outs)

@@ -878,8 +878,9 @@ def export_stl(mandrel: Mandrel, path: str | Path, tolerance_mm: float = 0.01, a
     ascii:
         Write ASCII STL instead of binary.
     """
-    if not (math.isfinite(tolerance_mm) and tolerance_mm >= 1e-4):
-        raise InputError(f"STL tolerance must be at least 0.0001 mm, got {tolerance_mm}", field="tolerance_mm")
+    if not (math.isfinite(tolerance_mm) and 1e-4 <= tolerance_mm <= 0.1 * mandrel.r_max):
+        raise InputError(f"STL tolerance must be in 0.0001 .. {0.1 * mandrel.r_max:.4g} mm (a tenth of the largest "
+                         f"radius), got {tolerance_mm}", field="tolerance_mm")
     if not (math.isfinite(angular_tolerance_rad) and 0 < angular_tolerance_rad <= 1.0):
         raise InputError(f"STL angular tolerance must be in (0, 1] rad, got {angular_tolerance_rad}",
                          field="angular_tolerance_rad")

@@ -9,7 +9,7 @@ hangs or crashes it.  For every case it checks:
 
 * exit code 0, 1 or 2 (argparse's usage error is 2);
 * no traceback (an exception escaping ``main``), no Python warning line (``RuntimeWarning: ...``);
-* finished within ``time_budget_s``;
+* finished within ``time_budget_s`` of CPU time (a wall-clock limit of 3x that + 30 s catches hangs);
 * peak memory (VmHWM of the worker, reset before each case) within ``memory_budget_bytes``;
 * no partial output: no temporary file left beside the outputs, nothing written on exit code 2, and
   a previous output file unchanged unless the command succeeded.
@@ -26,6 +26,7 @@ import os
 import random
 import re
 import select
+import shutil
 import signal
 import subprocess
 import sys
@@ -157,6 +158,7 @@ class Outcome:
     argv: list[str]
     rc: int | None = None
     elapsed_s: float = 0.0
+    cpu_s: float = 0.0
     peak_rss: int = 0
     stderr: str = ""
     problems: dict[str, str] = field(default_factory=dict)
@@ -435,6 +437,15 @@ def _vm_hwm() -> int:
     return 0
 
 
+def _cpu_s() -> float:
+    """CPU time of this process and its finished children (s): the time measure that does not depend
+    on how loaded the machine is."""
+    import resource
+
+    a, b = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return a.ru_utime + a.ru_stime + b.ru_utime + b.ru_stime
+
+
 def worker_main() -> None:  # pragma: no cover - runs in the worker process
     """Read one JSON request a line from stdin, run ``engine.cli.main``, answer one JSON line."""
     import contextlib
@@ -459,6 +470,7 @@ def worker_main() -> None:  # pragma: no cover - runs in the worker process
         out, err = io.StringIO(), io.StringIO()
         exc_text = None
         t0 = time.perf_counter()
+        c0 = _cpu_s()
         rc: Any = None
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
             try:
@@ -469,7 +481,7 @@ def worker_main() -> None:  # pragma: no cover - runs in the worker process
                 exc_text = traceback.format_exc()
         elapsed = time.perf_counter() - t0
         proto.write(json.dumps({"rc": rc, "exc": exc_text, "err": err.getvalue()[-4000:],
-                                "elapsed": elapsed, "peak": _vm_hwm()}) + "\n")
+                                "elapsed": elapsed, "cpu": _cpu_s() - c0, "peak": _vm_hwm()}) + "\n")
         proto.flush()
 
 
@@ -488,7 +500,7 @@ class Runner:
 
     def _start(self) -> subprocess.Popen[str]:
         env = dict(os.environ, PYTHONPATH=self.pythonpath + os.pathsep + str(Path(__file__).parent),
-                   WINDER_MAX_MEMORY=self.engine_budget, WINDER_IMPORT_TIMEOUT="30", QT_QPA_PLATFORM="offscreen",
+                   WINDER_MAX_MEMORY=self.engine_budget, WINDER_IMPORT_TIMEOUT="20", QT_QPA_PLATFORM="offscreen",
                    OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", PYTHONWARNINGS="default")
         limit = self.address_limit
 
@@ -497,6 +509,12 @@ class Runner:
 
             resource.setrlimit(resource.RLIMIT_AS, (limit, limit))  # protects the machine, not a check
             resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+            try:  # the worker ends with the driver (PR_SET_PDEATHSIG = 1)
+                import ctypes
+
+                ctypes.CDLL(None).prctl(1, signal.SIGKILL)
+            except (OSError, AttributeError):
+                pass
 
         return subprocess.Popen([self.python, "-c", "import fuzz_cases; fuzz_cases.worker_main()"],
                                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
@@ -526,7 +544,8 @@ class Runner:
         self.proc.stdin.write(json.dumps({"argv": argv}) + "\n")
         self.proc.stdin.flush()
         t0 = time.monotonic()
-        ready, _, _ = select.select([self.proc.stdout], [], [], time_budget_s + 5.0)
+        # wall clock: a generous limit for a real hang (the machine may be loaded); the budget is CPU time
+        ready, _, _ = select.select([self.proc.stdout], [], [], 3.0 * time_budget_s + 30.0)
         if not ready:
             res.elapsed_s = time.monotonic() - t0
             res.problems["hang"] = f"no answer after {res.elapsed_s:.0f} s"
@@ -540,6 +559,7 @@ class Runner:
             return res
         ans = json.loads(line)
         res.rc, res.elapsed_s, res.peak_rss, res.stderr = ans["rc"], ans["elapsed"], ans["peak"], ans["err"]
+        res.cpu_s = ans["cpu"]
         if ans["exc"]:
             res.problems["traceback"] = ans["exc"].strip().splitlines()[-1]
         if res.rc not in (0, 1, 2):
@@ -549,8 +569,8 @@ class Runner:
         m = re.search(r"^.*\b\w+Warning: .*$", res.stderr, re.M)
         if m:
             res.problems["warning"] = m.group(0)[:200]
-        if res.elapsed_s > time_budget_s:
-            res.problems["slow"] = f"{res.elapsed_s:.1f} s > {time_budget_s:g} s"
+        if res.cpu_s > time_budget_s:
+            res.problems["slow"] = f"{res.cpu_s:.1f} s of CPU > {time_budget_s:g} s (wall {res.elapsed_s:.1f} s)"
         if res.peak_rss > self.memory_budget:
             res.problems["memory"] = f"peak {res.peak_rss / 2**20:.0f} MB > {self.memory_budget / 2**20:.0f} MB"
         left = [p.name for p in d.iterdir() if ".winder-" in p.name or re.match(r"^\..+\.\w{8}\.\w+$", p.name)]
@@ -566,8 +586,13 @@ class Runner:
 
 
 def run_fuzz(n_cases: int, seed: int, workdir: Path, *, time_budget_s: float = 30.0, total_budget_s: float = 1e9,
-             heavy: bool = True, runner: Runner | None = None, log: Any = None) -> list[Outcome]:
-    """Generate and run up to ``n_cases`` cases (seeded); stop early after ``total_budget_s``."""
+             heavy: bool = True, runner: Runner | None = None, log: Any = None, progress: Any = None,
+             every: int = 50) -> list[Outcome]:
+    """Generate and run up to ``n_cases`` cases (seeded); stop early after ``total_budget_s``.
+
+    ``log(text)`` gets every case with a problem, ``progress(outcomes)`` the outcomes so far after
+    every ``every`` cases.  The cases depend on the seed only (not on the outcomes), so two runs with
+    the same seed (e.g. two versions of the engine) see the same cases in the same order."""
     rng = random.Random(seed)
     own = runner is None
     runner = runner or Runner()
@@ -580,8 +605,12 @@ def run_fuzz(n_cases: int, seed: int, workdir: Path, *, time_budget_s: float = 3
             case = make_case(i, rng, heavy=heavy)
             res = runner.run(case, workdir, time_budget_s)
             out.append(res)
+            if not res.problems:
+                shutil.rmtree(workdir / case.name, ignore_errors=True)  # keep the folders of failures only
             if log is not None and res.problems:
                 log(f"{res.case}: {res.problems} argv={res.argv}")
+            if progress is not None and len(out) % every == 0:
+                progress(out)
     finally:
         if own:
             runner.close()

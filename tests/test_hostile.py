@@ -424,3 +424,10 @@ def test_crashing_step_reader_in_a_job_is_exit_2(tmp_path, capsys, monkeypatch) 
     job = _job(tmp_path, 'schema_version = 1\n[mandrel]\nkind = "file"\npath = "m.step"\n')
     rc, _, err = _cli(capsys, "trajectory", str(job))
     assert rc == 2 and "the STEP reader crashed on this file" in err and str(tmp_path / "m.step") in err
+
+
+@pytest.mark.parametrize("tol", ["1e308", "1e-9", "nan", "-1"])
+def test_stl_tolerance_outside_its_range_is_refused(tmp_path, capsys, tol) -> None:
+    out = tmp_path / "m.stl"
+    rc, _, err = _cli(capsys, "mandrel", str(EXAMPLES / "pipe.toml"), "--stl", str(out), "--stl-tolerance", tol)
+    assert rc == 2 and "STL tolerance must be in 0.0001" in err and not out.exists()
