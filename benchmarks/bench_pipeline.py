@@ -49,7 +49,7 @@ def bench_example(name: str) -> None:
             extra = (f" | law {tl['total_time_s']:.2f} s, nodes {tl['nodes']}, iterations {tl['iterations']}, "
                      f"phases nodes {ph['nodes']:.2f} / laws {ph['laws']:.2f} / blocks {ph['blocks']:.2f} s, "
                      f"split {tl['blocks_split']}, at (17) time {tl['blocks_at_min_time']}, "
-                     f"jump warnings {tl['jump_warnings']}, law accel ratio {tl['max_accel_ratio']:.3f}")
+                     f"time added {tl['time_added_s']:.2f} s, law accel ratio {tl['max_accel_ratio']:.3f}")
         ref = rep["program_time_s"] if method == "blocks" else ref
         ratio = rep["program_time_s"] / ref if ref else float("nan")
         print(f"  {method:7s} blocks {res.stage_times['blocks']:.2f} s, nc {res.stage_times['nc']:.2f} s "

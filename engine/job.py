@@ -226,11 +226,40 @@ class AxisOverride(_Model):
     max_jump: PositiveMM | None = None
 
 
+class SetupSpec(_Model):
+    """Machine set-up ``[machine.setup]``: where the mandrel sits on the machine, the payout head's
+    geometry, the supports (shafts, chuck, tailstock) and the tolerances of the machine checks
+    (see engine.machine_setup and docs/machines.md, "Set-up")."""
+
+    mandrel_z0_mm: Finite | None = None
+    """Carriage (or track) position of the mandrel's z = 0, in the axis' controller units; default: the
+    mandrel is centred on the machine (the eye path's carriage range centred in the axis travel)."""
+    eye_radius_mm: PositiveMM | None = None
+    """Eye distance from the mandrel axis on a fixed-radius machine (no cross feed); default: the template's."""
+    head_offset_mm: tuple[Finite, Finite, Finite] = (0.0, 0.0, 0.0)
+    """Eye position relative to the head's datum that the axes report: radial (cross feed), vertical,
+    axial (mm); the cross, vertical and carriage axes are shifted by it."""
+    shaft_radius_mm: PositiveMM | None = None
+    """Radius of the mandrel shaft beyond both ends; default: 0.6 x the smaller end radius of the mandrel."""
+    shaft_length_mm: NonNegMM = 100.0
+    """Free shaft between each mandrel end and the chuck (left) or the tailstock (right)."""
+    chuck_radius_mm: PositiveMM = 60.0
+    chuck_length_mm: PositiveMM = 120.0
+    tailstock_radius_mm: PositiveMM = 40.0
+    tailstock_length_mm: PositiveMM = 150.0
+    clearance_mm: NonNegMM = 5.0
+    """Smallest gap the eye keeps from the mandrel, the shafts, the chuck and the tailstock, and the free
+    fibre from the shafts, the chuck and the tailstock."""
+    back_turn_tol_deg: NonNegMM = 0.01
+    """Mandrel back-turns up to this angle are numerical noise: the mandrel angle is held instead."""
+
+
 class MachineSpec(_Model):
-    """Machine template (a file name in resources/machines, or a path) and limit overrides."""
+    """Machine template (a file name in resources/machines, or a path), limit overrides and set-up."""
 
     template: str = "lathe2"
     axes: dict[str, AxisOverride] = Field(default_factory=dict)
+    setup: SetupSpec = Field(default_factory=SetupSpec)
 
 
 class TimeLawSpec(_Model):
@@ -418,6 +447,8 @@ def _allowed(loc: tuple[Any, ...]) -> str:
         return ", ".join(SketchSegmentSpec.model_fields)
     if len(loc) >= 3 and loc[0] == "mandrel" and loc[1] in kinds:
         return ", ".join(kinds[loc[1]].model_fields)
+    if len(loc) >= 3 and loc[:2] == ("machine", "setup"):
+        return ", ".join(SetupSpec.model_fields)
     if len(loc) >= 2 and loc[0] in models:
         return ", ".join(models[loc[0]].model_fields)
     if len(loc) == 1:

@@ -65,6 +65,8 @@ class PipelineResult:
     eye: Any = None
     machine: Any = None
     axes: Any = None
+    placement: Any = None
+    """:class:`engine.machine_setup.Placement` of the axes stage (where the mandrel sits on the machine)."""
     blocks: Any = None
     timelaw: dict[str, Any] | None = None
     timelaw_laws: tuple[Any, ...] = ()
@@ -109,10 +111,8 @@ class PipelineResult:
                 )
         if self.eye_circuit is not None and not self.eye_circuit.feasible:
             out += _payout_warnings(self.eye_circuit)
-        for v in self.violations:
-            out.append(getattr(v, "message", str(v)))
+        out += [g.message for g in self.violation_groups()]
         if self.timelaw is not None and self.blocks is not None and self.machine is not None:
-            out += timelaw_block_check(self.machine, self.blocks)[1]
             r = float(self.timelaw.get("max_accel_ratio", 0.0))
             if r > 1.0 + 1e-6:
                 out.append(f"time law ({self.timelaw.get('method')}): axis accelerations inside the node intervals "
@@ -120,12 +120,35 @@ class PipelineResult:
                            f"the tube and dp methods keep them")
         return out
 
+    def violation_groups(self) -> list[Any]:
+        """:attr:`violations` grouped by kind and axis, located by NC line, time, circuit and layer."""
+        from engine.machine_setup import Locator, group_violations
+
+        v = self.violations
+        return group_violations(v, Locator(self)) if v else []
+
     def report(self) -> dict[str, Any]:
         """The run report (``winder run --report``)."""
         rep: dict[str, Any] = {"job": self.job.name, "stage_times_s": dict(self.stage_times)}
         if self.machine is not None:
             rep["machine"] = self.machine.name
             rep["axes"] = list(self.machine.axis_names)
+        if self.placement is not None:
+            p = self.placement
+            rep["placement"] = {"axis": p.axis, "mode": p.mode, "mandrel_z0": p.z0, "range": [p.q_min, p.q_max],
+                                "travel": [p.lo, p.hi], "fits": p.fits,
+                                "z0_fit": list(p.z0_fit) if p.z0_fit else None, "message": p.message()}
+        if self.eye is not None:
+            s_eye = np.asarray(self.eye.s, dtype=float)
+            rep["fibre_length_mm"] = float(s_eye[-1] - s_eye[0]) if s_eye.size else 0.0
+        if self.blocks is not None and self.machine is not None:
+            qb = np.asarray(self.blocks.q, dtype=float)
+            rep["axis_ranges"] = {n: [float(qb[:, k].min()), float(qb[:, k].max())]
+                                  for k, n in enumerate(self.machine.axis_names)}
+        if self.axes is not None:
+            rep["violations"] = [{"kind": g.kind, "axis": g.axis, "what": g.what, "worst": g.worst, "value": g.value,
+                                  "limit": g.limit, "places": g.places, "count": g.points, **g.first}
+                                 for g in self.violation_groups()]
         if self.line is not None:
             rep["winding"] = {
                 k: v for k, v in self.line.summary().items() if not isinstance(v, list | np.ndarray) or k == "slips"
@@ -251,6 +274,17 @@ def load_machine_for_job(job: Job, job_path: str | Path | None = None) -> Any:
     return replace(machine, axes=tuple(new_axes))
 
 
+def setup_machine_for_job(job: Job, job_path: str | Path | None = None) -> Any:
+    """:func:`load_machine_for_job` with the job's ``[machine.setup]`` applied (eye radius, head offsets,
+    a fixed placement); see :mod:`engine.machine_setup`."""
+    from engine.machine_setup import apply_setup
+
+    try:
+        return apply_setup(load_machine_for_job(job, job_path), job.machine.setup)
+    except InputError as exc:
+        raise exc.at(file=job_path) from None
+
+
 def run_pipeline(
     job: Job,
     job_path: str | Path | None = None,
@@ -305,6 +339,14 @@ def run_pipeline(
             except InputError as exc:  # every message names the job file (and the field's line)
                 raise _locate(exc, jp) from None
             times[stage] = time.perf_counter() - t0
+        if stage == "mandrel" and last >= STAGES.index("axes"):
+            # cheap checks before the long stages: post x machine, eye radius, carriage travel
+            from engine.machine_setup import precheck
+
+            try:
+                precheck(job, setup_machine_for_job(job, jp), res.mandrel, with_post=upto == "nc")
+            except InputError as exc:
+                raise exc.at(file=jp) from None
         res = replace(res, keys={**res.keys, stage: keys[stage]})
         done += w
         if state is not None:
@@ -330,14 +372,14 @@ _STAGE_FIELDS = {
     "mandrel": ("mandrel",),
     "winding": ("line",),
     "payout": ("eye_circuit", "eye"),
-    "axes": ("machine", "axes"),
+    "axes": ("machine", "axes", "placement"),
     "blocks": ("blocks", "timelaw", "timelaw_laws", "timelaw_labels", "timelaw_paths"),
     "nc": ("nc_text", "post_name", "extension"),
 }
 
 
 # None / empty when the stage ran without a time law (method "blocks")
-_OPTIONAL_FIELDS = ("timelaw", "timelaw_laws", "timelaw_labels", "timelaw_paths")
+_OPTIONAL_FIELDS = ("timelaw", "timelaw_laws", "timelaw_labels", "timelaw_paths", "placement")
 
 
 def _has(res: PipelineResult, stage: str) -> bool:
@@ -364,11 +406,18 @@ def _run_stage(res: PipelineResult, stage: str, state: State | None) -> Pipeline
         return replace(res, eye_circuit=eye1, eye=extend_to_line(eye1, res.line))
     if stage == "axes":
         from engine.kinematics import inverse_kinematics
+        from engine.machine_setup import clearance_violations, hold_back_turns, place_on_machine
 
-        machine = load_machine_for_job(job, jp)
+        setup = job.machine.setup
+        machine = setup_machine_for_job(job, jp)
         eye = res.eye
         axes = inverse_kinematics(machine, eye.eye_xyz, eye.fibre_dir, eye.contact_xyz, state=state, x=eye.x)
-        return replace(res, machine=machine, axes=axes)
+        axes = hold_back_turns(machine, axes, float(setup.back_turn_tol_deg))
+        machine, axes, placement = place_on_machine(machine, axes, setup)
+        clear = clearance_violations(axes, res.mandrel, setup)
+        if clear:
+            axes = replace(axes, violations=tuple(axes.violations) + tuple(clear))
+        return replace(res, machine=machine, axes=axes, placement=placement)
     if stage == "blocks":
         from engine.blocks import make_blocks, optimise_block_times
         from engine.budget import check_post
@@ -388,10 +437,11 @@ def _run_stage(res: PipelineResult, stage: str, state: State | None) -> Pipeline
         return replace(res, blocks=blocks, timelaw=info, timelaw_laws=tuple(k[1] for k in kept),
                        timelaw_labels=tuple(k[0] for k in kept), timelaw_paths=tuple(k[2] for k in kept))
     if stage == "nc":
-        from engine.post import get_post, load_controller
+        from engine.machine_setup import controller_for
+        from engine.post import get_post
 
         post = get_post(job.post.post)
-        profile = load_controller(job.post.controller or post.name)
+        profile = controller_for(post.name, job.post.controller, res.machine)
         text = post.render(res.blocks, res.machine, profile)
         return replace(res, nc_text=text, post_name=post.name, extension=post.extension)
     raise AssertionError(stage)  # pragma: no cover
@@ -846,55 +896,32 @@ def _split_for_jumps(machine: Any, axes: Any, blocks: Any, T: np.ndarray, tau: f
     total = float(time_b.sum())
     out = replace(blocks, index=arrs[0], q=arrs[1], delta=arrs[2], t17=arrs[3], time=arrs[4], alpha=arrs[5],
                   max_error=arrs[6], total_t17=float(t17.sum()), total_start=total, history=(total,))
-    hard, soft = timelaw_block_check(machine, out)
+    if _jump_pairs(np.asarray(out.speed), p, blocks.cyclic)[0].size:
+        # where a block cannot be split the speed step to its neighbour may still exceed max_jump: slow
+        # the blocks of those steps (a ramp with steps of max_jump), never below the law's times
+        from engine.machine_setup import limit_speed_steps
+
+        time_b = limit_speed_steps(delta, time_b, p, blocks.cyclic)
+        a = np.ascontiguousarray(np.minimum(t17 / time_b, 1.0))
+        tb = np.ascontiguousarray(time_b)
+        a.flags.writeable = tb.flags.writeable = False
+        out = replace(out, time=tb, alpha=a, total_start=float(time_b.sum()), history=(float(time_b.sum()),))
+    hard, _ = timelaw_block_check(machine, out)
     out = replace(out, violations=tuple(hard))
     return out, {"blocks_split": split, "blocks_at_min_time": int(clamped.sum()),
-                 "time_added_s": float((time_b - dur).sum()),
-                 "jump_warnings": int(sum(int(w.split(":")[1].split()[0]) for w in soft))}
+                 "time_added_s": float((time_b - dur).sum())}
 
 
 def timelaw_block_check(machine: Any, blocks: Any) -> tuple[list[Any], list[str]]:
     """Limit check of a block program timed by a time law: ``(violations, warnings)``.
 
-    Position and speed limits are hard (violations).  A speed jump between neighbouring blocks above
-    ``max_jump`` is a hard violation only when it also exceeds what the axis acceleration allows over
-    the two blocks, ``|Δv| > max_accel·(t_i + t_j)/2``; otherwise it is a warning: the law bounds the
-    acceleration of the real motion (the physical limit), and the jump is the block program's coarse
-    picture of it where a block cannot be split (one path step, or halves shorter than tau).
+    Position, speed and speed-jump limits are all hard (violations; the warnings list stays empty):
+    :func:`_split_for_jumps` splits blocks and slows the pairs it cannot split
+    (:func:`engine.machine_setup.stretch_for_jumps`) so that a program it times keeps every one.
     """
     from engine.blocks import check_blocks
-    from engine.kinematics import violations_from_mask
 
-    no_jump = replace(machine, axes=tuple(replace(a, max_jump=float("inf")) for a in machine.axes))
-    hard = check_blocks(no_jump, blocks)
-    soft: list[str] = []
-    nb = blocks.n
-    if nb < 2:
-        return hard, soft
-    spd = blocks.speed
-    t = np.asarray(blocks.time, dtype=float)
-    cyc = blocks.cyclic and nb > 2
-    nxt = np.roll(spd, -1, axis=0) if cyc else np.vstack([spd[1:], spd[-1:]])
-    tn = np.roll(t, -1) if cyc else np.append(t[1:], t[-1])
-    jump = np.abs(nxt - spd)
-    p = machine.limits("max_jump")
-    amax = machine.limits("max_accel")
-    for k, ax in enumerate(machine.axes):
-        over = jump[:, k] > p[k] * (1 + 1e-9)
-        if not over.any():
-            continue
-        acc = jump[:, k] / (0.5 * (t + tn))
-        bad = over & (acc > amax[k] * (1 + 1e-6))
-        u = f" {ax.units}/s"
-        hard += violations_from_mask("jump", ax.name, bad, jump[:, k], p[k], u, where="block",
-                                     what="speed jump to the next block (also above max_accel)")
-        ok = over & ~bad
-        if ok.any():
-            i = int(np.argmax(np.where(ok, jump[:, k], -1.0)))
-            soft.append(f"axis {ax.name}: {int(ok.sum())} block speed jumps above max_jump {p[k]:g}{u} (largest "
-                        f"{jump[i, k]:.4g}{u} after block {i}) where a block cannot be split; the acceleration "
-                        f"over the two blocks stays within max_accel {amax[k]:g} {ax.units}/s² (time law)")
-    return hard, soft
+    return check_blocks(machine, blocks), []
 
 
 def _block_errors(machine: Any, axes: Any, idx: np.ndarray) -> np.ndarray:
@@ -923,7 +950,8 @@ def _block_errors(machine: Any, axes: Any, idx: np.ndarray) -> np.ndarray:
 
 
 def write_program(result: PipelineResult, path: str | Path, force: bool = False) -> Path:
-    """Write the NC text atomically; refuses (InfeasibleError) when there are violations unless forced."""
+    """Write the NC text atomically; refuses (InfeasibleError) when there are violations unless forced.
+    The refusal lists the violations grouped (kind, axis, worst amount, count, first NC line and time)."""
     from engine.post import write_nc
 
     if result.nc_text is None:
@@ -937,4 +965,4 @@ def write_program(result: PipelineResult, path: str | Path, force: bool = False)
             raise InputError(f"not written: {bad.size} block(s) have a non-finite or zero duration (block {i}: "
                              f"{t[i]!r} s), which would be an infinite or zero feed", file=path,
                              field="post.min_block_time_s")
-    return write_nc(path, result.nc_text, result.violations, force=force)
+    return write_nc(path, result.nc_text, result.violation_groups(), force=force)

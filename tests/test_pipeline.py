@@ -104,17 +104,31 @@ def test_machine_overrides_and_bad_axis() -> None:
 
 def test_cli_run_refuses_to_write_a_violating_program(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     job = tmp_path / "tight.toml"
-    job.write_text((EXAMPLES / "pipe.toml").read_text().replace("max = 1800.0", "max = 700.0"))
+    # 1100 mm of travel holds the 1000 mm pipe (the up-front check passes) but not the eye's 1198 mm
+    job.write_text((EXAMPLES / "pipe.toml").read_text().replace("max = 1800.0", "max = 1100.0"))
     out = tmp_path / "p.ngc"
     rep = tmp_path / "r.json"
     assert main(["run", str(job), "-o", str(out), "--report", str(rep), "--quiet"]) == 1
     assert not out.exists()
     err = capsys.readouterr().err
-    assert "not written" in err and "axis X" in err
+    assert "not written" in err and "axis X" in err and "NC line" in err
     data = json.loads(rep.read_text())
     assert data["written"] is False and any("axis X" in w for w in data["warnings"])
+    # grouped: one entry per kind and axis, located by NC line and time
+    groups = [g for g in data["violations"] if g["axis"] == "X" and g["kind"] == "position"]
+    assert len(groups) == 2 and all(g["places"] >= 1 and g["nc_line"] > 0 for g in groups)
+    assert not data["placement"]["fits"] and data["placement"]["z0_fit"] is None
     assert main(["run", str(job), "-o", str(out), "--force", "--quiet"]) == 0
     assert out.read_text().count("G1 ") > 10
+
+
+def test_cli_run_too_short_travel_is_refused_before_computing(tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture[str]) -> None:
+    job = tmp_path / "short.toml"
+    job.write_text((EXAMPLES / "pipe.toml").read_text().replace("max = 1800.0", "max = 700.0"))
+    assert main(["run", str(job), "-o", str(tmp_path / "p.ngc"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "axis X travels 700 mm but the mandrel is 1000 mm long" in err
 
 
 def test_cli_run_writes_program_and_report(tmp_path: Path) -> None:

@@ -1,0 +1,635 @@
+"""Machine set-up and the checks that make an NC program safe to run (issue 15).
+
+The job's ``[machine.setup]`` (:class:`engine.job.SetupSpec`) says where the mandrel sits on the
+machine and how the payout head and the supports are built:
+
+* **placement** - the carriage (or robot track) position of the mandrel's z = 0.  By default the
+  mandrel is *centred on the machine*: the carriage range the eye path needs is centred in the axis
+  travel (:func:`place_on_machine`), so any job fits a machine whose travel is long enough;
+* **head geometry** - the eye radius of a fixed-radius machine and the offsets of the eye from the
+  head's datum (:func:`apply_setup`);
+* **supports** - the shafts beyond both mandrel ends, the chuck (left, z < z_min) and the tailstock
+  (right, z > z_max), modelled as coaxial cylinders (:func:`support_obstacles`).
+
+Checks, all before anything is written (and the cheap ones before any long computation):
+
+* :func:`precheck` - up front: the post-processor can address the machine's axes, a fixed eye radius
+  clears the mandrel, the carriage travel is at least the mandrel's length;
+* :func:`placement_report` - after the inverse kinematics: which axis leaves its range, by how much, and
+  which placement would fit;
+* :func:`clearance_violations` - the eye against the mandrel, the shafts, the chuck and the tailstock,
+  and the free fibre against the shafts, the chuck and the tailstock, along the whole program;
+* :func:`hold_back_turns` - mandrel back-turns below a tolerance (degrees) are numerical noise and are
+  removed; larger ones stay violations with a message that says what to change;
+* :func:`group_violations` - every violation grouped by kind and axis (worst amount, count, first NC
+  line, time, circuit, layer) instead of one line per circuit.
+
+All lengths mm, angles as stated, times s.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from engine.errors import InputError
+from engine.kinematics import UNIT_SCALE, AxisPath, MachineTemplate, Violation, violations_from_mask
+
+# --------------------------------------------------------------------------------------------------
+# Head geometry and placement
+# --------------------------------------------------------------------------------------------------
+_POSITION_ROLES = ("carriage", "track")
+
+
+def carriage_index(machine: MachineTemplate) -> int | None:
+    """Index of the axis that moves the eye along the mandrel axis (carriage or robot track)."""
+    for role in _POSITION_ROLES:
+        k = machine.axis_index(role)
+        if k is not None:
+            return k
+    return None
+
+
+def apply_setup(machine: MachineTemplate, setup: Any) -> MachineTemplate:
+    """The template with the set-up's eye radius, head offsets and explicit placement applied.
+
+    ``setup`` is an :class:`engine.job.SetupSpec`.  Controller value of a linear head axis:
+    ``scale * (eye coordinate - head offset) + offset``; an explicit ``mandrel_z0_mm`` becomes the
+    carriage (track) offset.  Raises :class:`InputError` (field ``machine.setup.*``) for a set-up the
+    machine cannot take.
+    """
+    axes = list(machine.axes)
+    kw: dict[str, Any] = {}
+    if setup.eye_radius_mm is not None:
+        if machine.kind != "cartesian" or machine.axis_index("cross") is not None:
+            raise InputError(f"machine {machine.name} moves the eye radially (cross feed or robot): a fixed eye "
+                             f"radius does not apply; remove eye_radius_mm", field="machine.setup.eye_radius_mm")
+        kw["eye_radius"] = float(setup.eye_radius_mm)
+    off = tuple(float(x) for x in setup.head_offset_mm)
+    if any(off):
+        if machine.kind != "cartesian":
+            raise InputError(f"machine {machine.name} is a robot cell: its eye geometry is the [robot].tool "
+                             f"transform of the template; remove head_offset_mm", field="machine.setup.head_offset_mm")
+        for role, d in zip(("cross", "vertical", "carriage"), off):
+            k = machine.axis_index(role)
+            if d == 0.0:
+                continue
+            if k is None:
+                if role == "cross":        # fixed radius: the offset moves the eye radius
+                    kw["eye_radius"] = float(kw.get("eye_radius", machine.eye_radius)) + d
+                    continue
+                raise InputError(f"machine {machine.name} has no {role} axis for a head offset of {d:g} mm",
+                                 field="machine.setup.head_offset_mm")
+            a = axes[k]
+            axes[k] = replace(a, offset=a.offset - a.scale * d)
+    if setup.mandrel_z0_mm is not None:
+        k = carriage_index(machine)
+        if k is not None:
+            a = axes[k]
+            axes[k] = replace(a, offset=float(setup.mandrel_z0_mm) - a.scale * off[2])
+    if kw.get("eye_radius") is not None and kw["eye_radius"] <= 0:
+        raise InputError(f"the eye radius with the head offset is {kw['eye_radius']:g} mm (must be > 0)",
+                         field="machine.setup.head_offset_mm")
+    return replace(machine, axes=tuple(axes), **kw)
+
+
+@dataclass(frozen=True)
+class Placement:
+    """Where the mandrel sits on the machine and whether the eye path fits the carriage travel.
+
+    Attributes
+    ----------
+    axis: carriage/track axis name.  mode: ``"centre"`` (automatic) or ``"fixed"`` (mandrel_z0_mm).
+    z0: carriage position of the mandrel's z = 0 (controller units).
+    q_min, q_max: carriage range of the program.  lo, hi: the axis limits.
+    z0_fit: ``(lowest, highest)`` z0 for which the program fits the travel, or ``None`` when it cannot.
+    """
+
+    axis: str
+    mode: str
+    z0: float
+    q_min: float
+    q_max: float
+    lo: float
+    hi: float
+    z0_fit: tuple[float, float] | None
+
+    @property
+    def fits(self) -> bool:
+        return self.lo - 1e-9 <= self.q_min and self.q_max <= self.hi + 1e-9
+
+    def message(self) -> str:
+        """One sentence for the operator."""
+        need = self.q_max - self.q_min
+        how = "centred on the machine" if self.mode == "centre" else "machine.setup.mandrel_z0_mm"
+        where = f"mandrel z = 0 at {self.axis} {self.z0:.1f} ({how})"
+        if self.fits:
+            return f"{where}: {self.axis} runs {self.q_min:.1f}..{self.q_max:.1f} within {self.lo:g}..{self.hi:g}"
+        over = max(self.q_max - self.hi, self.lo - self.q_min)
+        if self.z0_fit is None:
+            return (f"{where}: the program needs {need:.1f} of {self.axis} travel but the axis has "
+                    f"{self.hi - self.lo:g} ({self.lo:g}..{self.hi:g}); no placement fits - shorten the eye "
+                    f"path (payout law, clearance) or use a machine with a longer {self.axis} axis")
+        return (f"{where}: {self.axis} runs {self.q_min:.1f}..{self.q_max:.1f} and leaves {self.lo:g}..{self.hi:g} "
+                f"by {over:.1f}; it fits with machine.setup.mandrel_z0_mm between {self.z0_fit[0]:.1f} and "
+                f"{self.z0_fit[1]:.1f} (or remove mandrel_z0_mm to centre the mandrel)")
+
+
+def place_on_machine(machine: MachineTemplate, axes: AxisPath, setup: Any) -> tuple[MachineTemplate, AxisPath,
+                                                                                      Placement | None]:
+    """Centre the mandrel on the machine (unless ``setup.mandrel_z0_mm`` fixes it).
+
+    Shifts the carriage (track) column of ``axes`` and the axis offset so that the program's carriage
+    range is centred in the axis travel (offset rounded to 0.1 mm), re-checks that axis' position
+    limits, and returns ``(machine, axes, placement)``.  Physics is unchanged: only the datum moves.
+    """
+    k = carriage_index(machine)
+    if k is None or axes.q.shape[0] == 0:
+        return machine, axes, None
+    ax = machine.axes[k]
+    col = np.asarray(axes.q[:, k], dtype=float)
+    q_min, q_max = float(col.min()), float(col.max())
+    lo, hi = float(ax.min), float(ax.max)
+    finite = math.isfinite(lo) and math.isfinite(hi) and hi - lo < 1e11
+    mode = "fixed" if setup.mandrel_z0_mm is not None else "centre"
+    shift = 0.0
+    if mode == "centre" and finite:
+        new_off = round(ax.offset + 0.5 * (lo + hi) - 0.5 * (q_min + q_max), 1)
+        shift = new_off - ax.offset
+    new_ax = replace(ax, offset=ax.offset + shift)
+    q = np.array(axes.q, dtype=float)
+    q[:, k] += shift
+    q_min, q_max = q_min + shift, q_max + shift
+    fit = None
+    if finite and q_max - q_min <= hi - lo + 1e-9:
+        fit = (new_ax.offset + lo - q_min, new_ax.offset + hi - q_max)
+    placement = Placement(ax.name, mode, new_ax.offset, q_min, q_max, lo, hi, fit)
+    if shift == 0.0:
+        return machine, axes, placement
+    machine = replace(machine, axes=tuple(new_ax if i == k else a for i, a in enumerate(machine.axes)))
+    viol = [v for v in axes.violations if not (v.kind == "position" and v.axis == ax.name)]
+    u = " " + ax.units
+    viol += violations_from_mask("position", ax.name, q[:, k] > hi, q[:, k], hi, u, what="position")
+    viol += violations_from_mask("position", ax.name, q[:, k] < lo, q[:, k], lo, u, what="position")
+    q.flags.writeable = False
+    return machine, replace(axes, q=q, violations=tuple(viol)), placement
+
+
+def placement_report(machine: MachineTemplate, axes: AxisPath, placement: Placement | None) -> list[str]:
+    """Which axes leave their range, by how much, and (carriage) which placement would fit."""
+    out: list[str] = []
+    if placement is not None and not placement.fits:
+        out.append(placement.message())
+    q = np.asarray(axes.q, dtype=float)
+    for k, ax in enumerate(machine.axes):
+        if placement is not None and ax.name == placement.axis:
+            continue
+        lo, hi = q[:, k].min(), q[:, k].max()
+        if lo < ax.min - 1e-9 or hi > ax.max + 1e-9:
+            over = max(hi - ax.max, ax.min - lo)
+            out.append(f"axis {ax.name} ({ax.role}) runs {lo:.4g}..{hi:.4g} {ax.units} and leaves its range "
+                       f"{ax.min:g}..{ax.max:g} by {over:.4g} {ax.units}")
+    return out
+
+
+# --------------------------------------------------------------------------------------------------
+# Mandrel back-turns
+# --------------------------------------------------------------------------------------------------
+def hold_back_turns(machine: MachineTemplate, axes: AxisPath, tol_deg: float) -> AxisPath:
+    """Remove mandrel back-turns of at most ``tol_deg`` degrees (the angle is held instead) and give the
+    remaining ones a message that names the amount, the tolerance and the cure."""
+    k = machine.axis_index("mandrel")
+    if k is None or not any(v.kind == "reverse" for v in axes.violations):
+        return axes
+    ax = machine.axes[k]
+    tol = math.radians(tol_deg) * abs(ax.scale)
+    q = np.array(axes.q, dtype=float)
+    col = q[:, k]
+    major = 1.0 if col[-1] >= col[0] else -1.0
+    mono = major * np.maximum.accumulate(major * col)
+    diff = np.abs(mono - col)
+    keep: list[Violation] = []
+    from engine.kinematics import _runs  # the same run grouping the checks use
+
+    for a, b in _runs(diff > 0):
+        if float(diff[a:b].max()) <= tol:
+            col[a:b] = mono[a:b]
+    q[:, k] = col
+    deg = 180.0 / math.pi / UNIT_SCALE[ax.units]
+    for v in axes.violations:
+        if v.kind != "reverse":
+            keep.append(v)
+            continue
+        if v.amount * deg <= tol_deg:
+            continue
+        keep.append(replace(v, message=(
+            f"axis {ax.name}: the mandrel turns back by {v.amount:.4g} {ax.units} (tolerance "
+            f"machine.setup.back_turn_tol_deg = {tol_deg:g} deg) at point {v.index}: the eye path overtakes the "
+            f"fibre at a turnaround; use the min-range payout law, a larger clearance or a longer dwell")))
+    q.flags.writeable = False
+    return replace(axes, q=q, violations=tuple(keep))
+
+
+# --------------------------------------------------------------------------------------------------
+# Supports and clearance
+# --------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Obstacle:
+    """A coaxial cylinder ``z0 <= z <= z1``, ``rho <= radius`` (mandrel frame, mm)."""
+
+    name: str
+    z0: float
+    z1: float
+    radius: float
+
+
+def default_shaft_radius(mandrel: Any) -> float:
+    """0.6 x the smaller end radius of the mandrel (at least 1 mm), mm."""
+    r0, r1 = (float(x) for x in mandrel.r(np.array([mandrel.z_min, mandrel.z_max])))
+    return max(0.6 * min(r0, r1), 1.0)
+
+
+def support_obstacles(mandrel: Any, setup: Any) -> list[Obstacle]:
+    """Shafts, chuck (left) and tailstock (right) as coaxial cylinders in the mandrel frame."""
+    rs = float(setup.shaft_radius_mm) if setup.shaft_radius_mm is not None else default_shaft_radius(mandrel)
+    z0, z1, gap = float(mandrel.z_min), float(mandrel.z_max), float(setup.shaft_length_mm)
+    out = []
+    if gap > 0:
+        out += [Obstacle("left shaft", z0 - gap, z0, rs), Obstacle("right shaft", z1, z1 + gap, rs)]
+    out += [Obstacle("chuck", z0 - gap - float(setup.chuck_length_mm), z0 - gap, float(setup.chuck_radius_mm)),
+            Obstacle("tailstock", z1 + gap, z1 + gap + float(setup.tailstock_length_mm),
+                     float(setup.tailstock_radius_mm))]
+    return out
+
+
+def _rect_distance(z: np.ndarray, rho: np.ndarray, ob: Obstacle) -> np.ndarray:
+    """Distance of points (z, rho) from the cylinder's half-plane section (0 inside)."""
+    dz = np.maximum(np.maximum(ob.z0 - z, z - ob.z1), 0.0)
+    dr = np.maximum(rho - ob.radius, 0.0)
+    return np.hypot(dz, dr)
+
+
+def mandrel_distance(mandrel: Any, z: np.ndarray, rho: np.ndarray, step_mm: float = 0.05,
+                     upto_mm: float = np.inf) -> np.ndarray:
+    """Distance (mm) of points (z, rho) from the mandrel's generatrix (negative inside the mandrel).
+
+    The generatrix is sampled every ``step_mm`` of arc length (a k-d tree finds the nearest sample), so
+    the distance is exact within ``step_mm / 2``; points farther than ``upto_mm`` get ``inf``.
+    """
+    from scipy.spatial import cKDTree
+
+    zs = np.linspace(mandrel.z_min, mandrel.z_max, 2001)
+    rs = np.asarray(mandrel.r(zs), dtype=float)
+    arc = np.concatenate(([0.0], np.cumsum(np.hypot(np.diff(zs), np.diff(rs)))))
+    sa = np.linspace(0.0, arc[-1], max(int(arc[-1] / step_mm) + 2, 2))
+    zd = np.interp(sa, arc, zs)
+    prof = np.stack([zd, np.asarray(mandrel.r(zd), dtype=float)], axis=1)
+    # the end faces (from the end radius down to the axis) are part of the body
+    ends = [np.stack([np.full(m, zz), np.linspace(0.0, rr, m)], axis=1)
+            for zz, rr in ((prof[0, 0], prof[0, 1]), (prof[-1, 0], prof[-1, 1]))
+            for m in (max(int(rr / step_mm) + 2, 2),)]
+    d, _ = cKDTree(np.vstack([prof, *ends])).query(np.stack([z, rho], axis=1), distance_upper_bound=upto_mm)
+    inside = (z >= mandrel.z_min) & (z <= mandrel.z_max)
+    rin = np.interp(z, zd, prof[:, 1])
+    body = inside & (rho < rin)
+    return np.where(body, -np.where(np.isinf(d), rin - rho, d), d)
+
+
+def _segment_min_rho(c: np.ndarray, e: np.ndarray, z0: float, z1: float) -> np.ndarray:
+    """Smallest distance from the axis of the segments c->e (N,3) within z0 <= z <= z1 (inf: none there)."""
+    d = e - c
+    dz = d[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ta = np.where(np.abs(dz) > 1e-12, (z0 - c[:, 2]) / dz, -np.inf)
+        tb = np.where(np.abs(dz) > 1e-12, (z1 - c[:, 2]) / dz, np.inf)
+    t_lo = np.clip(np.minimum(ta, tb), 0.0, 1.0)
+    t_hi = np.clip(np.maximum(ta, tb), 0.0, 1.0)
+    flat = np.abs(dz) <= 1e-12
+    inside_flat = (c[:, 2] >= z0) & (c[:, 2] <= z1)
+    t_lo = np.where(flat, 0.0, t_lo)
+    t_hi = np.where(flat, 1.0, t_hi)
+    empty = np.where(flat, ~inside_flat, t_hi <= t_lo)
+    dxy = d[:, :2]
+    a = np.einsum("ij,ij->i", dxy, dxy)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ts = np.where(a > 0, -np.einsum("ij,ij->i", c[:, :2], dxy) / a, 0.0)
+    ts = np.clip(ts, t_lo, t_hi)
+    p = c[:, :2] + ts[:, None] * dxy
+    return np.where(empty, np.inf, np.hypot(p[:, 0], p[:, 1]))
+
+
+def clearance_violations(axes: AxisPath, mandrel: Any, setup: Any, eye_clearance_mm: float | None = None
+                         ) -> list[Violation]:
+    """The eye against the mandrel and the supports, the free fibre against the supports, at every point.
+
+    ``eye_clearance_mm`` (default ``setup.clearance_mm``) is the smallest gap between the eye and the
+    mandrel; the supports keep ``setup.clearance_mm`` from the eye and from the free fibre.
+    Violations have kind ``"clearance"``, ``axis`` None, ``amount`` = the missing gap (mm).
+    """
+    gap = float(setup.clearance_mm)
+    eye_gap = gap if eye_clearance_mm is None else float(eye_clearance_mm)
+    eye = np.asarray(axes.eye_xyz, dtype=float)
+    con = np.asarray(axes.contact_xyz, dtype=float)
+    z, rho = eye[:, 2], np.hypot(eye[:, 0], eye[:, 1])
+    out: list[Violation] = []
+    dm = mandrel_distance(mandrel, z, rho, upto_mm=2.0 * eye_gap + 1.0)
+    out += violations_from_mask("clearance", None, dm < eye_gap - 1e-6, dm, eye_gap, " mm",
+                                what="gap between the eye and the mandrel")
+    for ob in support_obstacles(mandrel, setup):
+        de = _rect_distance(z, rho, ob)
+        out += violations_from_mask("clearance", None, de < gap - 1e-6, de, gap, " mm",
+                                    what=f"gap between the eye and the {ob.name}")
+        rf = _segment_min_rho(con, eye, ob.z0, ob.z1) - ob.radius
+        out += violations_from_mask("clearance", None, rf < gap - 1e-6, rf, gap, " mm",
+                                    what=f"gap between the free fibre and the {ob.name}")
+    return out
+
+
+# --------------------------------------------------------------------------------------------------
+# Speed steps between blocks
+# --------------------------------------------------------------------------------------------------
+def limit_speed_steps(delta: np.ndarray, time_s: np.ndarray, max_jump: np.ndarray, cyclic: bool,
+                      max_rounds: int = 10_000) -> np.ndarray:
+    """Block times (s), each >= ``time_s``, for which every axis' speed step between neighbouring blocks
+    is within ``max_jump`` (controller units/s) - the (18) condition.
+
+    Only blocks that take part in a step above the limit are slowed, each by the smallest factor its
+    worst pair needs: where both blocks run the same way on the axis, the faster one comes down to the
+    slower one's speed + max_jump; on a reversal both come down so that the step is max_jump.  Repeated
+    (Jacobi rounds) until no step is over: the slowed block may now step against its other neighbour,
+    so a speed ramp with steps of max_jump grows outwards, as a controller's look-ahead would plan it.
+    Speeds only fall, so the rounds end.
+    """
+    t = np.array(time_s, dtype=float)
+    nb = t.size
+    if nb < 2:
+        return t
+    d = np.asarray(delta, dtype=float)
+    p = np.asarray(max_jump, dtype=float)
+    i_all = np.arange(nb) if cyclic and nb > 2 else np.arange(nb - 1)
+    act = i_all
+    for _ in range(max_rounds):
+        i = act
+        j = (i + 1) % nb
+        vi, vj = d[i] / t[i, None], d[j] / t[j, None]
+        over = np.abs(vj - vi) > p * (1.0 + 1e-9)
+        rows = over.any(axis=1)
+        if not rows.any():
+            if act.size == i_all.size:
+                return t
+            act = i_all                          # confirm on every pair
+            continue
+        i, j, vi, vj, over = i[rows], j[rows], vi[rows], vj[rows], over[rows]
+        ai, aj = np.abs(vi), np.abs(vj)
+        same = vi * vj >= 0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            fi = np.where(same, np.where(ai > aj, ai / (aj + p), 1.0), (ai + aj) / p)
+            fj = np.where(same, np.where(aj > ai, aj / (ai + p), 1.0), (ai + aj) / p)
+        fi = np.where(over, fi, 1.0).max(axis=1) * (1.0 + 1e-9)
+        fj = np.where(over, fj, 1.0).max(axis=1) * (1.0 + 1e-9)
+        g = np.ones(nb)
+        np.maximum.at(g, i, fi)
+        np.maximum.at(g, j, fj)
+        t *= g
+        moved = np.flatnonzero(g > 1.0)
+        act = np.unique(np.concatenate([(moved - 1) % nb, moved]))
+        if not (cyclic and nb > 2):
+            act = act[(act >= 0) & (act < nb - 1)]
+    return t
+
+
+# --------------------------------------------------------------------------------------------------
+# Locating and grouping violations
+# --------------------------------------------------------------------------------------------------
+_MOVE = re.compile(r"^\s*(?:N\d+\s+)?G0?1(?![0-9])", re.IGNORECASE)
+
+
+def nc_move_lines(nc_text: str | None) -> np.ndarray:
+    """1-based line numbers of the feed moves (G1/G01 lines, or the rows of a CSV table after block 0)."""
+    if not nc_text:
+        return np.zeros(0, dtype=np.int64)
+    lines = nc_text.replace("\r\n", "\n").split("\n")
+    rows = [i + 1 for i, s in enumerate(lines) if _MOVE.match(s)]
+    if rows:
+        return np.asarray(rows, dtype=np.int64)
+    # CSV: a header row starting with "block", then block 0 (the start) and one row per block
+    for i, s in enumerate(lines):
+        if s.startswith("block"):
+            n = sum(1 for x in lines[i + 2:] if x and x[0].isdigit())
+            return np.arange(i + 3, i + 3 + n, dtype=np.int64)
+    return np.zeros(0, dtype=np.int64)
+
+
+class Locator:
+    """Maps a path point or a block of a pipeline result to (layer, circuit, time, NC line)."""
+
+    def __init__(self, result: Any, layer: int = 1) -> None:
+        self.layer = layer
+        blocks = result.blocks
+        self.block_index = np.asarray(blocks.index, dtype=np.int64) if blocks is not None else None
+        self.block_start = (np.concatenate(([0.0], np.cumsum(np.asarray(blocks.time, dtype=float))))
+                            if blocks is not None else None)
+        self.lines = nc_move_lines(result.nc_text)
+        eye_index = getattr(result.eye, "index", None)
+        self.line_index = np.asarray(eye_index, dtype=np.int64) if eye_index is not None else None
+        self.ppc = int(getattr(result.line, "points_per_circuit", 0) or 0)
+
+    def block_of_point(self, i: int) -> int | None:
+        if self.block_index is None or self.block_index.size < 2:
+            return None
+        return int(np.clip(np.searchsorted(self.block_index, i, side="right") - 1, 0, self.block_index.size - 2))
+
+    def locate(self, point: int | None = None, block: int | None = None) -> dict[str, Any]:
+        """``{"layer", "circuit", "time_s", "nc_line", "block", "point"}`` (None where unknown)."""
+        if point is None and block is not None and self.block_index is not None:
+            point = int(self.block_index[min(block, self.block_index.size - 1)])
+        if block is None and point is not None:
+            block = self.block_of_point(point)
+        out: dict[str, Any] = {"layer": self.layer, "circuit": None, "time_s": None, "nc_line": None,
+                               "block": block, "point": point}
+        if point is not None and self.line_index is not None and self.ppc > 0 and point < self.line_index.size:
+            out["circuit"] = int(self.line_index[point] // self.ppc) + 1
+        if block is not None and self.block_start is not None:
+            out["time_s"] = float(self.block_start[block])
+        if block is not None and block < self.lines.size:
+            out["nc_line"] = int(self.lines[block])
+        return out
+
+
+@dataclass(frozen=True)
+class ViolationGroup:
+    """All violations of one kind on one axis (or one clearance pair)."""
+
+    kind: str
+    axis: str | None
+    what: str
+    worst: float
+    value: float
+    limit: float
+    places: int
+    points: int
+    first: dict[str, Any]
+    message: str
+
+
+_WHAT = re.compile(r"^(?:axis \S+|machine): (.*?) -?[0-9.eE+-]+\S* exceeds")
+
+
+def _where(loc: dict[str, Any]) -> str:
+    parts = []
+    if loc.get("nc_line") is not None:
+        parts.append(f"NC line {loc['nc_line']}")
+    if loc.get("time_s") is not None:
+        parts.append(f"t = {loc['time_s']:.2f} s")
+    if loc.get("circuit") is not None:
+        parts.append(f"circuit {loc['circuit']}")
+    if loc.get("layer") is not None:
+        parts.append(f"layer {loc['layer']}")
+    if not parts and loc.get("point") is not None:
+        parts.append(f"path point {loc['point']}")
+    return ", ".join(parts)
+
+
+def group_violations(violations: list[Violation], locator: Locator | None = None) -> list[ViolationGroup]:
+    """One group per (kind, axis, what, above/below the limit): worst amount, number of places, first
+    place located (NC line, time, circuit, layer)."""
+    groups: dict[tuple[Any, ...], list[Violation]] = {}
+    for v in violations:
+        m = _WHAT.match(v.message or "")
+        what = m.group(1) if m else v.kind
+        if v.kind == "reverse":
+            what = "mandrel back-turn"
+        groups.setdefault((v.kind, v.axis, what, v.value < v.limit), []).append(v)
+    out: list[ViolationGroup] = []
+    for (kind, axis, what, _below), vs in groups.items():
+        w = max(vs, key=lambda v: abs(v.amount))
+        first = min(vs, key=lambda v: (v.index if v.index is not None else 1 << 62,
+                                       v.block if v.block is not None else 1 << 62))
+        loc = (locator.locate(point=first.index, block=first.block) if locator is not None
+               else {"point": first.index, "block": first.block})
+        label = f"axis {axis}" if axis else "machine"
+        pts = sum(v.count for v in vs)
+        if kind == "reverse":
+            text = (f"{label}: the mandrel turns back by up to {abs(w.amount):.4g} at {len(vs)} place(s)"
+                    f"; {w.message.split(': ', 1)[1] if ': ' in w.message else ''}")
+        else:
+            rel = "below" if w.value < w.limit else "above"
+            text = (f"{label}: {what} {w.value:.6g} is {rel} the limit {w.limit:.6g} by {abs(w.amount):.4g} "
+                    f"(worst) at {len(vs)} place(s), {pts} {'block' if first.block is not None else 'point'}(s)")
+        where = _where(loc)
+        msg = f"{text}; first at {where}" if where else text
+        out.append(ViolationGroup(kind, axis, what, float(abs(w.amount)), float(w.value), float(w.limit), len(vs),
+                                  pts, loc, msg))
+    return out
+
+
+# --------------------------------------------------------------------------------------------------
+# Post-processor x machine
+# --------------------------------------------------------------------------------------------------
+def post_mismatch(post_name: str, profile: Any, machine: MachineTemplate) -> str | None:
+    """Why ``post_name`` with ``profile`` cannot write programs for ``machine`` (None: it can)."""
+    from engine.post import get_post
+
+    post = get_post(post_name)
+    if profile.dialect != post.name:
+        return f"controller profile {profile.name} is for the {profile.dialect} dialect, not {post.name}"
+    try:
+        post.letters(machine, profile)
+        post.check_units(machine, profile)
+    except InputError as exc:
+        return exc.message
+    return None
+
+
+def controller_for(post_name: str, controller: str | None, machine: MachineTemplate) -> Any:
+    """The controller profile that writes ``machine``'s axes in dialect ``post_name``.
+
+    With ``controller`` given, that profile (refused with the reason when it cannot address the axes);
+    else the dialect's own profile, or the first shipped profile of that dialect that addresses them.
+    Raises :class:`InputError` (field ``post.post``/``post.controller``) naming the mismatch and the
+    posts/controllers that do work for the machine.
+    """
+    from engine.post import get_post, list_controllers, load_controller
+
+    if not post_name:
+        raise InputError("no post-processor chosen", field="post.post")
+    post = get_post(post_name)
+    if controller:
+        prof = load_controller(controller)
+        why = post_mismatch(post.name, prof, machine)
+        if why is None:
+            return prof
+        raise InputError(f"post {post.name} with controller {prof.name} cannot write machine {machine.name}: {why}"
+                         f"; {_suggest(machine)}", field="post.controller")
+    names = [post.name] + [c for c in list_controllers() if c != post.name]
+    first_why = None
+    for name in names:
+        prof = load_controller(name)
+        if prof.dialect != post.name:
+            continue
+        why = post_mismatch(post.name, prof, machine)
+        if why is None:
+            return prof
+        first_why = first_why or why
+    raise InputError(f"post {post.name} cannot write machine {machine.name} ({first_why}); {_suggest(machine)}",
+                     field="post.post")
+
+
+def compatible_posts(machine: MachineTemplate) -> list[tuple[str, str]]:
+    """``(post, controller)`` pairs (shipped profiles) that can address ``machine``'s axes."""
+    from engine.post import list_controllers, list_posts, load_controller
+
+    out = []
+    posts = set(list_posts())
+    for c in list_controllers():
+        prof = load_controller(c)
+        if prof.dialect in posts and post_mismatch(prof.dialect, prof, machine) is None:
+            out.append((prof.dialect, c))
+    return out
+
+
+def _suggest(machine: MachineTemplate) -> str:
+    ok = compatible_posts(machine)
+    if not ok:
+        return "no shipped controller profile addresses its axes"
+    return "these work: " + ", ".join(f"--post {p}" + (f" (controller {c})" if c != p else "") for p, c in ok)
+
+
+# --------------------------------------------------------------------------------------------------
+# Up-front checks
+# --------------------------------------------------------------------------------------------------
+def precheck(job: Any, machine: MachineTemplate, mandrel: Any | None = None, with_post: bool = True) -> None:
+    """Checks that need no long computation; raises :class:`InputError` naming the field.
+
+    * the post (and controller) can address the machine's axes (``with_post``);
+    * a fixed eye radius clears the mandrel's largest radius by ``setup.clearance_mm``;
+    * the carriage (track) travel is at least the mandrel's length.
+    """
+    if with_post:
+        controller_for(job.post.post, job.post.controller, machine)
+    if mandrel is None:
+        return
+    setup = job.machine.setup
+    if machine.kind == "cartesian" and machine.axis_index("cross") is None and machine.eye_radius is not None:
+        need = float(mandrel.r_max) + float(setup.clearance_mm)
+        if machine.eye_radius < need:
+            raise InputError(f"the eye of machine {machine.name} runs at radius {machine.eye_radius:g} mm but the "
+                             f"mandrel's largest radius is {mandrel.r_max:g} mm: it needs at least {need:g} mm "
+                             f"(machine.setup.eye_radius_mm)", field="machine.setup.eye_radius_mm")
+    k = carriage_index(machine)
+    if k is not None:
+        ax = machine.axes[k]
+        travel = (ax.max - ax.min) / abs(ax.scale)
+        if travel < mandrel.length:
+            raise InputError(f"axis {ax.name} travels {travel:g} mm but the mandrel is {mandrel.length:g} mm long: "
+                             f"no placement fits it on machine {machine.name}", field="machine.template")
+
+
+__all__ = ["Locator", "Obstacle", "Placement", "ViolationGroup", "apply_setup", "carriage_index",
+           "clearance_violations", "compatible_posts", "controller_for", "group_violations",
+           "hold_back_turns", "nc_move_lines", "place_on_machine", "placement_report", "post_mismatch",
+           "limit_speed_steps", "precheck", "support_obstacles"]
