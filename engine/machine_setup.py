@@ -353,9 +353,10 @@ def clearance_violations(axes: AxisPath, mandrel: Any, setup: Any, eye_clearance
 # Speed steps between blocks
 # --------------------------------------------------------------------------------------------------
 def limit_speed_steps(delta: np.ndarray, time_s: np.ndarray, max_jump: np.ndarray, cyclic: bool,
-                      max_rounds: int = 10_000) -> np.ndarray:
+                      max_accel: np.ndarray | None = None, max_rounds: int = 10_000) -> np.ndarray:
     """Block times (s), each >= ``time_s``, for which every axis' speed step between neighbouring blocks
-    is within ``max_jump`` (controller units/s) - the (18) condition.
+    is within ``max_jump`` (controller units/s) - the (18) condition - and, with ``max_accel`` (units/s²),
+    also within ``max_accel`` x the pair's mean block time (the acceleration measure of the report).
 
     Only blocks that take part in a step above the limit are slowed, each by the smallest factor its
     worst pair needs: where both blocks run the same way on the axis, the faster one comes down to the
@@ -376,19 +377,20 @@ def limit_speed_steps(delta: np.ndarray, time_s: np.ndarray, max_jump: np.ndarra
         i = act
         j = (i + 1) % nb
         vi, vj = d[i] / t[i, None], d[j] / t[j, None]
-        over = np.abs(vj - vi) > p * (1.0 + 1e-9)
+        pe = p if max_accel is None else np.minimum(p, np.asarray(max_accel) * 0.5 * (t[i] + t[j])[:, None])
+        over = np.abs(vj - vi) > pe * (1.0 + 1e-9)
         rows = over.any(axis=1)
         if not rows.any():
             if act.size == i_all.size:
                 return t
             act = i_all                          # confirm on every pair
             continue
-        i, j, vi, vj, over = i[rows], j[rows], vi[rows], vj[rows], over[rows]
+        i, j, vi, vj, over, pe = i[rows], j[rows], vi[rows], vj[rows], over[rows], np.broadcast_to(pe, vi.shape)[rows]
         ai, aj = np.abs(vi), np.abs(vj)
         same = vi * vj >= 0
         with np.errstate(divide="ignore", invalid="ignore"):
-            fi = np.where(same, np.where(ai > aj, ai / (aj + p), 1.0), (ai + aj) / p)
-            fj = np.where(same, np.where(aj > ai, aj / (ai + p), 1.0), (ai + aj) / p)
+            fi = np.where(same, np.where(ai > aj, ai / (aj + pe), 1.0), (ai + aj) / pe)
+            fj = np.where(same, np.where(aj > ai, aj / (ai + pe), 1.0), (ai + aj) / pe)
         fi = np.where(over, fi, 1.0).max(axis=1) * (1.0 + 1e-9)
         fj = np.where(over, fj, 1.0).max(axis=1) * (1.0 + 1e-9)
         g = np.ones(nb)

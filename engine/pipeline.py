@@ -898,10 +898,10 @@ def _split_for_jumps(machine: Any, axes: Any, blocks: Any, T: np.ndarray, tau: f
                   max_error=arrs[6], total_t17=float(t17.sum()), total_start=total, history=(total,))
     if _jump_pairs(np.asarray(out.speed), p, blocks.cyclic)[0].size:
         # where a block cannot be split the speed step to its neighbour may still exceed max_jump: slow
-        # the blocks of those steps (a ramp with steps of max_jump), never below the law's times
+        # the blocks of those steps (a ramp with steps within max_jump and max_accel), never below the law's times
         from engine.machine_setup import limit_speed_steps
 
-        time_b = limit_speed_steps(delta, time_b, p, blocks.cyclic)
+        time_b = limit_speed_steps(delta, time_b, p, blocks.cyclic, machine.limits("max_accel"))
         a = np.ascontiguousarray(np.minimum(t17 / time_b, 1.0))
         tb = np.ascontiguousarray(time_b)
         a.flags.writeable = tb.flags.writeable = False

@@ -50,7 +50,7 @@ def test_program_time_equals_the_law(runs) -> None:
     assert tl["method"] == "tube" and tl["iterations"] >= 2
     assert tl["max_accel_ratio"] <= 1.0 + 1e-6
     # the program takes the law's time plus the ramps that keep max_jump where a block cannot be split
-    assert rep["program_time_s"] == pytest.approx(tl["total_time_s"] + tl["time_added_s"], rel=1e-9)
+    assert rep["program_time_s"] == pytest.approx(tl["total_time_s"] + tl["time_added_s"], rel=1e-5)
     assert rep["program_time_s"] >= tl["total_time_s"] * (1 - 1e-9)
     assert res.blocks.time.size == res.blocks.n
     assert np.all(res.blocks.alpha <= 1.0) and np.all(res.blocks.alpha > 0)
