@@ -243,9 +243,11 @@ class SetupSpec(_Model):
     """Radius of the mandrel shaft beyond both ends; default: 0.6 x the smaller end radius of the mandrel."""
     shaft_length_mm: NonNegMM = 100.0
     """Free shaft between each mandrel end and the chuck (left) or the tailstock (right)."""
-    chuck_radius_mm: PositiveMM = 60.0
+    chuck_radius_mm: PositiveMM | None = None
+    """Chuck (left, beyond the shaft) radius; default: 2 x the shaft radius."""
     chuck_length_mm: PositiveMM = 120.0
-    tailstock_radius_mm: PositiveMM = 40.0
+    tailstock_radius_mm: PositiveMM | None = None
+    """Tailstock (right, beyond the shaft) radius; default: 1.5 x the shaft radius."""
     tailstock_length_mm: PositiveMM = 150.0
     clearance_mm: NonNegMM = 5.0
     """Smallest gap the eye keeps from the mandrel, the shafts, the chuck and the tailstock, and the free

@@ -254,15 +254,17 @@ def default_shaft_radius(mandrel: Any) -> float:
 
 
 def support_obstacles(mandrel: Any, setup: Any) -> list[Obstacle]:
-    """Shafts, chuck (left) and tailstock (right) as coaxial cylinders in the mandrel frame."""
+    """Shafts, chuck (left) and tailstock (right) as coaxial cylinders in the mandrel frame (defaults:
+    shaft 0.6 x the smaller end radius, chuck 2 x and tailstock 1.5 x the shaft radius)."""
     rs = float(setup.shaft_radius_mm) if setup.shaft_radius_mm is not None else default_shaft_radius(mandrel)
     z0, z1, gap = float(mandrel.z_min), float(mandrel.z_max), float(setup.shaft_length_mm)
     out = []
     if gap > 0:
         out += [Obstacle("left shaft", z0 - gap, z0, rs), Obstacle("right shaft", z1, z1 + gap, rs)]
-    out += [Obstacle("chuck", z0 - gap - float(setup.chuck_length_mm), z0 - gap, float(setup.chuck_radius_mm)),
-            Obstacle("tailstock", z1 + gap, z1 + gap + float(setup.tailstock_length_mm),
-                     float(setup.tailstock_radius_mm))]
+    rc = float(setup.chuck_radius_mm) if setup.chuck_radius_mm is not None else 2.0 * rs
+    rt = float(setup.tailstock_radius_mm) if setup.tailstock_radius_mm is not None else 1.5 * rs
+    out += [Obstacle("chuck", z0 - gap - float(setup.chuck_length_mm), z0 - gap, rc),
+            Obstacle("tailstock", z1 + gap, z1 + gap + float(setup.tailstock_length_mm), rt)]
     return out
 
 
@@ -478,7 +480,7 @@ class ViolationGroup:
     message: str
 
 
-_WHAT = re.compile(r"^(?:axis \S+|machine): (.*?) -?[0-9.eE+-]+\S* exceeds")
+_WHAT = re.compile(r"^(?:axis \S+|machine): (.*?) -?[0-9.eE+-]+(?: ?\S+)? exceeds")
 
 
 def _where(loc: dict[str, Any]) -> str:
@@ -503,6 +505,7 @@ def group_violations(violations: list[Violation], locator: Locator | None = None
     for v in violations:
         m = _WHAT.match(v.message or "")
         what = m.group(1) if m else v.kind
+        what = what.removeprefix("end ")           # a block's end position is a path position too
         if v.kind == "reverse":
             what = "mandrel back-turn"
         groups.setdefault((v.kind, v.axis, what, v.value < v.limit), []).append(v)
@@ -539,6 +542,9 @@ def post_mismatch(post_name: str, profile: Any, machine: MachineTemplate) -> str
     post = get_post(post_name)
     if profile.dialect != post.name:
         return f"controller profile {profile.name} is for the {profile.dialect} dialect, not {post.name}"
+    only = profile.extra.get("machines")
+    if only and machine.name not in only:
+        return f"controller profile {profile.name} is made for machine(s) {', '.join(only)}"
     try:
         post.letters(machine, profile)
         post.check_units(machine, profile)
@@ -598,7 +604,8 @@ def _suggest(machine: MachineTemplate) -> str:
     ok = compatible_posts(machine)
     if not ok:
         return "no shipped controller profile addresses its axes"
-    return "these work: " + ", ".join(f"--post {p}" + (f" (controller {c})" if c != p else "") for p, c in ok)
+    return "these work: " + ", ".join(f"post {p}" + (f" with [post] controller = \"{c}\"" if c != p else "")
+                                      for p, c in ok)
 
 
 # --------------------------------------------------------------------------------------------------

@@ -63,7 +63,11 @@ def test_option_schema_and_validation():
 
 
 def _golden_cases():
-    return [(c, "lathe4") for c in list_controllers()] + [("csv", "robot_cell"), ("linuxcnc", "gantry6")]
+    from engine.machine_setup import compatible_posts
+
+    lathe4 = [c for _p, c in compatible_posts(load_machine("lathe4"))]
+    return [(c, "lathe4") for c in lathe4] + [("csv", "robot_cell"), ("linuxcnc", "gantry6"),
+                                              ("linuxcnc_robot", "robot_cell")]
 
 
 @pytest.mark.parametrize(("controller", "machine"), _golden_cases())

@@ -119,6 +119,8 @@ def _arm_selftest(app, window, mode: str, timer_cls) -> None:  # noqa: ANN001 - 
     pipeline ran and produced NC text (``full``); exit code 1 on any reported error."""
     start = _process_start()
     seen = {"shown": False, "ready": False, "done": False}
+    # the exit code is ours alone: closing the window must not post a quit(0) that overrides exit(1)
+    app.setQuitOnLastWindowClosed(False)
 
     def finish(code: int) -> None:
         if seen["done"]:

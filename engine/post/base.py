@@ -213,6 +213,10 @@ class PostProcessor:
             f"{blocks.n} blocks, tolerance {blocks.tol_mm:g} mm, program time {blocks.total:.3f} s "
             f"(preliminary (17): {blocks.total_t17:.3f} s)",
         ]
+        carriage = next((a for a in machine.axes if a.role in ("carriage", "track")), None)
+        if carriage is not None:
+            # the placement of the mandrel on the machine (engine.machine_setup): the read-back needs it
+            lines.append(f"set-up: mandrel z = 0 at {carriage.name} = {carriage.offset:.6g} {carriage.units}")
         if opts["timestamp"]:
             lines.append("created " + datetime.now(UTC).strftime("%Y-%m-%d %H:%M:%S UTC"))
         return [self.comment(profile, s) for s in lines]

@@ -4,6 +4,7 @@ O0001
 (machine lathe4: 4-axis winder [mandrel, carriage, cross feed, eye roll])
 (controller fanuc [fanuc], axes A X Y B)
 (115 blocks, tolerance 0.1 mm, program time 2.696 s [preliminary [17]: 2.677 s])
+(set-up: mandrel z = 0 at X = 600 mm)
 N10 G17 G40 G49 G80
 N20 G21 G90 G93
 N30 G00 A30.964 X503.923 Y116.619 B-26.339

@@ -2,6 +2,7 @@
 ; machine lathe4: 4-axis winder [mandrel, carriage, cross feed, eye roll]
 ; controller grbl [marlin], axes A X Y B
 ; 115 blocks, tolerance 0.1 mm, program time 2.696 s [preliminary [17]: 2.677 s]
+; set-up: mandrel z = 0 at X = 600 mm
 G21 G90 G93
 G0 A30.964 X503.923 Y116.619 B-26.339
 G1 A158.242 X888.686 F77.97

@@ -2,6 +2,7 @@
 ; machine lathe4: 4-axis winder [mandrel, carriage, cross feed, eye roll]
 ; controller marlin [marlin], axes A X Y B
 ; 115 blocks, tolerance 0.1 mm, program time 2.696 s [preliminary [17]: 2.677 s]
+; set-up: mandrel z = 0 at X = 600 mm
 M17
 G21 G90
 G0 Y30.964 X503.923 Z116.619 E-26.339

@@ -1,0 +1,101 @@
+"""``winder simulate FILE --machine TEMPLATE [--controller C] [--job JOB] [--json]``: NC read-back."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from engine.errors import InputError
+
+NAME = "simulate"
+HELP = ("Read an NC program back (ours or foreign G-code), replay it on a machine template and report time, "
+        "fibre length, axis ranges and every limit violation.")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("file", help="NC program (.ngc, .nc, .mpf, .gcode, .csv)")
+    parser.add_argument("--machine", metavar="TEMPLATE",
+                        help="machine template (name or .toml); default: the job's, else lathe2")
+    parser.add_argument("--controller", metavar="C",
+                        help="controller profile for the axis letters (default: the profile that matches "
+                             "the file's dialect and the machine)")
+    parser.add_argument("--job", metavar="JOB.toml",
+                        help="the winding job: its machine set-up, and its winding line for the laid fibre")
+    parser.add_argument("--json", action="store_true", help="print the report as JSON")
+
+
+def _dialect_of(path: Path, text: str) -> str:
+    ext = path.suffix.lower()
+    if ext == ".csv" or text.lstrip().startswith(("# ", "block")) and "path_index" in text[:4000]:
+        return "csv"
+    if ext == ".mpf":
+        return "sinumerik"
+    if ext == ".gcode" or ";" in text[:4000] and "(" not in text[:200]:
+        return "marlin"
+    if text.lstrip().startswith("%"):
+        return "fanuc"
+    return "linuxcnc"
+
+
+def run(args: argparse.Namespace) -> int:
+    from engine.cli import dump_json
+    from engine.machine_setup import controller_for
+    from engine.ncread import read_nc, simulate
+
+    path = Path(args.file)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", file=path) from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputError("not a text file", file=path, line=raw[: exc.start].count(b"\n") + 1) from None
+    job = line = None
+    tol = 0.01
+    if args.job:
+        from engine.job import load_job
+
+        job = load_job(args.job)
+        tol = float(job.machine.setup.back_turn_tol_deg)
+    machine = _machine(args, job)
+    dialect = _dialect_of(path, text)
+    if args.controller:
+        from engine.post import load_controller
+
+        profile = load_controller(args.controller)
+    else:
+        profile = controller_for(dialect, None, machine)
+    prog = read_nc(text, machine, profile, file=path)
+    if job is not None:
+        from engine.pipeline import run_pipeline
+
+        line = run_pipeline(job, args.job, upto="winding").line
+    sim = simulate(prog, machine, line, back_turn_tol_deg=tol)
+    rep = {**sim.report, "controller": profile.name}
+    if args.json:
+        dump_json(rep, sys.stdout)
+    else:
+        print(f"{path}: {prog.n} moves on {machine.name}, program time {rep['program_time_s']:.2f} s "
+              f"(with the limits {rep['time_with_limits_s']:.2f} s)")
+        for n, (a, b) in rep["axis_ranges"].items():
+            print(f"  {n}: {a:.4g} .. {b:.4g}")
+        if "fibre_length_mm" in rep:
+            print(f"  laid fibre {rep['fibre_length_mm']:.1f} mm (eye within {rep['fibre_miss_mm']:.3g} mm of the "
+                  f"fibre tangent)")
+        for v in rep["violations"]:
+            print(f"violation: {v['message']}", file=sys.stderr)
+    return 0 if sim.report["ok"] else 1
+
+
+def _machine(args: argparse.Namespace, job: object | None) -> object:
+    if job is not None:
+        from engine.pipeline import setup_machine_for_job
+
+        if args.machine:
+            job = job.replace(machine={**job.machine.model_dump(), "template": args.machine})  # type: ignore[attr-defined]
+        return setup_machine_for_job(job, args.job)  # type: ignore[arg-type]
+    from engine.kinematics import load_machine
+
+    return load_machine(args.machine or "lathe2")
