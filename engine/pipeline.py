@@ -339,8 +339,9 @@ def run_pipeline(
             except InputError as exc:  # every message names the job file (and the field's line)
                 raise _locate(exc, jp) from None
             times[stage] = time.perf_counter() - t0
-        if stage == "mandrel" and last >= STAGES.index("axes"):
-            # cheap checks before the long stages: post x machine, eye radius, carriage travel
+        if stage == "winding" and last >= STAGES.index("axes"):
+            # cheap checks before the long stages (payout, time law): post x machine, eye radius, carriage
+            # travel (after the winding stage, whose budget checks come first)
             from engine.machine_setup import precheck
 
             try:
