@@ -285,22 +285,29 @@ class BoxWorkspace:
 
 
 class _Contour:
-    """Signed distance (mm) in the meridian plane from (Z, R) to the mandrel generatrix.
+    """Signed distance (mm) in the meridian plane from (Z, R) to the mandrel body.
 
-    The generatrix is a dense polyline (chord error ~ h²κ/8, about 1e-4 mm here); the nearest
-    vertex comes from a KD-tree and the distance is refined on its two adjacent segments.
-    Negative inside the mandrel.
+    The body is bounded by the generatrix and its two end faces (z = z_min and z = z_max from the
+    end radius down to the axis), so an eye beyond an end keeps its clearance from the end face too.
+    The boundary is a dense polyline (chord error ~ h²κ/8, about 1e-4 mm here); the nearest vertex
+    comes from a KD-tree and the distance is refined on its two adjacent segments.  Negative inside.
     """
 
     def __init__(self, mandrel: Any, n: int = 6000) -> None:
-        try:  # the KD-tree module alone: `scipy.spatial` also loads qhull, distances, rotations (~0.1 s)
-            from scipy.spatial._ckdtree import cKDTree
-        except ImportError:  # pragma: no cover - a SciPy that moved it
-            from scipy.spatial import cKDTree
+        from scipy.spatial import cKDTree
 
         z, r = mandrel.sample(n)
         self.z, self.r = np.asarray(z, float), np.asarray(r, float)
-        self.tree = cKDTree(np.column_stack([self.z, self.r]))
+        self.r = np.maximum(self.r, 0.0)
+        h = float(np.median(np.hypot(np.diff(self.z), np.diff(self.r))))
+        faces = []
+        for rf in (self.r[0], self.r[-1]):
+            k = max(2, int(math.ceil(rf / max(h, 1e-9))) + 1) if rf > 0 else 0
+            faces.append(np.linspace(0.0, rf, k)[:-1] if k else np.zeros(0))
+        left, right = faces
+        self.bz = np.concatenate([np.full(left.size, self.z[0]), self.z, np.full(right.size, self.z[-1])])
+        self.br = np.concatenate([left, self.r, right[::-1]])
+        self.tree = cKDTree(np.column_stack([self.bz, self.br]))
         self.z_min, self.z_max = float(self.z[0]), float(self.z[-1])
         self.r_max = float(self.r.max())
 
@@ -316,11 +323,11 @@ class _Contour:
         Zf, Rf = np.ravel(Z), np.ravel(R)
         _, j = self.tree.query(np.column_stack([Zf, Rf]))
         best = np.full(Zf.shape, np.inf)
-        m = self.z.size
+        m = self.bz.size
         for a in (j - 1, j):
             a = np.clip(a, 0, m - 2)
-            z0, r0 = self.z[a], self.r[a]
-            ez, er = self.z[a + 1] - z0, self.r[a + 1] - r0
+            z0, r0 = self.bz[a], self.br[a]
+            ez, er = self.bz[a + 1] - z0, self.br[a + 1] - r0
             t = np.clip(((Zf - z0) * ez + (Rf - r0) * er) / (ez * ez + er * er), 0.0, 1.0)
             best = np.minimum(best, np.hypot(Zf - z0 - t * ez, Rf - r0 - t * er))
         inside = (Zf >= self.z_min) & (Zf <= self.z_max) & (Rf < np.interp(Zf, self.z, self.r))
@@ -1032,6 +1039,52 @@ def _solve_lp_stage(prob: _Problem, kind: str, u_lo: float | None, mu0: FloatArr
     return _Stage(kind, mu, float(res.x[-1]), max_iter, time.perf_counter() - t0)
 
 
+def _solve_range_stage(prob: _Problem, u_floor: float, mu0: FloatArray, state: State | None, tol: float,
+                       max_iter: int = 40) -> tuple[_Stage, float, float]:
+    """min (T − t) with t <= u <= T on every interval and t >= ``u_floor``: the narrowest pull-speed band.
+
+    The same constraints as (13)/(14) (envelope, cyclicity, no sag, no reverse rotation with the
+    cutting-plane loop), so every law the report finds feasible lies in its feasible set and its
+    band is never wider.  Returns the stage (value = T − t) and (t, T).
+    """
+    import scipy.sparse as sp
+
+    n = prob.n
+    t0 = time.perf_counter()
+    mu = mu0
+    dxcol = sp.csr_matrix(prob.dx[:, None])
+    zero = sp.csr_matrix((n - 1, 1))
+    x = np.zeros(n + 2)
+    it = 0
+    while it < max_iter:
+        it += 1
+        check_cancel(state)
+        G, h = prob.cut_rows(mu)
+        cyc, e = prob.cyclic_row(mu)
+        Gx = sp.hstack([G, sp.csr_matrix((G.shape[0], 2))], format="csr")
+        # u_i = (Δs_i + (Dμ)_i)/Δx_i:  Dμ − T·Δx <= −Δs ;  −Dμ + t·Δx <= Δs
+        A = sp.vstack([sp.hstack([prob.D, zero, -dxcol]), sp.hstack([-prob.D, dxcol, zero]), -Gx], format="csr")
+        b = np.concatenate([-prob.ds, prob.ds, -h])
+        cost = np.zeros(n + 2)
+        cost[-1], cost[-2] = 1.0, -1.0
+        A_eq = sp.csr_matrix(np.append(cyc, [0.0, 0.0])[None, :])
+        bounds = np.column_stack([np.append(prob.mu_lo, [u_floor, -np.inf]),
+                                  np.append(prob.mu_hi, [np.inf, np.inf])])
+        res = _linprog(cost, A, b, A_eq, np.array([e]), bounds)
+        check_cancel(state)
+        if res.status == 2:
+            raise _diagnose_infeasible(prob)
+        if res.status != 0:
+            msg = res.message.strip().rstrip(".")
+            raise InfeasibleError(f"the narrowest pull-speed band could not be found ({msg}); try fewer "
+                                  "grid_points", field="payout")
+        x = res.x
+        mu = x[:n]
+        if prob.update_rows(mu, margin=10 * tol) <= tol:
+            break
+    return _Stage("range", mu, float(x[-1] - x[-2]), it, time.perf_counter() - t0), float(x[-2]), float(x[-1])
+
+
 def _solve_qp_stage(prob: _Problem, u_lo: float, u_hi: float, mu0: FloatArray, state: State | None,
                     tol: float, max_iter: int = 40) -> tuple[_Stage, str]:
     """(15): min Σ (u_i − U)²·Δx_i, u_lo <= u <= u_hi, with the same cutting-plane loop."""
@@ -1687,14 +1740,27 @@ def min_range_law(line: Any, mandrel: Any, spec: Any = None, workspace: Workspac
     if state is not None:
         state.progress(0.7, "(14) min max u")
     u_hi = s14.value + 1e-7 * max(1.0, abs(s14.value))
+    # the narrowest band itself: (13) then (14) fixes the lower bound first, and a law with a lower
+    # u_min may have a narrower band (pipe.toml: equidistant 3.578 < 3.650); take the narrower one
+    mu_band = s14.mu
+    band_from = "(13) max min u, then (14) min max u"
+    s_rng, t_rng, T_rng = _solve_range_stage(prob, u_floor, s14.mu, state, tol)
+    scale = max(1.0, abs(s14.value), abs(u13))
+    if s_rng.value < (s14.value - u13) - 1e-7 * scale:
+        u_lo = t_rng - 1e-7 * max(1.0, abs(t_rng))
+        u_hi = T_rng + 1e-7 * max(1.0, abs(T_rng))
+        mu_band = s_rng.mu
+        band_from = "min (u_max − u_min) (narrower than (13) then (14))"
+    if state is not None:
+        state.progress(0.8, "narrowest band")
     s15: _Stage | None = None
     if solver == "fast" and prob.exact_cyclic:
         try:
-            s15, backend = _fast_qp_stage(prob, u_lo, u_hi, s14.mu, state, tol)
+            s15, backend = _fast_qp_stage(prob, u_lo, u_hi, mu_band, state, tol)
         except _FastFail as exc:
             fallback.append(f"(15): {exc}")
     if s15 is None:
-        s15, backend = _solve_qp_stage(prob, u_lo, u_hi, s14.mu, state, tol)
+        s15, backend = _solve_qp_stage(prob, u_lo, u_hi, mu_band, state, tol)
     solve_s = time.perf_counter() - t_start
     if state is not None:
         state.progress(0.95, "(15) jerk")
@@ -1713,6 +1779,10 @@ def min_range_law(line: Any, mandrel: Any, spec: Any = None, workspace: Workspac
             "nonlinear_rows": {kk: len(v) for kk, v in prob.rows.items()},
             "u_min_13": u13,
             "u_max_14": s14.value,
+            "range_lp": {"u_min": t_rng, "u_max": T_rng, "u_range": s_rng.value, "iterations": s_rng.iterations,
+                         "seconds": s_rng.seconds},
+            "band_15": [u_lo, u_hi],
+            "band_from": band_from,
             "jerk_15": s15.value,
         }
     })

@@ -196,9 +196,12 @@ def test_min_range_beats_geometric_laws(circuit: ContactLine, vessel: Mandrel, k
     for law in ("parallel", "equidistant", "equal-tangent"):
         g = geometric_law(circuit, vessel, law, spec)
         assert rep["u_range"] <= g.report["u_range"] + 1e-6, law
-    # (13) then (14): the band is the optimum of each, the jerk cannot exceed the (14) vertex's
-    assert rep["u_min"] >= rep["solver"]["u_min_13"] - 1e-6
-    assert rep["u_max"] <= rep["solver"]["u_max_14"] + 1e-6
+    # the band of (15) is the narrower of (13)-then-(14) and the direct min (u_max − u_min)
+    sol = rep["solver"]
+    lo, hi = sol["band_15"]
+    assert rep["u_min"] >= lo - 1e-6 and rep["u_max"] <= hi + 1e-6
+    assert rep["u_range"] <= sol["u_max_14"] - sol["u_min_13"] + 1e-6
+    assert rep["u_range"] <= sol["range_lp"]["u_range"] + 1e-6
 
 
 def _slsqp(line: ContactLine, vessel: Mandrel, k: int, n: int, eye) -> dict[str, float]:
@@ -233,16 +236,26 @@ def _slsqp(line: ContactLine, vessel: Mandrel, k: int, n: int, eye) -> dict[str,
     out["13_mid"] = s13(np.append(mid, u_of(mid).min()))
     out["13_lp"] = s13(np.append(eye.l, eye.u.min()))
     t13 = eye.report["solver"]["u_min_13"]
+    b_lo, b_hi = eye.report["solver"]["band_15"]
     r14 = minimize(lambda y: y[-1], np.append(eye.l, eye.u.max()), method="SLSQP", bounds=bounds, options=opts,
                    constraints=[*common, {"type": "ineq", "fun": lambda y: y[-1] - u_of(y[:n])},
                                 {"type": "ineq", "fun": lambda y: u_of(y[:n]) - (t13 - 1e-7)}])
     out["14"] = float(r14.x[-1])
-    t14 = eye.report["solver"]["u_max_14"]
     U = (s[-1] - s[0]) / (geo.x[-1] - geo.x[0])
     r15 = minimize(lambda y: float(np.sum((u_of(y[:n]) - U) ** 2 * dx)), np.append(eye.l, 0.0), method="SLSQP",
                    bounds=bounds, options=opts,
-                   constraints=[*common, {"type": "ineq", "fun": lambda y: (t14 + 1e-7) - u_of(y[:n])},
-                                {"type": "ineq", "fun": lambda y: u_of(y[:n]) - (t13 - 1e-7)}])
+                   constraints=[*common, {"type": "ineq", "fun": lambda y: b_hi - u_of(y[:n])},
+                                {"type": "ineq", "fun": lambda y: u_of(y[:n]) - b_lo}])
+    # the narrowest band: min T − t over (l, t, T)
+    rr = minimize(lambda y: y[-1] - y[-2], np.append(eye.l, [eye.u.min(), eye.u.max()]), method="SLSQP",
+                  bounds=[*zip(lo, hi), (None, None), (None, None)], options=opts,
+                  constraints=[{"type": "eq", "fun": lambda y: y[0] - y[n - 1]},
+                               {"type": "ineq", "fun": lambda y: np.diff(s + y[:n]) / dx},
+                               {"type": "ineq", "fun": lambda y: np.diff(geo.eye(y[:n])[2]) / dx},
+                               {"type": "ineq", "fun": lambda y: y[-1] - u_of(y[:n])},
+                               {"type": "ineq", "fun": lambda y: u_of(y[:n]) - y[-2]},
+                               {"type": "ineq", "fun": lambda y: y[-2]}])
+    out["range"] = float(rr.x[-1] - rr.x[-2])
     out["15"] = float(r15.fun)
     return out
 
@@ -258,6 +271,7 @@ def test_lp_qp_agree_with_slsqp_in_l(circuit: ContactLine, vessel: Mandrel, k: i
     assert abs(ref["13_lp"] - sol["u_min_13"]) < tol  # and the LP point is a KKT point of the nonlinear problem
     assert abs(ref["14"] - sol["u_max_14"]) < tol
     assert abs(ref["15"] - eye.report["jerk"]) < 1e-4 * max(1.0, ref["15"])
+    assert abs(ref["range"] - sol["range_lp"]["u_range"]) < tol
 
 
 # ------------------------------------------------------------------------------------------------
