@@ -125,6 +125,7 @@ def read_nc(text: str, machine: MachineTemplate, profile: Any | None = None, fil
     mode_abs, inverse, inch = True, False, False
     motion: int | None = None                   # modal motion G0/G1 (none until set)
     feed: float | None = None
+    feed_inch = False                            # F given in inch/min (G20): linear moves scale it
     rapid_t = dwell = 0.0
     ended = False
     end_codes = set(_END_CODES)
@@ -132,6 +133,7 @@ def read_nc(text: str, machine: MachineTemplate, profile: Any | None = None, fil
     if re.fullmatch(r"M\d+", last):
         end_codes.add(int(last[1:]))               # e.g. Marlin's M18 (steppers off)
     ours = "filament winding program" in head
+    sinumerik = getattr(profile, "dialect", "") == "sinumerik"
     for ln, raw in enumerate(text.replace("\r\n", "\n").replace("\r", "\n").split("\n"), start=1):
         s = re.sub(r"\([^)]*\)", " ", raw)
         if "(" in s:
@@ -173,6 +175,9 @@ def read_nc(text: str, machine: MachineTemplate, profile: Any | None = None, fil
                 continue
             if name == "G":
                 g = int(round(val))
+                if sinumerik and g in (70, 71):      # Sinumerik: G70 inch, G71 metric
+                    inch = g == 70
+                    continue
                 if abs(val - g) > 1e-9 or g not in _G_KNOWN:
                     known = ", G".join(map(str, sorted(_G_KNOWN)))
                     raise InputError(f"unknown word G{val:g} (this reader knows G{known})", file=src, line=ln)
@@ -202,9 +207,10 @@ def read_nc(text: str, machine: MachineTemplate, profile: Any | None = None, fil
             if name == "F":
                 if val <= 0:
                     raise InputError(f"feed F{val:g} must be positive", file=src, line=ln)
-                feed = val * (25.4 if inch and not inverse else 1.0)
+                feed = val
+                feed_inch = inch
                 continue
-            if name in ("P", "S", "T", "H", "D", "Q", "R") and name not in letters:
+            if name in ("P", "S", "T") and name not in letters:      # G64 P, G4 P/S, spindle, tool
                 if name == "P":
                     dwell_p = val
                 elif name == "S":
@@ -249,7 +255,8 @@ def read_nc(text: str, machine: MachineTemplate, profile: Any | None = None, fil
         else:
             if feed is None:
                 raise InputError("a feed move before any F word", file=src, line=ln)
-            t = 60.0 * float(np.linalg.norm(d)) / feed
+            f_mm = feed * (25.4 if feed_inch and bool(np.any(linear & (d != 0))) else 1.0)
+            t = 60.0 * float(np.linalg.norm(d)) / f_mm
         qs.append(target.copy())
         ts.append(t)
         lines.append(ln)
@@ -420,12 +427,13 @@ def _with_line(msg: str, prog: NcProgram, b: int | None, t: np.ndarray) -> str:
     return f"{msg.split('; first at')[0]}; first at NC line {int(prog.line[b])}, t = {float(t[:b].sum()):.2f} s"
 
 
-def match_contacts(eye: np.ndarray, c: np.ndarray, tau: np.ndarray, window: int = 256
+def match_contacts(eye: np.ndarray, c: np.ndarray, tau: np.ndarray, window: int = 256, near_mm: float = 0.5
                    ) -> tuple[np.ndarray, np.ndarray]:
     """For every eye position the winding-line point whose tangent ray passes nearest to it.
 
     The contact advances along the line: each search starts at the previous contact and looks
-    ``window`` points ahead (the window doubles while the best point sits at its far edge).
+    ``window`` points ahead (the window doubles, up to 64 times, while the best point sits at its far
+    edge or its ray misses the eye by more than ``near_mm``).
     Returns ``(index, miss_mm)``: the contact point of each eye position and the distance of the eye
     from that point's tangent ray.
     """
@@ -442,7 +450,7 @@ def match_contacts(eye: np.ndarray, c: np.ndarray, tau: np.ndarray, window: int 
             perp = np.linalg.norm(rel - along[:, None] * tau[j0:j1], axis=1)
             perp = np.where(along > 0, perp, np.inf)
             b = int(np.argmin(perp))
-            if b < j1 - j0 - 1 or j1 == m or w >= 64 * window:
+            if (b < j1 - j0 - 1 and perp[b] <= near_mm) or j1 == m or w >= 64 * window:
                 break
             w *= 2
         idx[k] = j0 + b

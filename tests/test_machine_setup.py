@@ -1,0 +1,250 @@
+"""Machine set-up and the NC safety checks (engine.machine_setup, issue 15): placement, head geometry,
+back-turn tolerance, clearance against the supports, speed steps, grouping, post x machine."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from engine.blocks import make_blocks, optimise_block_times
+from engine.errors import InputError
+from engine.job import SetupSpec, default_job, parse_job
+from engine.kinematics import AxisPath, Violation, demo_eye_path, forward_kinematics, inverse_kinematics, load_machine
+from engine.machine_setup import (
+    Locator,
+    _segment_min_rho,
+    apply_setup,
+    clearance_violations,
+    compatible_posts,
+    controller_for,
+    group_violations,
+    hold_back_turns,
+    limit_speed_steps,
+    mandrel_distance,
+    place_on_machine,
+    precheck,
+    support_obstacles,
+)
+from engine.mandrel import Mandrel
+
+
+def _axes(machine_name: str = "lathe2", length: float = 400.0):
+    m = load_machine(machine_name)
+    p = demo_eye_path("helix", n=1500, circuits=1, length=length, eye_radius=160.0)
+    return m, inverse_kinematics(m, p.eye_xyz, p.fibre_dir, p.contact_xyz)
+
+
+def test_setup_section_round_trips_and_names_typos() -> None:
+    job = default_job().replace(machine={"template": "lathe3", "setup": {"mandrel_z0_mm": 250.0,
+                                                                      "head_offset_mm": [5.0, 0.0, -10.0]}})
+    again = parse_job(job.to_toml())
+    assert again == job and again.machine.setup.mandrel_z0_mm == 250.0
+    bad = job.to_toml().replace("mandrel_z0_mm", "mandrel_zero_mm")
+    with pytest.raises(InputError) as info:
+        parse_job(bad, "j.toml")
+    assert info.value.location.field == "machine.setup.mandrel_zero_mm" and "mandrel_z0_mm" in info.value.message
+
+
+def test_centred_placement_by_hand() -> None:
+    m, ap = _axes()
+    m2, ap2, pl = place_on_machine(m, ap, SetupSpec())
+    x = ap2.q[:, 1]
+    # centred: the middle of the carriage range is the middle of the travel 0..1200 (offset rounded to 0.1 mm)
+    assert 0.5 * (x.min() + x.max()) == pytest.approx(600.0, abs=0.051)
+    assert pl.fits and pl.mode == "centre" and pl.z0 == m2.axes[1].offset
+    # the physics is unchanged: the same eye positions through forward kinematics
+    e1, _ = forward_kinematics(m, ap.q)
+    e2, _ = forward_kinematics(m2, ap2.q)
+    assert np.allclose(e1, e2, atol=1e-9)
+    # every z0 of the fitting interval puts the range inside the travel, its ends touch the limits
+    lo_z0, hi_z0 = pl.z0_fit
+    span = x.max() - x.min()
+    assert hi_z0 - lo_z0 == pytest.approx(1200.0 - span, abs=1e-6)
+    for z0 in (lo_z0, hi_z0):
+        _m, ap3, pl3 = place_on_machine(apply_setup(m, SetupSpec(mandrel_z0_mm=z0)), ap, SetupSpec(mandrel_z0_mm=z0))
+        shift = z0 - m.axes[1].offset
+        assert ap3.q[:, 1].min() + shift >= -1e-6 and ap3.q[:, 1].max() + shift <= 1200 + 1e-6
+
+
+def test_fixed_placement_outside_the_travel_says_what_fits() -> None:
+    m, ap = _axes()
+    setup = SetupSpec(mandrel_z0_mm=1100.0)
+    m1 = apply_setup(m, setup)
+    assert m1.axes[1].offset == 1100.0
+    ap1 = inverse_kinematics(m1, ap.eye_xyz, ap.fibre_dir, ap.contact_xyz)
+    _m, ap2, pl = place_on_machine(m1, ap1, setup)
+    assert not pl.fits and pl.mode == "fixed"
+    over = [v for v in ap2.violations if v.kind == "position" and v.axis == "X"]
+    assert over and max(v.amount for v in over) == pytest.approx(pl.q_max - 1200.0, rel=1e-9)
+    msg = pl.message()
+    assert "leaves 0..1200" in msg and f"{pl.z0_fit[0]:.1f}" in msg and f"{pl.z0_fit[1]:.1f}" in msg
+
+
+def test_placement_cannot_fit_a_too_long_path() -> None:
+    m, ap = _axes(length=1300.0)
+    _m, _ap, pl = place_on_machine(m, ap, SetupSpec())
+    assert not pl.fits and pl.z0_fit is None and "no placement fits" in pl.message()
+
+
+def test_head_geometry() -> None:
+    m = load_machine("lathe2")
+    assert apply_setup(m, SetupSpec(eye_radius_mm=210.0)).eye_radius == 210.0
+    with pytest.raises(InputError, match="fixed eye radius does not apply") as info:
+        apply_setup(load_machine("lathe3"), SetupSpec(eye_radius_mm=210.0))
+    assert info.value.location.field == "machine.setup.eye_radius_mm"
+    # a head offset shifts the controller values by exactly the offset (cross +5 mm -> Y 5 mm less)
+    m3 = load_machine("lathe3")
+    p = demo_eye_path("dome", n=400, circuits=1)
+    a0 = inverse_kinematics(m3, p.eye_xyz, p.fibre_dir, p.contact_xyz)
+    a1 = inverse_kinematics(apply_setup(m3, SetupSpec(head_offset_mm=(5.0, 0.0, -10.0))), p.eye_xyz, p.fibre_dir,
+                            p.contact_xyz)
+    assert np.allclose(a1.q[:, 2], a0.q[:, 2] - 5.0) and np.allclose(a1.q[:, 1], a0.q[:, 1] + 10.0)
+    with pytest.raises(InputError, match="robot cell"):
+        apply_setup(load_machine("robot_cell"), SetupSpec(head_offset_mm=(1.0, 0.0, 0.0)))
+
+
+def _reverse_path(m, col):
+    n = col.size
+    q = np.zeros((n, 2))
+    q[:, 0] = col
+    q[:, 1] = 600.0
+    z = np.zeros((n, 3))
+    viol = []
+    d = np.diff(col)
+    for i in np.flatnonzero(d < 0):
+        viol.append(Violation("reverse", "A", float(-d[i]), float(-d[i]), 0.0, index=int(i + 1), message="back"))
+    return AxisPath("lathe2", ("A", "X"), q, z, z, z, np.zeros(n), violations=tuple(viol))
+
+
+def test_back_turn_tolerance() -> None:
+    m = load_machine("lathe2")                      # A in degrees
+    col = np.linspace(0.0, 100.0, 50)
+    col[10] = col[9] - 2e-13                        # noise
+    col[30] = col[29] - 1.0                         # a real back-turn of 1 deg
+    out = hold_back_turns(m, _reverse_path(m, col), 0.01)
+    a = out.q[:, 0]
+    assert a[10] == col[9] and a[30] == col[30]     # the noise is held, the real turn kept
+    rev = [v for v in out.violations if v.kind == "reverse"]
+    assert len(rev) == 1 and rev[0].index == 30
+    assert "back_turn_tol_deg = 0.01 deg" in rev[0].message and "min-range" in rev[0].message
+    # with a tolerance above 1 deg both are held and the column is monotone
+    out2 = hold_back_turns(m, _reverse_path(m, col), 1.5)
+    assert not [v for v in out2.violations if v.kind == "reverse"] and np.all(np.diff(out2.q[:, 0]) >= 0)
+
+
+def test_segment_distance_from_the_axis_against_sampling() -> None:
+    rng = np.random.default_rng(3)
+    c = rng.uniform(-100, 100, (300, 3))
+    e = rng.uniform(-100, 100, (300, 3))
+    got = _segment_min_rho(c, e, -20.0, 35.0)
+    t = np.linspace(0.0, 1.0, 20001)
+    for k in range(300):
+        p = c[k] + t[:, None] * (e[k] - c[k])
+        inz = (p[:, 2] >= -20.0) & (p[:, 2] <= 35.0)
+        want = np.hypot(p[inz, 0], p[inz, 1]).min() if inz.any() else np.inf
+        if np.isinf(want):
+            assert np.isinf(got[k]) or got[k] >= 0
+        else:
+            assert got[k] == pytest.approx(want, abs=0.02)
+
+
+def test_mandrel_distance_of_a_pipe_is_analytic() -> None:
+    pipe = Mandrel.pipe(50.0, 300.0)
+    z = np.array([10.0, 150.0, 290.0, 150.0, -30.0])
+    rho = np.array([55.0, 80.0, 49.0, 20.0, 50.0])
+    d = mandrel_distance(pipe, z, rho)
+    assert d[:2] == pytest.approx([5.0, 30.0], abs=0.03)
+    assert d[2] < 0 and d[3] < 0                    # inside the body
+    assert d[4] == pytest.approx(30.0, abs=0.03)    # beyond the end face: to the rim at (0, 50)
+
+
+def test_clearance_of_eye_and_fibre_against_the_supports() -> None:
+    pipe = Mandrel.pipe(50.0, 300.0)
+    setup = SetupSpec(shaft_radius_mm=20.0, shaft_length_mm=100.0, chuck_radius_mm=80.0, chuck_length_mm=100.0,
+                      clearance_mm=5.0)
+    obs = {o.name: o for o in support_obstacles(pipe, setup)}
+    assert obs["chuck"].z0 == -200.0 and obs["chuck"].z1 == -100.0 and obs["tailstock"].radius == 30.0
+    # point 0: eye 2 mm above the pipe (too close); point 1: fine; point 2: the fibre from the pipe's end
+    # rim out to an eye beyond the chuck face passes through the chuck (radius 80 at z = -100..-200)
+    contact = np.array([[52.0, 0.0, 150.0], [50.0, 0.0, 150.0], [50.0, 0.0, 0.0]])
+    eye = np.array([[52.0, 0.0, 150.0], [120.0, 0.0, 150.0], [100.0, 0.0, -250.0]])
+    contact[0] = [50.0, 0.0, 140.0]
+    ap = AxisPath("lathe3", ("A", "X", "Y"), np.zeros((3, 3)), eye, np.zeros((3, 3)), contact, np.zeros(3))
+    v = clearance_violations(ap, pipe, setup)
+    what = {(x.message.split(":")[1].split(" 0")[0].split(" -")[0].strip(), x.index) for x in v}
+    assert any("eye and the mandrel" in w and i == 0 for w, i in what)
+    assert any("free fibre and the chuck" in w and i == 2 for w, i in what)
+    assert not any(i == 1 for _w, i in what)
+    worst = [x for x in v if "eye and the mandrel" in x.message][0]
+    assert worst.value == pytest.approx(2.0, abs=0.03) and worst.amount == pytest.approx(-3.0, abs=0.03)
+    # by hand: the fibre (50,0,0) -> (100,0,-250) is at rho = 50 + 50·(100/250) = 70 at the chuck face z = -100
+    fib = [x for x in v if "free fibre and the chuck" in x.message][0]
+    assert fib.value == pytest.approx(70.0 - 80.0, abs=1e-6)
+
+
+def test_limit_speed_steps_against_the_18_optimum() -> None:
+    """Second method: the (18) pairwise/global optimisation of engine.blocks with the given times as
+    lower bounds is the least total time keeping max_jump; the ramps keep every step and stay close."""
+    m = load_machine("lathe4")
+    p = demo_eye_path("dome", n=1200, circuits=1)
+    ap = inverse_kinematics(m, p.eye_xyz, p.fibre_dir, p.contact_xyz)
+    b = make_blocks(m, ap, 0.05)
+    t0 = np.asarray(b.t17) * 0.5                    # too fast everywhere: many steps over
+    pj = m.limits("max_jump")
+    t = limit_speed_steps(b.delta, t0, pj, b.cyclic)
+    v = b.delta / t[:, None]
+    steps = np.abs(np.roll(v, -1, axis=0) - v) if b.cyclic else np.abs(np.diff(v, axis=0))
+    assert np.all(steps <= pj * (1 + 1e-6)) and np.all(t >= t0 * (1 - 1e-12))
+    opt = optimise_block_times(replace(b, t17=t0), m)
+    assert opt.total <= t.sum() * (1 + 1e-6)
+    assert t.sum() <= 1.5 * opt.total
+    print(f"ramps {t.sum():.3f} s, (18) optimum {opt.total:.3f} s")
+
+
+def test_grouping_collapses_repeats_and_locates_the_first() -> None:
+    class _R:                                       # the fields a Locator reads
+        blocks = type("B", (), {"index": np.array([0, 10, 20, 30, 40]), "time": np.array([1.0, 2.0, 3.0, 4.0])})()
+        nc_text = "(head)\nG0 X0\nG1 X1 F1\nG1 X2 F1\nG1 X3 F1\nG1 X4 F1\nM2\n"
+        eye = type("E", (), {"index": np.arange(41)})()
+        line = type("L", (), {"points_per_circuit": 20})()
+
+    vs = [Violation("position", "X", 5.0 + k, 1205.0 + k, 1200.0, index=12 + 10 * k, count=2,
+                    message=f"axis X: position {1205.0 + k:.6g} mm exceeds the limit 1200 mm by {5.0 + k:g} mm "
+                            f"at point {12 + 10 * k} (2 points from point {12 + 10 * k})") for k in range(3)]
+    g = group_violations(vs, Locator(_R()))
+    assert len(g) == 1
+    g = g[0]
+    assert g.places == 3 and g.points == 6 and g.worst == 7.0 and g.what == "position"
+    # point 12 lies in block 1 (path 10..20): NC line 4, t = 1 s, circuit 1
+    assert g.first["nc_line"] == 4 and g.first["time_s"] == 1.0 and g.first["circuit"] == 1
+    assert "NC line 4" in g.message and "3 place(s)" in g.message
+
+
+def test_post_and_machine_resolved_up_front() -> None:
+    robot = load_machine("robot_cell")
+    assert controller_for("linuxcnc", None, robot).name == "linuxcnc_robot"
+    assert controller_for("csv", None, robot).name == "csv"
+    with pytest.raises(InputError) as info:
+        controller_for("marlin", None, robot)
+    msg = info.value.message
+    assert "post marlin cannot write machine robot_cell" in msg and "E1" in msg and "linuxcnc_robot" in msg
+    with pytest.raises(InputError, match="made for machine"):
+        controller_for("linuxcnc", "linuxcnc_robot", load_machine("lathe2"))
+    for name in ("lathe2", "lathe3", "lathe4", "gantry6", "robot_cell"):
+        pairs = compatible_posts(load_machine(name))
+        assert pairs and all(p and c for p, c in pairs)
+        assert {p for p, _ in pairs} >= {"csv", "linuxcnc", "sinumerik"}
+
+
+def test_precheck_eye_radius_and_travel() -> None:
+    job = default_job().replace(mandrel={"kind": "pipe", "radius_mm": 158.0, "length_mm": 500.0})
+    m = load_machine("lathe2")
+    mandrel = Mandrel.pipe(158.0, 500.0)
+    with pytest.raises(InputError, match="needs at least 163 mm") as info:
+        precheck(job, m, mandrel, with_post=False)
+    assert info.value.location.field == "machine.setup.eye_radius_mm"
+    precheck(job, apply_setup(m, SetupSpec(eye_radius_mm=200.0)), mandrel, with_post=False)
+    with pytest.raises(InputError, match="travels 1200 mm but the mandrel is 1500 mm long"):
+        precheck(job, m, Mandrel.pipe(50.0, 1500.0), with_post=False)
