@@ -456,12 +456,146 @@ def load_dxf(path: str | Path) -> Mandrel:
         raise InputError(
             "no profile found: expected LINE/ARC/LWPOLYLINE/POLYLINE/SPLINE entities in model space (x = axial z, "
             f"y = radius); {_describe_entities(entities)}", file=file)
+    meta = {"dxf_entities": [_entity_label(e) for e in curves][:50], "dxf_scale_to_mm": scale}
+    exact, why = _dxf_exact_segments(curves, scale)
+    if exact is not None:
+        try:
+            m = Mandrel(tuple(exact), name=p.stem, source="dxf")
+        except InputError:
+            m = None
+            why = "the exact segments do not form a valid generatrix"
+        if m is not None:
+            m.meta.update(meta)
+            m.meta.update({"file": file, "dxf_exact": True, "segments": len(exact)})
+            return m
     try:
         z, r = _profile_from_pieces(pieces, curves)
     except InputError as exc:
         raise exc.at(file=file) from None
-    meta = {"dxf_entities": [_entity_label(e) for e in curves][:50], "dxf_scale_to_mm": scale}
+    meta["dxf_exact"] = False
+    meta["dxf_spline_reason"] = why
     return _mandrel_from_profile(z, r, path=p, source="dxf", meta=meta)
+
+
+DXF_TANGENCY_TOL_RAD = 1e-6
+"""Largest angle between drawn segments at a joint that still counts as tangent (exact DXF import)."""
+
+
+def _dxf_exact_segments(curves: list[Any], scale: float) -> tuple[list[Segment] | None, str]:
+    """The profile as exact line and arc segments, if it is drawn only with LINE, ARC and (bulged)
+    polylines, joined end to end and tangentially; else (None, why) and the caller fits a spline."""
+    raw: list[tuple[str, FloatArray, FloatArray, Any]] = []  # kind, start, end (z increasing), extra
+    for e in curves:
+        t = e.dxftype()
+        parts = list(e.virtual_entities()) if t in ("LWPOLYLINE", "POLYLINE") else [e]
+        for part in parts:
+            pt = part.dxftype()
+            if pt == "LINE":
+                a = np.array([part.dxf.start.x, part.dxf.start.y]) * scale
+                b = np.array([part.dxf.end.x, part.dxf.end.y]) * scale
+                raw.append(("line", a, b, None))
+            elif pt == "ARC":
+                c = np.array([part.dxf.center.x, part.dxf.center.y]) * scale
+                rad = float(part.dxf.radius) * scale
+                t0, t1 = math.radians(part.dxf.start_angle), math.radians(part.dxf.end_angle)
+                sweep = (t1 - t0) % (2.0 * math.pi)
+                a = c + rad * np.array([math.cos(t0), math.sin(t0)])
+                b = c + rad * np.array([math.cos(t0 + sweep), math.sin(t0 + sweep)])
+                mid = t0 + 0.5 * sweep
+                raw.append(("arc", a, b, (c, rad, t0, sweep, 1 if math.sin(mid) > 0 else -1)))
+            else:
+                return None, f"{_entity_label(part)} is not a line or an arc"
+    if not raw:
+        return None, "no lines or arcs"
+    allp = np.concatenate([[a, b] for _, a, b, _ in raw])
+    extent = max(float(np.ptp(allp[:, 0])), float(np.ptp(allp[:, 1])), 1e-9)
+    tol = 1e-6 * extent
+    segs: list[tuple[float, float, Segment]] = []
+    for kind, a, b, extra in raw:
+        if abs(a[0] - b[0]) <= tol and kind == "line":
+            continue  # an end face
+        if a[1] <= tol and b[1] <= tol and kind == "line":
+            continue  # the axis
+        if min(a[1], b[1]) < -tol:
+            return None, "geometry below the axis"
+        if a[0] > b[0]:
+            a, b = b, a
+        if kind == "line":
+            segs.append((a[0], b[0], LineSegment(float(a[0]), float(b[0]), float(a[1]), float(b[1]))))
+            continue
+        c, rad, t0, sweep, side = extra
+        # the arc must not pass a vertical tangent (angle 0 or π) inside: it would turn back along z
+        for v in (0.0, math.pi):
+            inner = ((v - t0) % (2.0 * math.pi))
+            if 1e-9 < inner < sweep - 1e-9:
+                return None, "an arc passes a vertical tangent"
+        if (side > 0 and min(a[1], b[1]) < c[1] - tol) or (side < 0 and max(a[1], b[1]) > c[1] + tol):
+            return None, "an arc is not a function of z"
+        segs.append((a[0], b[0], ArcSegment(float(a[0]), float(b[0]), zc=float(c[0]), rc=float(c[1]), a=rad,
+                                            side=int(side))))
+    if not segs:
+        return None, "only end faces and the axis"
+    segs.sort(key=lambda s: s[0])
+    out: list[Segment] = []
+    for k, (z0, _z1, seg) in enumerate(segs):
+        if k:
+            prev = out[-1]
+            if abs(z0 - prev.z1) > tol:
+                return None, f"a gap or overlap at z = {z0:.6g} mm"
+            r_prev = float(prev.eval(np.array([prev.z1]))[0][0])
+            r_here = float(seg.eval(np.array([z0]))[0][0])
+            if abs(r_prev - r_here) > tol:
+                return None, f"a step at z = {z0:.6g} mm"
+            s_prev = float(prev.eval(np.array([prev.z1]))[1][0])
+            s_here = float(seg.eval(np.array([z0]))[1][0])
+            if abs(math.atan(s_prev) - math.atan(s_here)) > DXF_TANGENCY_TOL_RAD:
+                return None, (f"a corner at z = {z0:.6g} mm (slopes {s_prev:.6g} and {s_here:.6g}); a spline fit "
+                              "rounds it")
+            z0 = prev.z1  # snap the joint
+            if isinstance(seg, LineSegment):
+                seg = LineSegment(z0, seg.z1, r_prev, seg.r1)
+            else:
+                assert isinstance(seg, ArcSegment)
+                seg = ArcSegment(z0, seg.z1, zc=seg.zc, rc=seg.rc, a=seg.a, side=seg.side)
+        if not seg.z1 > seg.z0:
+            return None, "a zero-length segment"
+        out.append(seg)
+    return out, ""
+
+
+def export_dxf(mandrel: Mandrel, path: str | Path) -> Path:
+    """Write the generatrix as a DXF profile (x = axial z, y = radius, mm) on layer PROFILE.
+
+    Lines and circle arcs are written exactly (LINE, ARC), so :func:`load_dxf` reads them back as the
+    same segments; other segments as fit-point SPLINEs through 64 points each.
+    """
+    import ezdxf
+
+    doc = ezdxf.new("R2010")
+    doc.header["$INSUNITS"] = 4  # mm
+    doc.layers.add("PROFILE")
+    msp = doc.modelspace()
+    att = {"layer": "PROFILE"}
+    for s in mandrel.segments:
+        if isinstance(s, LineSegment):
+            msp.add_line((s.z0, s.r0), (s.z1, s.r1), dxfattribs=att)
+        elif isinstance(s, ArcSegment):
+            r0 = float(s.eval(np.array([s.z0]))[0][0])
+            r1 = float(s.eval(np.array([s.z1]))[0][0])
+            a0 = math.degrees(math.atan2(r0 - s.rc, s.z0 - s.zc))
+            a1 = math.degrees(math.atan2(r1 - s.rc, s.z1 - s.zc))
+            start, end = (a1, a0) if s.side > 0 else (a0, a1)  # DXF arcs run counter-clockwise
+            msp.add_arc((s.zc, s.rc), s.a, start, end, dxfattribs=att)
+        else:
+            z = np.linspace(s.z0, s.z1, 64)
+            r = s.eval(z)[0]
+            msp.add_spline(fit_points=[(float(a), float(b), 0.0) for a, b in zip(z, r)], dxfattribs=att)
+    out = Path(path)
+
+    def write(tmp: str) -> None:
+        doc.saveas(tmp)
+
+    return atomic_write_with(out, write)
 
 
 def _read_dxf_doc(p: Path, data: bytes) -> Any:

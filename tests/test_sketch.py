@@ -172,3 +172,71 @@ def test_spline_segment_is_clamped_tangent_to_its_neighbours() -> None:
     for j in (1, 2):
         z = m.segments[j].z0
         assert abs(m.segments[j - 1].eval(np.array([z]))[1][0] - m.segments[j].eval(np.array([z]))[1][0]) < 1e-12
+
+
+# ------------------------------------------------------------------------------------------------
+# DXF: lines and arcs stay exact segments
+# ------------------------------------------------------------------------------------------------
+def _filleted() -> Mandrel:
+    return build_sketch(START, [
+        *CYL[:2],
+        {"type": "line", "to_mm": [360.0, 40.0], "corner": True, "fillet_mm": 30.0},
+        {"type": "line", "to_mm": [420.0, 40.0], "corner": True, "fillet_mm": 15.0},  # a concave fillet
+        {"type": "arc", "to_mm": [440.0, 20.0]},
+    ])
+
+
+@pytest.mark.parametrize("make", [lambda: build_sketch(START, CYL), _filleted], ids=["cylinder-arcs", "fillets"])
+def test_dxf_of_lines_and_arcs_round_trips_exactly(make, tmp_path: Path) -> None:  # noqa: ANN001
+    from engine.mandrel_io import export_dxf, load_dxf
+
+    m = make()
+    p = export_dxf(m, tmp_path / "profile.dxf")
+    back = load_dxf(p)
+    assert back.meta["dxf_exact"] is True
+    assert [type(s) for s in back.segments] == [type(s) for s in m.segments]
+    for a, b in zip(m.segments, back.segments):
+        assert abs(a.z0 - b.z0) < 1e-9 and abs(a.z1 - b.z1) < 1e-9
+        if isinstance(a, ArcSegment):
+            assert isinstance(b, ArcSegment)
+            assert (abs(a.zc - b.zc), abs(a.rc - b.rc), abs(a.a - b.a), a.side) < (1e-9, 1e-9, 1e-9, b.side + 1)
+            assert a.side == b.side
+    z = np.linspace(m.z_min, m.z_max, 100_001)
+    assert np.abs(back.r(z) - m.r(z)).max() < 1e-9
+    z = np.linspace(1.0, m.segments[1].z1 - 1.0, 1001)  # the straight part stays exactly straight
+    assert np.abs(back.r(z) - R).max() <= 1e-9
+    # and again: a second round trip changes nothing
+    again = load_dxf(export_dxf(back, tmp_path / "again.dxf"))
+    assert np.abs(again.r(z) - back.r(z)).max() < 1e-12
+
+
+def test_dxf_with_a_corner_is_fitted_by_a_spline_and_says_why(tmp_path: Path) -> None:
+    import ezdxf
+
+    from engine.mandrel_io import load_dxf
+
+    doc = ezdxf.new("R2010")
+    msp = doc.modelspace()
+    msp.add_line((0.0, 30.0), (100.0, 30.0))
+    msp.add_line((100.0, 30.0), (150.0, 20.0))
+    doc.saveas(tmp_path / "corner.dxf")
+    m = load_dxf(tmp_path / "corner.dxf")
+    assert m.meta["dxf_exact"] is False and "corner at z = 100" in m.meta["dxf_spline_reason"]
+    assert m.segments[0].kind == "spline"
+
+
+def test_cli_exports_dxf_and_sketch(tmp_path: Path) -> None:
+    import tomllib
+
+    from engine.cli import main
+
+    job = EXAMPLES / "pressure_vessel.toml"
+    assert main(["mandrel", str(job), "--dxf", str(tmp_path / "v.dxf"), "--sketch", str(tmp_path / "v.toml")]) == 0
+    sk = tomllib.loads((tmp_path / "v.toml").read_text())["mandrel"]
+    assert [s["type"] for s in sk["segments"]] == ["isotensoid", "line", "isotensoid"]
+    m0 = build_mandrel(load_job(job))
+    m1 = build_sketch(sk["start_mm"], sk["segments"])
+    z = np.linspace(m0.z_min, m0.z_max, 10_001)
+    assert np.abs(m1.r(z) - m0.r(z)).max() < 1e-9
+    assert (tmp_path / "v.dxf").stat().st_size > 0
+    assert main(["mandrel", str(job), "--dxf", str(tmp_path / "v.txt")]) == 2

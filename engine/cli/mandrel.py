@@ -17,6 +17,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
     parser.add_argument("--step", metavar="OUT.step", help="export the mandrel solid as STEP")
     parser.add_argument("--stl", metavar="OUT.stl", help="export the mandrel surface as STL")
+    parser.add_argument("--dxf", metavar="OUT.dxf", help="export the generatrix as a DXF profile (lines/arcs exact)")
+    parser.add_argument("--sketch", metavar="OUT.toml",
+                        help="write the generatrix as a [mandrel] sketch of exact segments (kind = 'segments')")
     parser.add_argument("--stl-tolerance", type=float, default=0.05, metavar="MM", help="STL chord tolerance (mm)")
 
 
@@ -37,7 +40,7 @@ def load_any_mandrel(path: str | Path) -> Any:
 def run(args: argparse.Namespace) -> int:
     from engine.cli import dump_json
 
-    for opt, suffixes in (("step", {".step", ".stp"}), ("stl", {".stl"})):
+    for opt, suffixes in (("step", {".step", ".stp"}), ("stl", {".stl"}), ("dxf", {".dxf"}), ("sketch", {".toml"})):
         out = getattr(args, opt)
         if out and Path(out).suffix.lower() not in suffixes:
             raise InputError(f"--{opt} needs a file ending in {' or '.join(sorted(suffixes))}", file=out)
@@ -46,6 +49,17 @@ def run(args: argparse.Namespace) -> int:
 
             check_output_path(out, opt.upper())
     mandrel = load_any_mandrel(args.file)
+    if args.dxf:
+        from engine.mandrel_io import export_dxf
+
+        export_dxf(mandrel, args.dxf)
+    if args.sketch:
+        import tomli_w
+
+        from engine.fileio import atomic_write_text
+        from engine.sketch import sketch_from_mandrel
+
+        atomic_write_text(args.sketch, tomli_w.dumps({"mandrel": sketch_from_mandrel(mandrel)}))
     if args.step or args.stl:
         from engine import mandrel_io
 
