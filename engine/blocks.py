@@ -198,8 +198,9 @@ def _split_level(machine: MachineTemplate, q: np.ndarray, eye: np.ndarray, w: np
         u = np.where(span > 0, (w[pts] - w[pa]) / np.where(span > 0, span, 1.0), (pts - pa) / (pb - pa))
         qa = q[pa]
         qi = qa + u[:, None] * (q[pb] - qa)
-        e_fk, _ = forward_kinematics(machine, qi)
-        err = np.linalg.norm(e_fk - eye[pts], axis=1)
+        e_fk, _ = forward_kinematics(machine, qi, fibre=False)
+        e_fk -= eye[pts]
+        err = np.linalg.norm(e_fk, axis=1)
         smax = np.maximum.reduceat(err, starts)
         ok = smax <= tol
         seg_err[P[a[ok]]] = smax[ok]

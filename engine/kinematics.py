@@ -492,8 +492,8 @@ def eye_chain(machine: MachineTemplate, q_int: np.ndarray) -> np.ndarray:
     return T @ machine.tool
 
 
-def forward_kinematics(machine: MachineTemplate, q: np.ndarray, contact_xyz: np.ndarray | None = None
-                       ) -> tuple[np.ndarray, np.ndarray]:
+def forward_kinematics(machine: MachineTemplate, q: np.ndarray, contact_xyz: np.ndarray | None = None,
+                       fibre: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
     """Eye position and fibre direction in the mandrel frame from controller axis values.
 
     Parameters
@@ -506,17 +506,26 @@ def forward_kinematics(machine: MachineTemplate, q: np.ndarray, contact_xyz: np.
     -------
     eye_xyz: (N,3) mm, mandrel frame.
     fibre_dir: (N,3) unit vectors, mandrel frame: the eye axis (``"projected"``/``"full"``) or
-        ``normalise(eye - contact)`` (``"line"``; NaN when ``contact_xyz`` is None).
+        ``normalise(eye - contact)`` (``"line"``; NaN when ``contact_xyz`` is None); ``None`` when
+        ``fibre`` is False (the eye position only: what the block tolerance checks need, cheaper).
     """
     q_int = machine.to_internal(np.atleast_2d(q))
-    pw, zw = eye_pose(machine, q_int)
+    pw, zw = eye_pose(machine, q_int, axis=fibre)
     theta = q_int[:, machine.axis_index("mandrel")]
     c, s = np.cos(theta), np.sin(theta)
 
     def to_m(v: np.ndarray) -> np.ndarray:   # p_M = Rz(-theta) p_W
-        return np.stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1], v[:, 2]], axis=1)
+        out = np.empty(v.shape)
+        np.multiply(c, v[:, 0], out=out[:, 0])
+        out[:, 0] += s * v[:, 1]
+        np.multiply(c, v[:, 1], out=out[:, 1])
+        out[:, 1] -= s * v[:, 0]
+        out[:, 2] = v[:, 2]
+        return out
 
     eye = to_m(pw)
+    if not fibre:
+        return eye, None
     if machine.fibre_mode == "line":
         if contact_xyz is None:
             return eye, np.full_like(eye, np.nan)
@@ -525,10 +534,11 @@ def forward_kinematics(machine: MachineTemplate, q: np.ndarray, contact_xyz: np.
     return eye, to_m(zw)
 
 
-def eye_pose(machine: MachineTemplate, q_int: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def eye_pose(machine: MachineTemplate, q_int: np.ndarray, axis: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Fast form of :func:`eye_chain`: eye position (N,3) and eye axis (N,3), machine frame.
 
-    Same products as the 4x4 chain, written out column by column (tests compare the two).
+    Same products as the 4x4 chain, written out column by column (tests compare the two).  With
+    ``axis=False`` a Cartesian machine's eye axis is not computed (returned as zeros).
     """
     q_int = np.atleast_2d(np.asarray(q_int, dtype=float))
     n = q_int.shape[0]
@@ -539,6 +549,8 @@ def eye_pose(machine: MachineTemplate, q_int: np.ndarray) -> tuple[np.ndarray, n
         p[:, 1] = q_int[:, col["vertical"]] if col["vertical"] is not None else 0.0
         p[:, 2] = q_int[:, col["carriage"]]
         z = np.zeros((n, 3))
+        if not axis:
+            return p, z
         z[:, 2] = 1.0
         if col["roll"] is not None:
             r = q_int[:, col["roll"]]

@@ -943,10 +943,13 @@ def _block_errors(machine: Any, axes: Any, idx: np.ndarray) -> np.ndarray:
     span = w[b] - w[a]
     u = np.where(span > 0, (w[pts] - w[a]) / np.where(span > 0, span, 1.0), (pts - a) / (b - a))
     qi = q[a] + u[:, None] * (q[b] - q[a])
-    e_fk, _ = forward_kinematics(machine, qi)
-    err = np.linalg.norm(e_fk - eye[pts], axis=1)
+    e_fk, _ = forward_kinematics(machine, qi, fibre=False)
+    e_fk -= eye[pts]
+    err = np.linalg.norm(e_fk, axis=1)
     out = np.zeros(nb)
-    np.maximum.at(out, blk, err)
+    if err.size:                             # blk is sorted: one reduceat instead of maximum.at
+        first = np.flatnonzero(np.concatenate([[True], blk[1:] != blk[:-1]]))
+        out[blk[first]] = np.maximum.reduceat(err, first)
     return out
 
 
