@@ -1089,7 +1089,7 @@ def _forward_compiled(chunks: list[tuple[int, int]], uniform_h: bool, two_h: np.
         th, kq = two_h, kq_h
     return timeparam_jit.forward_pass(levf, klo, cnt, bad, np.ascontiguousarray(th, float),
                                       np.ascontiguousarray(kq, float), use_k, M, int(_LOMASK), int(_HIMASK),
-                                      Jraw.reshape(-1), int(_STATS.get("candidates", 0)))
+                                      Jraw.reshape(-1))
 
 
 _NUMBA = True  # False: always the numpy pass (the tested reference; tests switch it)
@@ -1132,7 +1132,7 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
 
         L = prob.rq.size // max(n - 1, 1)
         win = timeparam_jit.windows(lev, xall, prob.xn, (prob.rq, prob.rk, prob.lq, prob.lk), L, prob.xjb,
-                                    prob.xjt, degenerate, plo, sp_p, t_lo, t_hi, nb, (n - 1) * M * 8)
+                                    prob.xjt, degenerate, plo, sp_p, t_lo, t_hi, nb)
     if win is not None:                      # the compiled windows: the same integers
         klo, cnt_eff, bad = win
     else:
@@ -1627,6 +1627,10 @@ def parametrize(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, meth
     if method not in METHODS:
         raise InputError(f"unknown method {method!r}; use one of {', '.join(METHODS)}", field="method")
     t0 = time.perf_counter()
+    if _NUMBA and method != "toppra" and np.size(path_s) >= 2:
+        from engine import timeparam_jit
+
+        timeparam_jit.kernel(int(np.size(path_s)))        # loads numba for big problems (see there)
     prob = _prepare(path_s, X, dX, ddX, limits, chains=method == "dp")
     iterations: list[IterationLog] = []
     group = 1

@@ -5,10 +5,11 @@ candidates in the same floating-point order and the same integer minimum (the de
 in the low 12 bits of the float cost), so ``J`` and the argmins are bit for bit those of the numpy
 pass (``tests/test_timeparam_speed.py`` compares both).
 
-numba is imported lazily and only when it pays: :func:`forward_pass` returns ``None`` (the caller
-then runs the numpy pass) when numba is not installed or cannot compile/cache here (the frozen build
-leaves numba out, see installer/README.md), when ``WINDER_NUMBA=0`` is set, or when the pass is
-too small to repay importing numba (~0.5 s, once per process) and numba is not loaded yet.
+numba is imported lazily and only when it pays: the kernels are not used (the caller then runs the
+numpy code) when numba is not installed or cannot compile/cache here (the frozen build leaves numba
+out, see installer/README.md), when ``WINDER_NUMBA=0`` is set, or when numba is not loaded yet and
+the problem is too small to repay importing it (~0.5 s once per process; :data:`IMPORT_THRESHOLD`).
+The same module has the compiled DP windows and the convex hulls of the node groups.
 Compiled code is cached on disk (``cache=True``: ``__pycache__`` next to this file, or numba's
 per-user cache directory when that is not writable).
 """
@@ -21,9 +22,11 @@ from typing import Any
 
 import numpy as np
 
-# A pass with at least this many candidates imports numba if it is not loaded yet (one DP pass of
-# 2e6 candidates costs ~60 ms in numpy; the import + cache load ~0.5 s once per process).
-IMPORT_THRESHOLD = 2_000_000
+# Problems with at least this many nodes import numba if it is not loaded yet
+# (:func:`engine.timeparam.parametrize` calls :func:`kernel` with its node count): importing numba
+# and loading the cached kernels costs ~0.5 s once per process, about what the compiled passes save
+# on 5 000 nodes; smaller problems (every shipped example) use numba only when it is loaded already.
+IMPORT_THRESHOLD = 5000
 
 _KERNEL: list[Any] = []      # [kernel] once compiled, [None] when numba is unusable here
 
@@ -164,12 +167,11 @@ def _build_windows() -> Any:
 
 def windows(lev: np.ndarray, xall: np.ndarray, xn: np.ndarray, ch: tuple[np.ndarray, ...], L: int,
             xjb: np.ndarray, xjt: np.ndarray, degenerate: np.ndarray, plo: np.ndarray, sp_p: np.ndarray,
-            t_lo: np.ndarray, t_hi: np.ndarray, nb: int, candidates_hint: int
-            ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+            t_lo: np.ndarray, t_hi: np.ndarray, nb: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """The DP windows ``(klo, cnt, bad)`` of :func:`engine.timeparam._dp` (levels uniform in ṡ), the
     same integers as its numpy code; ``None`` without numba."""
     if not _WINDOWS:
-        if kernel(candidates_hint) is None:
+        if kernel(0) is None:
             return None
         try:
             _WINDOWS.append(_build_windows())
@@ -259,14 +261,14 @@ def hulls(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     zero points ignored; ``(order, m)`` as :func:`engine.timeparam._hull_sym` returns them, or ``None``
     without numba.  Any start vertex."""
     if not _HULL:
-        if kernel(IMPORT_THRESHOLD) is None:
+        if kernel(0) is None:
             _HULL.append(None)
         else:
             try:
                 _HULL.append(_build_hull())
             except Exception:  # noqa: BLE001 - see kernel()
                 _HULL.append(None)
-    if _HULL[0] is None:
+    if _HULL[0] is None or kernel(0) is None:
         return None
     B, R = pts.shape[0], pts.shape[1]
     order = np.zeros((B, max(R, 1)), np.int64)
@@ -275,13 +277,16 @@ def hulls(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     return order, m
 
 
-def kernel(candidates: int) -> Any:
-    """The compiled forward pass, or ``None`` when the numpy pass should run (see the module doc)."""
+def kernel(nodes: int) -> Any:
+    """The compiled forward pass, or ``None`` when the numpy pass should run (see the module doc).
+
+    ``nodes``: the size of the caller's problem in nodes (imports numba from
+    :data:`IMPORT_THRESHOLD` on); 0 = only if numba is loaded already."""
     if _KERNEL:
         return _KERNEL[0]
     if os.environ.get("WINDER_NUMBA", "1") == "0":
         return None
-    if "numba" not in sys.modules and candidates < IMPORT_THRESHOLD:
+    if "numba" not in sys.modules and nodes < IMPORT_THRESHOLD:
         return None
     try:
         k = _build_kernel()
@@ -292,15 +297,14 @@ def kernel(candidates: int) -> Any:
 
 
 def forward_pass(levf: np.ndarray, klo: np.ndarray, cnt: np.ndarray, bad: np.ndarray, two_h: np.ndarray,
-                 kq: np.ndarray, use_k: bool, M: int, lomask: int, himask: int, Jraw: np.ndarray,
-                 candidates: int) -> bool:
+                 kq: np.ndarray, use_k: bool, M: int, lomask: int, himask: int, Jraw: np.ndarray) -> bool:
     """Run the forward pass into ``Jraw`` (int64 view of J, shape (N·M,)) if the kernel is available.
 
     ``levf`` (N·M,) level speeds (mm/s); ``klo``, ``cnt`` (N-1, M) first departure level and window
     size; ``bad`` (N-1, M) no feasible departure; ``two_h``, ``kq`` (N-1,) the per-interval ``2h`` and
     ``K/(4h²)`` exactly as the numpy pass uses them.  Returns False (nothing done) without the kernel.
     """
-    k = kernel(candidates)
+    k = kernel(0)
     if k is None:
         return False
     try:

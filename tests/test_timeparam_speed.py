@@ -93,6 +93,9 @@ def test_dense_nodes_converge_like_the_paper_spacing(n: int) -> None:
     if n == 3000:
         old = tp.parametrize(s, X, dX, ddX, replace(lim, coarse=False))
         assert old.node_group == 1 and law.total_time_s <= old.total_time_s
+        ref_np = _law(False, s, X, dX, ddX, lim)            # numpy hulls and passes (no numba)
+        assert ref_np.node_group == law.node_group and ref_np.max_accel_ratio <= 1 + 1e-9
+        assert ref_np.total_time_s == pytest.approx(law.total_time_s, rel=1e-6)
 
 
 def test_grouping_keeps_the_paper_spacing_and_the_vessel_on_their_nodes() -> None:
