@@ -111,6 +111,8 @@ class FileSpec(_Model):
 
     kind: Literal["file"] = "file"
     path: str
+    smoothing_mm: PositiveMM | None = None
+    """CSV tables: fit the smoothest spline within this distance of the points (the deviation is reported)."""
 
     @field_validator("path")
     @classmethod
@@ -533,7 +535,7 @@ def build_mandrel(job: Job, job_path: str | Path | None = None) -> Any:
             from engine.mandrel_io import load_mandrel_file
 
             base = Path(job_path).parent if job_path else Path(".")
-            return load_mandrel_file(base / spec.path)
+            return load_mandrel_file(base / spec.path, smoothing_mm=spec.smoothing_mm)
     except InputError as exc:
         if exc.location.file:  # a problem inside an imported profile file: keep its own location
             raise

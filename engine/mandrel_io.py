@@ -257,7 +257,7 @@ def _parse_number(cell: str, separator: str) -> float | None:
     return None
 
 
-def load_csv(path: str | Path) -> Mandrel:
+def load_csv(path: str | Path, smoothing_mm: float | None = None) -> Mandrel:
     """Read a generatrix table (z and r in mm) and return a C2 spline mandrel.
 
     Format: one point per line; cells separated by ``,``, ``;``, tab or blanks; decimal point (a
@@ -365,7 +365,10 @@ def load_csv(path: str | Path) -> Mandrel:
                          "least 4", file=file, line=line_nos[-1] if line_nos else None)
     # errors from validation should name the CSV column
     try:
-        return _mandrel_from_profile(z, r, path=p, source="csv", lines=line_nos)
+        m = _mandrel_from_profile(z, r, path=p, source="csv", lines=line_nos)
+        if smoothing_mm is not None:
+            m = smooth_profile(m, z, r, smoothing_mm, file=file)
+        return m
     except InputError as exc:
         f = exc.location.field
         if f in ("z", "r"):
@@ -1536,12 +1539,78 @@ _LOADERS = {".csv": load_csv, ".txt": load_csv, ".dat": load_csv, ".dxf": load_d
             ".stp": load_step}
 
 
-def load_mandrel_file(path: str | Path) -> Mandrel:
-    """Load a mandrel from a CSV/TXT table, a DXF profile or a STEP solid, chosen by the file suffix."""
+def smooth_profile(mandrel: Mandrel, z: FloatArray, r: FloatArray, tolerance_mm: float,
+                   file: str | None = None) -> Mandrel:
+    """The smoothest spline that stays within ``tolerance_mm`` of measured points (z, r), mm.
+
+    A penalised cubic smoothing spline (scipy ``make_smoothing_spline``) with the largest penalty whose
+    final C2 spline (through its values at the points, pole radii kept) deviates from every point by at
+    most the tolerance (bisection on the penalty in log scale).  ``meta['smoothing']`` states the
+    tolerance and the deviation reached (max and where, rms); when even a tiny penalty exceeds the
+    tolerance the points are interpolated as they are and the note says so.
+    """
+    from scipy.interpolate import make_smoothing_spline
+
+    tol = float(tolerance_mm)
+    if not (math.isfinite(tol) and tol > 0):
+        raise InputError(f"the smoothing tolerance must be a positive number of mm, got {tolerance_mm!r}", file=file,
+                         field="smoothing_mm")
+    zz = np.asarray(z, dtype=float)
+    rr = np.asarray(r, dtype=float)
+    if len(zz) < 5:
+        raise InputError("smoothing needs at least 5 points", file=file, field="smoothing_mm")
+
+    def fit(log_lam: float) -> tuple[Mandrel | None, float]:
+        try:
+            spl = make_smoothing_spline(zz, rr, lam=10.0**log_lam)
+            rs = np.asarray(spl(zz), dtype=float)
+            rs[0], rs[-1] = rr[0], rr[-1]  # keep the pole radii as measured
+            m = Mandrel.from_points(zz, rs, name=mandrel.name, source="csv", file=file)
+        except (InputError, ValueError, np.linalg.LinAlgError):
+            return None, math.inf
+        return m, float(np.abs(m.r(zz) - rr).max())
+
+    span = float(zz[-1] - zz[0])
+    lo, hi = math.log10(1e-12 * span**3), math.log10(1e3 * span**3)
+    best, dev = fit(lo)
+    if best is None or dev > tol:
+        mandrel.meta["smoothing"] = {"tolerance_mm": tol, "max_deviation_mm": 0.0, "rms_deviation_mm": 0.0,
+                                     "applied": False,
+                                     "note": "no smoothing meets the tolerance; the points are interpolated"}
+        return mandrel
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        m, d = fit(mid)
+        if m is not None and d <= tol:
+            best, dev, lo = m, d, mid
+        else:
+            hi = mid
+        if hi - lo < 0.01:
+            break
+    res = best.r(zz) - rr
+    i = int(np.argmax(np.abs(res)))
+    best.meta.update(mandrel.meta)
+    best.meta["smoothing"] = {"tolerance_mm": tol, "max_deviation_mm": float(abs(res[i])), "at_z_mm": float(zz[i]),
+                              "rms_deviation_mm": float(np.sqrt(np.mean(res * res))), "applied": True,
+                              "penalty": 10.0**lo}
+    return best
+
+
+def load_mandrel_file(path: str | Path, smoothing_mm: float | None = None) -> Mandrel:
+    """Load a mandrel from a CSV/TXT table, a DXF profile or a STEP solid, chosen by the file suffix.
+
+    ``smoothing_mm``: for a CSV/TXT table, the smoothest spline within this distance (mm) of the points
+    instead of the interpolating one (:func:`smooth_profile`); refused for other files.
+    """
     p = Path(path)
     loader = _LOADERS.get(p.suffix.lower())
     if loader is None:
         raise InputError(
             f"unknown mandrel file type '{p.suffix or '(no suffix)'}'; use .csv/.txt (z, r table), .dxf (profile "
             "drawing) or .step/.stp (solid of revolution)", file=p)
+    if smoothing_mm is not None:
+        if loader is not load_csv:
+            raise InputError("smoothing applies to measured point tables (.csv/.txt/.dat) only", file=p,
+                             field="smoothing_mm")
+        return load_csv(p, smoothing_mm=smoothing_mm)
     return loader(p)

@@ -240,3 +240,48 @@ def test_cli_exports_dxf_and_sketch(tmp_path: Path) -> None:
     assert np.abs(m1.r(z) - m0.r(z)).max() < 1e-9
     assert (tmp_path / "v.dxf").stat().st_size > 0
     assert main(["mandrel", str(job), "--dxf", str(tmp_path / "v.txt")]) == 2
+
+
+# ------------------------------------------------------------------------------------------------
+# CSV: smoothing fit with a stated tolerance
+# ------------------------------------------------------------------------------------------------
+def _noisy_csv(tmp_path: Path, sigma: float = 0.01) -> tuple[Path, np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(3)
+    z = np.concatenate([np.linspace(-56.0, 0.0, 15, endpoint=False), np.linspace(0.0, 300.0, 30, endpoint=False),
+                        np.linspace(300.0, 356.0, 15)])
+    r_true = np.where(z < 0, np.sqrt(np.maximum(R * R - z * z, 0)),
+                      np.where(z <= 300, R, np.sqrt(np.maximum(R * R - (z - 300) ** 2, 0))))
+    r = r_true + rng.normal(0.0, sigma, z.size)
+    p = tmp_path / "noisy.csv"
+    p.write_text("z,r\n" + "\n".join(f"{float(a)!r},{float(b)!r}" for a, b in zip(z, r)))
+    return p, z, r
+
+
+@pytest.mark.parametrize("tol", [0.01, 0.03, 0.1])
+def test_csv_smoothing_stays_within_the_stated_tolerance(tol: float, tmp_path: Path) -> None:
+    from engine.mandrel_io import load_csv
+
+    p, z, r = _noisy_csv(tmp_path)
+    raw = load_csv(p)
+    sm = load_csv(p, smoothing_mm=tol)
+    info = sm.meta["smoothing"]
+    assert info["applied"] and info["tolerance_mm"] == tol
+    dev = np.abs(sm.r(z) - r)
+    assert dev.max() <= tol + 1e-12 and info["max_deviation_mm"] == pytest.approx(dev.max())
+    assert info["rms_deviation_mm"] == pytest.approx(float(np.sqrt(np.mean(dev**2))))
+    # smoother than the interpolating spline on the straight part: less curvature wiggle
+    zz = np.linspace(40.0, 260.0, 2001)
+    assert np.abs(sm.d2r(zz)).max() < np.abs(raw.d2r(zz)).max()
+    assert sm.pole_radii == pytest.approx(raw.pole_radii)
+
+
+def test_csv_smoothing_in_a_job_and_refused_for_dxf(tmp_path: Path) -> None:
+    p, _, _ = _noisy_csv(tmp_path)
+    job = parse_job(f'schema_version = 1\n[mandrel]\nkind = "file"\npath = "{p.name}"\nsmoothing_mm = 0.05\n')
+    m = build_mandrel(job, tmp_path / "job.toml")
+    assert m.meta["smoothing"]["max_deviation_mm"] <= 0.05
+    from engine.mandrel_io import export_dxf, load_mandrel_file
+
+    d = export_dxf(build_sketch(START, CYL), tmp_path / "p.dxf")
+    with pytest.raises(InputError, match="point tables"):
+        load_mandrel_file(d, smoothing_mm=0.05)

@@ -17,6 +17,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the summary as JSON")
     parser.add_argument("--step", metavar="OUT.step", help="export the mandrel solid as STEP")
     parser.add_argument("--stl", metavar="OUT.stl", help="export the mandrel surface as STL")
+    parser.add_argument("--smooth", type=float, metavar="MM",
+                        help="CSV tables: fit the smoothest spline within MM of the points (reports the deviation)")
     parser.add_argument("--dxf", metavar="OUT.dxf", help="export the generatrix as a DXF profile (lines/arcs exact)")
     parser.add_argument("--sketch", metavar="OUT.toml",
                         help="write the generatrix as a [mandrel] sketch of exact segments (kind = 'segments')")
@@ -48,7 +50,14 @@ def run(args: argparse.Namespace) -> int:
             from engine.fileio import check_output_path
 
             check_output_path(out, opt.upper())
-    mandrel = load_any_mandrel(args.file)
+    if args.smooth is not None:
+        if Path(args.file).suffix.lower() not in (".csv", ".txt", ".dat"):
+            raise InputError("--smooth applies to measured point tables (.csv/.txt/.dat)", file=args.file)
+        from engine.mandrel_io import load_mandrel_file
+
+        mandrel = load_mandrel_file(args.file, smoothing_mm=args.smooth)
+    else:
+        mandrel = load_any_mandrel(args.file)
     if args.dxf:
         from engine.mandrel_io import export_dxf
 
@@ -70,6 +79,8 @@ def run(args: argparse.Namespace) -> int:
     summary = mandrel.summary()
     if mandrel.meta.get("decimated"):
         summary["decimated"] = mandrel.meta["decimated"]
+    if mandrel.meta.get("smoothing"):
+        summary["smoothing"] = mandrel.meta["smoothing"]
     if args.json:
         dump_json(summary)
     else:
@@ -80,9 +91,15 @@ def run(args: argparse.Namespace) -> int:
         print(f"  area {summary['area_mm2']:.1f} mm2, volume {summary['volume_mm3']:.1f} mm3")
         if mandrel.meta.get("note"):
             print(f"  note: {mandrel.meta['note']}")
+        sm = summary.get("smoothing")
+        if sm and sm.get("applied"):
+            print(f"  smoothed within {sm['tolerance_mm']:g} mm of the points: max deviation "
+                  f"{sm['max_deviation_mm']:.4g} mm at z = {sm['at_z_mm']:.6g} mm, rms {sm['rms_deviation_mm']:.4g} mm")
+        elif sm:
+            print(f"  smoothing: {sm['note']}")
         zones = summary["concave_zones"] or "none"
         print(f"  concave zones: {zones}")
-        for opt in ("step", "stl"):
+        for opt in ("step", "stl", "dxf", "sketch"):
             if getattr(args, opt):
                 print(f"  wrote {getattr(args, opt)}")
     return 0
