@@ -88,6 +88,8 @@ class Blocks:
     total_start: float = 0.0
     history: tuple[float, ...] = ()
     violations: tuple[Violation, ...] = field(default_factory=tuple)
+    sections: tuple[tuple[int, str], ...] = ()
+    """(block index, text): a comment the posts write before that block (the layers of a laminate)."""
 
     @property
     def n(self) -> int:

@@ -2,7 +2,11 @@
 
 Sections: ``[mandrel]`` (generatrix), ``[band]`` (band/material), ``[winding]`` (winding-line
 parameters), ``[payout]`` (payout-eye law), ``[machine]`` (machine template and limit overrides),
-``[timelaw]`` (time parametrization), ``[post]`` (controller post-processor and NC output).
+``[timelaw]`` (time parametrization), ``[post]`` (controller post-processor and NC output), and
+(schema version 2) the laminate: an ordered array of tables ``[[layer]]``, each of ``kind`` hoop,
+helical, polar or skip.  ``[band]`` and ``[winding]`` are the defaults every layer inherits; a layer
+overrides what it names.  A version 1 file (no ``[[layer]]``) loads as one helical layer that
+inherits everything, with ``winding.layers`` as its repeat count, and is written back as version 2.
 
 The document is schema-versioned (``schema_version``) and validated with pydantic; every error
 names the file, the line and the field (``InputError``).  ``load_job(save_job(job))`` returns an
@@ -10,7 +14,7 @@ equal job (floats are written with ``repr`` precision), and saving is atomic.
 
 Example::
 
-    schema_version = 1
+    schema_version = 2
     name = "Vessel 200"
     [mandrel]
     kind = "vessel"
@@ -20,6 +24,11 @@ Example::
     pole_radius_mm = [25.0, 40.0]
     [band]
     width_mm = 8.0
+    [[layer]]
+    kind = "hoop"
+    [[layer]]
+    kind = "helical"
+    angles = [{z_mm = 150.0, angle_deg = 30.0}]
 """
 
 from __future__ import annotations
@@ -34,7 +43,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from engine.errors import InputError
 from engine.fileio import MAX_TOML_BYTES, atomic_write_text, loads_toml
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+SUPPORTED_VERSIONS = (1, 2)
 
 PositiveMM = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNegMM = Annotated[float, Field(ge=0, allow_inf_nan=False)]
@@ -294,10 +304,124 @@ class PostSpec(_Model):
     output: str | None = None
 
 
+# ------------------------------------------------------------------------------------------------
+# Laminate: layers (schema version 2)
+# ------------------------------------------------------------------------------------------------
+class LayerBand(_Model):
+    """Band values of one layer that override ``[band]`` (unset = inherited)."""
+
+    width_mm: PositiveMM | None = None
+    thickness_mm: PositiveMM | None = None
+    friction: NonNegMM | None = None
+    tows: Annotated[int, Field(ge=1, le=1000)] | None = None
+    """Number of tows (rovings) side by side in the band; used for the fibre mass."""
+    material: str | None = None
+
+
+class _LayerBase(_Model):
+    name: str = ""
+    """Shown in the layer table, the NC comments and the report; default: kind and index."""
+    enabled: bool = True
+    """A disabled layer stays in the document but is neither wound nor counted."""
+    band: LayerBand = Field(default_factory=LayerBand)
+    lead_in_mm: NonNegMM = 0.0
+    """Carriage move (mm) from the transition position to the layer's first point, before the fibre is laid."""
+    lead_out_deg: NonNegMM = 0.0
+    """Extra mandrel rotation (deg) after the layer's last point (the band is tied off on the shaft)."""
+
+
+class HoopLayer(_LayerBase):
+    """Near-90° turns along a z range: pitch = band width × (1 − overlap) per mandrel turn."""
+
+    kind: Literal["hoop"] = "hoop"
+    z_range_mm: tuple[Finite, Finite] | None = None
+    """z range wound (mm); default: the cylindrical part of the surface (r within 0.1 % of r_max)."""
+    overlap: Annotated[float, Field(ge=0.0, lt=1.0)] = 0.0
+    """Share of the band width laid over the previous turn (0 = butt joints)."""
+    passes: Annotated[int, Field(ge=1, le=1000)] = 1
+    """Passes over the z range (alternating direction unless ``terminal``); each pass adds one band thickness."""
+    terminal: bool = False
+    """Wind in one direction only (the carriage returns without laying between passes)."""
+    repeat: Annotated[int, Field(ge=1, le=1000)] = 1
+    points_per_turn: Annotated[int, Field(ge=8, le=2000)] = 72
+
+
+class HelicalLayer(_LayerBase):
+    """A winding line (geodesic, non-geodesic or minimax): the fields of ``[winding]``, per layer."""
+
+    kind: Literal["helical"] = "helical"
+    mode: Literal["auto", "geodesic", "constant-lambda", "piecewise-lambda", "minimax"] | None = None
+    pole_c_mm: tuple[NonNegMM, NonNegMM] | None = None
+    angles: list[AngleRequirement] | None = None
+    angle_deg: Annotated[float, Field(gt=0, lt=90)] | None = None
+    """Shortcut: the winding angle on the middle parallel of the cylindrical part (or of the surface)."""
+    dwell_deg: tuple[NonNegMM, NonNegMM] | None = None
+    points_per_pass: Annotated[int, Field(ge=50, le=200_000)] | None = None
+    circuits: Annotated[int, Field(ge=1)] | None = None
+    pattern_p: Annotated[int, Field(ge=1)] | None = None
+    pattern_q: Annotated[int, Field(ge=1)] | None = None
+    lead: Literal["leading", "lagging"] | None = None
+    close_by: Literal["dwell", "angle"] | None = None
+    repeat: Annotated[int, Field(ge=1, le=1000)] | None = None
+    """Times the pattern is wound (default: ``winding.layers``)."""
+
+
+class PolarLayer(HelicalLayer):
+    """Polar winding: the near-geodesic line tangent to both polar openings (C = opening + band/2 at
+    each end unless ``pole_c_mm`` is given); only on a surface closed by two domes."""
+
+    kind: Literal["polar"] = "polar"  # type: ignore[assignment]
+
+
+class SkipLayer(_LayerBase):
+    """A pure mandrel reposition between layers (no fibre laid)."""
+
+    kind: Literal["skip"] = "skip"
+    angle_deg: Finite = 0.0
+    """Mandrel rotation (deg)."""
+
+
+LayerSpec = Annotated[HoopLayer | HelicalLayer | PolarLayer | SkipLayer, Field(discriminator="kind")]
+LAYER_KINDS: tuple[str, ...] = ("hoop", "helical", "polar", "skip")
+_WINDING_OVERRIDES = ("mode", "pole_c_mm", "angles", "dwell_deg", "points_per_pass", "circuits", "pattern_p",
+                      "pattern_q", "lead", "close_by")
+
+
+def layer_name(layer: Any, index: int) -> str:
+    """The layer's display name: its own, else ``"<index+1> <kind>"``."""
+    return layer.name or f"{index + 1} {layer.kind}"
+
+
+def effective_band(job: Job, layer: Any) -> BandSpec:
+    """``[band]`` with the layer's overrides applied."""
+    over = {k: v for k, v in layer.band.model_dump().items() if v is not None and k != "tows"}
+    return job.band.model_copy(update=over) if over else job.band
+
+
+def effective_winding(job: Job, layer: Any, mandrel: Any = None) -> WindingSpec:
+    """``[winding]`` with a helical/polar layer's overrides; ``angle_deg`` becomes an angle condition on the
+    middle of the cylindrical part of ``mandrel`` (or of the surface)."""
+    data = job.winding.model_dump()
+    for k in _WINDING_OVERRIDES:
+        v = getattr(layer, k, None)
+        if v is not None:
+            data[k] = v
+    rep = getattr(layer, "repeat", None)
+    if rep is not None:
+        data["layers"] = rep
+    ang = getattr(layer, "angle_deg", None)
+    if ang is not None and getattr(layer, "angles", None) is None and mandrel is not None:
+        from engine.mandrel import cylinder_range
+
+        z0, z1 = cylinder_range(mandrel)
+        data["angles"] = [{"z_mm": 0.5 * (z0 + z1), "angle_deg": ang}]
+    return WindingSpec.model_validate(data)
+
+
 class Job(_Model):
     """A complete winding job."""
 
-    schema_version: Literal[1] = SCHEMA_VERSION
+    schema_version: Literal[2] = SCHEMA_VERSION
     name: str = "untitled"
     description: str = ""
     mandrel: MandrelSpec
@@ -307,11 +431,52 @@ class Job(_Model):
     machine: MachineSpec = Field(default_factory=MachineSpec)
     timelaw: TimeLawSpec = Field(default_factory=TimeLawSpec)
     post: PostSpec = Field(default_factory=PostSpec)
+    layers: list[LayerSpec] = Field(default_factory=lambda: [HelicalLayer()], alias="layer", min_length=1,
+                                    max_length=200)
+    """The laminate, wound in this order (TOML: ``[[layer]]``)."""
+
+    @model_validator(mode="before")
+    @classmethod
+    def _migrate(cls, data: Any) -> Any:
+        # version 1: no [[layer]]; winding.layers repeats the one helical pattern
+        if isinstance(data, dict) and data.get("schema_version", SCHEMA_VERSION) == 1:
+            data = dict(data)
+            data["schema_version"] = SCHEMA_VERSION
+            if "layer" not in data and "layers" not in data:
+                win = data.get("winding")
+                rep = win.get("layers", 1) if isinstance(win, dict) else 1
+                data["layer"] = [{"kind": "helical", **({"repeat": rep} if rep != 1 else {})}]
+                if isinstance(win, dict) and "layers" in win:
+                    data["winding"] = {k: v for k, v in win.items() if k != "layers"}
+        return data
+
+    @property
+    def active_layers(self) -> list[tuple[int, Any]]:
+        """(index, layer) of the enabled layers, in winding order."""
+        return [(i, lay) for i, lay in enumerate(self.layers) if lay.enabled]
+
+    @property
+    def is_single_line(self) -> bool:
+        """True for a job that is one helical layer inheriting every winding value (a version-1 job)."""
+        if len(self.layers) != 1 or not isinstance(self.layers[0], HelicalLayer) or self.layers[0].kind != "helical":
+            return False
+        lay = self.layers[0]
+        return all(getattr(lay, k) is None for k in (*_WINDING_OVERRIDES, "angle_deg", "repeat")) and \
+            lay.band == LayerBand() and lay.lead_in_mm == 0 and lay.lead_out_deg == 0 and lay.enabled
 
     def to_toml(self) -> str:
         """The document as TOML text."""
         data = self.model_dump(mode="json", exclude_none=True, by_alias=True)
-        return tomli_w.dumps(_order(data))
+        layers = data.pop("layer", [])
+        text = tomli_w.dumps(_order(data))
+        for lay in layers:  # one readable [[layer]] table each (tomli_w would write an inline array)
+            head = {k: v for k, v in lay.items() if not isinstance(v, dict)}
+            head = {"kind": head.pop("kind"), **head}
+            text += "\n[[layer]]\n" + tomli_w.dumps(head)
+            for k, v in lay.items():
+                if isinstance(v, dict) and v:
+                    text += f"\n[layer.{k}]\n" + tomli_w.dumps(v)
+        return text
 
     def replace(self, **changes: Any) -> Job:
         """A copy with top-level sections replaced (validated)."""
@@ -321,8 +486,8 @@ class Job(_Model):
 
 
 def _order(data: dict[str, Any]) -> dict[str, Any]:
-    head = {k: v for k, v in data.items() if not isinstance(v, dict)}
-    tail = {k: v for k, v in data.items() if isinstance(v, dict)}
+    head = {k: v for k, v in data.items() if not isinstance(v, dict | list)}
+    tail = {k: v for k, v in data.items() if isinstance(v, dict | list)}
     return {**head, **tail}
 
 
@@ -332,9 +497,11 @@ def _order(data: dict[str, Any]) -> dict[str, Any]:
 def parse_job(text: str, file: str | Path | None = None) -> Job:
     """Parse and validate TOML text; errors name ``file``, the line and the field."""
     data = loads_toml(text, file)  # size, nesting and every parser failure -> InputError with the line
-    if "schema_version" in data and data["schema_version"] != SCHEMA_VERSION:
+    if "schema_version" in data and (isinstance(data["schema_version"], bool)
+                                     or data["schema_version"] not in SUPPORTED_VERSIONS):
         raise InputError(
-            f"schema_version {data['schema_version']!r} is not supported (this program reads {SCHEMA_VERSION})",
+            f"schema_version {data['schema_version']!r} is not supported (this program reads versions "
+            f"{', '.join(map(str, SUPPORTED_VERSIONS))})",
             file=file,
             line=_find_line(text, ("schema_version",)),
             field="schema_version",
@@ -393,6 +560,10 @@ def _validation_error(exc: ValidationError, text: str, file: str | Path | None) 
     if len(loc) >= 3 and loc[:2] == ("mandrel", "segments") and isinstance(loc[2], int):
         line = _segment_line(text, loc[2], next((p for p in loc[3:] if isinstance(p, str)), None)) or line
         field = f"mandrel.segments[{loc[2]}]" + "".join(f".{p}" for p in loc[3:] if isinstance(p, str))
+    if len(loc) >= 2 and loc[0] in ("layer", "layers") and isinstance(loc[1], int):
+        # layers are numbered from 1 for people: 'layer.3.overlap' is the third [[layer]]
+        field = ".".join(["layer", str(loc[1] + 1), *(str(p) for p in loc[2:])])
+        msg = f"layer {loc[1] + 1}: {msg}"
     return InputError(msg, file=file, line=line, field=field)
 
 
@@ -422,6 +593,8 @@ def _clean_loc(loc: tuple[Any, ...]) -> tuple[Any, ...]:
     for i, part in enumerate(loc):
         if i > 0 and loc[0] == "mandrel" and i == 1 and part in {"vessel", "cone", "pipe", "bottle", "points", "file",
                                                                  "segments"}:
+            continue
+        if i == 2 and loc[0] in ("layer", "layers") and part in LAYER_KINDS:
             continue
         if isinstance(part, str) and ("[" in part or part in {"tuple", "float", "function-after"}):
             continue
@@ -453,6 +626,12 @@ def _allowed(loc: tuple[Any, ...]) -> str:
         return ", ".join(kinds[loc[1]].model_fields)
     if len(loc) >= 3 and loc[:2] == ("machine", "setup"):
         return ", ".join(SetupSpec.model_fields)
+    layer_kinds: dict[str, type[BaseModel]] = {"hoop": HoopLayer, "helical": HelicalLayer, "polar": PolarLayer,
+                                               "skip": SkipLayer}
+    if len(loc) >= 4 and loc[0] == "layer" and loc[2] in layer_kinds:
+        if loc[3] == "band" and len(loc) >= 5:
+            return ", ".join(LayerBand.model_fields)
+        return ", ".join(layer_kinds[loc[2]].model_fields)
     if len(loc) >= 2 and loc[0] in models:
         return ", ".join(models[loc[0]].model_fields)
     if len(loc) == 1:
@@ -466,6 +645,8 @@ _KEY = re.compile(r"^\s*([A-Za-z0-9_\-\"']+)\s*=")
 
 def _find_line(text: str, loc: tuple[Any, ...]) -> int | None:
     """Best-effort line number (1-based) of the TOML key at ``loc``; the section header if absent."""
+    if len(loc) >= 2 and isinstance(loc[0], str) and isinstance(loc[1], int):
+        return _find_line_in_array(text, loc[0], loc[1], [p for p in loc[2:] if isinstance(p, str)])
     keys = [p for p in loc if isinstance(p, str)]
     if not keys:
         return None
@@ -489,6 +670,39 @@ def _find_line(text: str, loc: tuple[Any, ...]) -> int | None:
             return i
     # dotted/inline: 'mandrel.radius_mm = ...' or key in a table of the same name
     return header_line
+
+
+def _find_line_in_array(text: str, table: str, index: int, keys: list[str]) -> int | None:
+    """Line (1-based) of ``keys`` inside the ``index``-th ``[[table]]`` (its header when absent)."""
+    count = -1
+    header: int | None = None
+    sub = ""
+    for i, line in enumerate(text.splitlines(), start=1):
+        h = _HEADER.match(line)
+        if h:
+            name = h.group(1).strip()
+            if line.lstrip().startswith("[[") and name == table:
+                count += 1
+                sub = ""
+                if count == index:
+                    header = i
+                elif count > index:
+                    break
+                continue
+            if count == index and name.startswith(table + "."):
+                sub = name[len(table) + 1:]
+                if keys and sub == ".".join(keys):
+                    return i
+                continue
+            if count == index:
+                break
+            continue
+        if count != index or not keys:
+            continue
+        k = _KEY.match(line)
+        if k and sub == ".".join(keys[:-1]) and k.group(1).strip("\"'") == keys[-1]:
+            return i
+    return header
 
 
 def build_mandrel(job: Job, job_path: str | Path | None = None) -> Any:

@@ -777,6 +777,33 @@ class Mandrel:
         return cls(segs, name=name, source="bottle")
 
 
+def cylinder_range(mandrel: Mandrel, rel_tol: float = 1e-3) -> tuple[float, float]:
+    """z range (mm) of the cylindrical part: the longest run with r >= (1 − rel_tol)·r_max and |r'| <= rel_tol.
+
+    The whole winding zone when there is no such run (a cone, a sketch without a straight part).
+    """
+    z = np.linspace(mandrel.z_min, mandrel.z_max, 4001)
+    r, dr, _ = mandrel.evaluate(z)
+    ok = (r >= (1.0 - rel_tol) * float(r.max())) & (np.abs(dr) <= rel_tol)
+    if not ok.any():
+        return mandrel.z_min, mandrel.z_max
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.view(np.int8), [0]])))
+    runs = edges.reshape(-1, 2)
+    a, b = runs[int(np.argmax(runs[:, 1] - runs[:, 0]))]
+    za, zb = float(z[a]), float(z[b - 1])
+    # snap to the segment joints inside one grid step (exact cylinder ends on analytic mandrels)
+    step = float(z[1] - z[0])
+    for s in mandrel.segments:
+        for zj in (s.z0, s.z1):
+            if abs(zj - za) <= step:
+                za = zj
+            if abs(zj - zb) <= step:
+                zb = zj
+    if zb - za <= step:
+        return mandrel.z_min, mandrel.z_max
+    return za, zb
+
+
 def _positive(**values: float) -> None:
     for k, v in values.items():
         if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):

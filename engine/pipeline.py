@@ -293,8 +293,15 @@ def run_pipeline(
     previous: PipelineResult | None = None,
     post_name: str | None = None,
     state: State | None = None,
+    mandrel: Any = None,
+    line: Any = None,
 ) -> PipelineResult:
     """Run the stages of ``job`` up to ``upto`` (inclusive), re-using ``previous`` where valid.
+
+    This is the single-line pipeline (one winding line).  A layered job (``not job.is_single_line``) is
+    wound by :func:`engine.laminate.run_laminate`, which calls this once per layer with the surface the
+    layer is wound on (``mandrel``) and its line (``line``) given; those replace the mandrel and winding
+    stages (no re-use across calls then).
 
     Parameters
     ----------
@@ -314,6 +321,8 @@ def run_pipeline(
     if post_name is not None:
         job = job.replace(post={**job.post.model_dump(), "post": post_name})
     keys = stage_keys(job)
+    if mandrel is not None or line is not None:
+        previous = None
     jp = str(job_path) if job_path is not None else None
     if STAGES.index(upto) >= STAGES.index("blocks"):
         from engine.budget import check_post
@@ -331,6 +340,12 @@ def run_pipeline(
         if previous is not None and previous.keys.get(stage) == keys[stage] and _has(previous, stage):
             res = _copy_stage(res, previous, stage)
             reused.append(stage)
+            times[stage] = 0.0
+        elif stage == "mandrel" and mandrel is not None:
+            res = replace(res, mandrel=mandrel)
+            times[stage] = 0.0
+        elif stage == "winding" and line is not None:
+            res = replace(res, line=line)
             times[stage] = 0.0
         else:
             t0 = time.perf_counter()

@@ -383,7 +383,10 @@ def solve_pass(
         zt = _crossing(mandrel, conds[-1].C, conds[-1].z, mandrel.z_max, from_inside=True)
         if zt is not None:
             zb, right_kind = zt, wc.TURN
-    concave = [zn for zn in mandrel.concave_zones() if zn.z_to > za and zn.z_from < zb]
+    # a laminate's grown surface carries the bridging its build-up steps may cause (engine.laminate)
+    tol = mandrel.meta.get("concave_tol_mm") if isinstance(getattr(mandrel, "meta", None), dict) else None
+    zones = mandrel.concave_zones(tol_mm=tol) if tol is not None else mandrel.concave_zones()
+    concave = [zn for zn in zones if zn.z_to > za and zn.z_from < zb]
     same_c = max(c.C for c in conds) - min(c.C for c in conds) <= 1e-12 * max(c.C for c in conds)
     if mode == "auto":
         if concave:

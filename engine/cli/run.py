@@ -53,15 +53,22 @@ def run(args: argparse.Namespace) -> int:
     if args.report:
         check_output_path(args.report, "report")
     job = load_job(args.job)
-    result = run_pipeline(job, args.job, post_name=args.post, state=CliState(quiet=args.quiet))
+    if job.is_single_line:
+        result = run_pipeline(job, args.job, post_name=args.post, state=CliState(quiet=args.quiet))
+        write = write_program
+    else:  # a laminate: every layer, joined into one program
+        from engine.laminate import run_laminate, write_laminate
+
+        result = run_laminate(job, args.job, post_name=args.post, state=CliState(quiet=args.quiet))
+        write = write_laminate
     report = result.report()
     report["output"] = str(out)
     rc = 0
     try:
-        refusals = process_refusals(result)  # what `trajectory` / `payout` report as failing (exit 1)
+        refusals = process_refusals(result) if job.is_single_line else []  # a laminate refuses per layer
         if refusals and not args.force:
             raise InfeasibleError(f"not written: {'; '.join(refusals)}. Use --force to write it anyway.", file=out)
-        write_program(result, out, force=args.force)
+        write(result, out, force=args.force)
         report["written"] = True
     except InfeasibleError as exc:
         report["written"] = False

@@ -44,7 +44,13 @@ class GcodePost(PostProcessor):
         last = list(pos[0])
         inverse = profile.feed_mode == "inverse_time"
         last_f = None
+        notes: dict[int, list[str]] = {}
+        if opts["comments"]:
+            for i, text in getattr(blocks, "sections", ()):
+                notes.setdefault(int(i), []).append(self.comment(profile, text))
         for i in range(blocks.n):
+            if i in notes:
+                body += notes[i]
             words = [self.g_linear]
             row = pos[i + 1]
             for k, L in enumerate(letters):

@@ -1,0 +1,1009 @@
+"""The laminate: a stack of layers wound one after the other on the surface the previous ones built.
+
+A job (schema version 2) holds an ordered list of layers (:mod:`engine.job`): ``hoop``, ``helical``,
+``polar`` and ``skip``.  :func:`run_laminate` winds them in order:
+
+1. layer k is wound on the surface ``S_k`` (``S_0`` the bare mandrel): a hoop layer by
+   :func:`hoop_line`, a helical or polar layer by :func:`engine.winding.winding_line`; each line then
+   runs through the single-line pipeline (payout -> axes -> time law -> blocks,
+   :func:`engine.pipeline.run_pipeline`);
+2. the layer's thickness t(s) along the meridian of ``S_k`` follows from fibre-count conservation
+   (:func:`layer_thickness`, docs/laminate.md), and ``S_{k+1}`` is ``S_k`` offset along its normal by
+   t(s), trimmed where the offset folds over at a polar opening (the opening grows) and re-fitted as a C2
+   spline (:func:`grow_surface`);
+3. the layers' blocks, joined by transition moves inside the machine limits (:func:`transition_blocks`),
+   make one NC program with a comment per layer.
+
+Results are cached per layer: a layer whose own definition and every layer before it are unchanged is
+taken from the previous result (``previous=``), so an edit of layer k re-runs layers k... only.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from engine.errors import InfeasibleError, InputError
+from engine.job import (
+    HelicalLayer,
+    HoopLayer,
+    Job,
+    PolarLayer,
+    SkipLayer,
+    build_mandrel,
+    effective_band,
+    effective_winding,
+    layer_name,
+)
+from engine.state import State, SubState, check_cancel
+
+FloatArray = NDArray[np.float64]
+
+THICKNESS_GRID = 1201
+"""Points of the meridian grid on which each layer's thickness is computed."""
+GROWN_POINTS = 241
+"""Spline points of a grown surface (spread by arc length, joints of the thickness field included)."""
+
+
+# --------------------------------------------------------------------------------------------------
+# Material data
+# --------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Material:
+    """Fibre and resin data of a band material (resources/materials/fibres.toml)."""
+
+    name: str
+    title: str
+    fibre_density_g_cm3: float
+    resin_density_g_cm3: float
+    fibre_volume_fraction: float
+    tex_g_km: float
+    """Linear density of one tow (g/km)."""
+    source: str = ""
+
+    def masses_kg(self, volume_mm3: float) -> tuple[float, float]:
+        """(fibre, resin) mass in kg of a wound volume (mm³) at the material's fibre volume fraction."""
+        v_cm3 = volume_mm3 * 1e-3
+        vf = self.fibre_volume_fraction
+        return v_cm3 * vf * self.fibre_density_g_cm3 * 1e-3, v_cm3 * (1.0 - vf) * self.resin_density_g_cm3 * 1e-3
+
+
+MATERIALS_FILE = Path(__file__).resolve().parents[1] / "resources" / "materials" / "fibres.toml"
+
+
+def load_materials(path: str | Path | None = None) -> dict[str, Material]:
+    """Every material of the materials file, by name."""
+    from engine.resources import read_toml
+
+    p = Path(path) if path is not None else MATERIALS_FILE
+    data = read_toml(p, "materials file")
+    out: dict[str, Material] = {}
+    for name, d in data.get("material", {}).items():
+        try:
+            out[name] = Material(
+                name=name, title=str(d.get("title", name)), fibre_density_g_cm3=float(d["fibre_density_g_cm3"]),
+                resin_density_g_cm3=float(d["resin_density_g_cm3"]),
+                fibre_volume_fraction=float(d["fibre_volume_fraction"]), tex_g_km=float(d["tex_g_km"]),
+                source=str(d.get("source", "")))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(f"material {name!r}: bad or missing value ({exc})", file=p,
+                             field=f"material.{name}") from None
+    return out
+
+
+def find_material(text: str, materials: dict[str, Material] | None = None) -> Material:
+    """The material named by a band's ``material`` text: an exact key, else the first key contained in the
+    text (``"carbon T700 / epoxy"`` -> ``t700``), else the generic carbon/epoxy entry."""
+    mats = materials if materials is not None else load_materials()
+    key = text.strip().lower()
+    if key in mats:
+        return mats[key]
+    for name, m in mats.items():
+        if name in key.replace(" ", "").replace("-", "") or name in key:
+            return m
+    if "glass" in key:
+        return mats.get("e-glass", next(iter(mats.values())))
+    return mats.get("carbon", next(iter(mats.values())))
+
+
+# --------------------------------------------------------------------------------------------------
+# Hoop line
+# --------------------------------------------------------------------------------------------------
+def hoop_range(mandrel: Any, layer: HoopLayer, band_width: float, index: int, bare: Any = None
+               ) -> tuple[float, float]:
+    """The z range (mm) a hoop layer covers: its own, else the cylindrical part of the bare mandrel ``bare``
+    (the cylinder keeps its z range as the laminate grows), else of ``mandrel``."""
+    from engine.mandrel import cylinder_range
+
+    fld = f"layer.{index + 1}.z_range_mm"
+    if layer.z_range_mm is None:
+        z0, z1 = cylinder_range(bare if bare is not None else mandrel)
+        z0, z1 = max(z0, mandrel.z_min), min(z1, mandrel.z_max)
+    else:
+        z0, z1 = (float(x) for x in layer.z_range_mm)
+        tol = 1e-9 * max(1.0, abs(mandrel.z_max))
+        if not (mandrel.z_min - tol <= z0 < z1 <= mandrel.z_max + tol):
+            raise InputError(
+                f"layer {index + 1} (hoop): z range {z0:g}..{z1:g} mm is outside the surface it is wound on "
+                f"(z {mandrel.z_min:.6g}..{mandrel.z_max:.6g} mm)", field=fld)
+    if z1 - z0 < band_width:
+        raise InputError(f"layer {index + 1} (hoop): z range {z0:g}..{z1:g} mm is narrower than the band "
+                         f"({band_width:g} mm)", field=fld)
+    return z0, z1
+
+
+def hoop_line(mandrel: Any, band_width: float, mu: float, layer: HoopLayer, index: int = 0, bare: Any = None
+              ) -> Any:
+    """A hoop layer as a :class:`engine.winding.WindingLine` (one "circuit" holding every pass).
+
+    The band centre runs from ``z0 + b/2`` to ``z1 − b/2`` (band edges on the range ends) on a helix of
+    pitch ``p = b·(1 − overlap)`` per mandrel turn; passes alternate direction (a terminal layer has
+    one pass).  On a surface that is not a cylinder the near-parallel line needs λ = k_g/k_n ≈ r'·sin²β
+    (a parallel of slope r'), reported as slip where it exceeds μ.
+    """
+    from engine.winding import WindingLine
+
+    b = float(band_width)
+    z0, z1 = hoop_range(mandrel, layer, b, index, bare)
+    pitch = b * (1.0 - layer.overlap)
+    za, zb = z0 + 0.5 * b, z1 - 0.5 * b
+    turns = max((zb - za) / pitch, 1e-9)
+    passes = 1 if layer.terminal else layer.passes
+    n_pass = max(2, int(math.ceil(turns * layer.points_per_turn)) + 1)
+    u = np.linspace(0.0, 1.0, n_pass)
+    zs, vs, dirs, pids = [], [], [], []
+    for k in range(passes):
+        fwd = k % 2 == 0
+        z = za + (zb - za) * (u if fwd else 1.0 - u)
+        v = 2.0 * math.pi * turns * (k + u)
+        sl = slice(0 if k == 0 else 1, None)  # the passes share their turning point
+        zs.append(z[sl])
+        vs.append(v[sl])
+        dirs.append(np.full(z[sl].size, 1 if fwd else -1, dtype=np.int64))
+        pids.append(np.full(z[sl].size, k, dtype=np.int64))
+    z = np.concatenate(zs)
+    v = np.concatenate(vs)
+    direction = np.concatenate(dirs)
+    pass_id = np.concatenate(pids)
+    r, dr, _ = mandrel.evaluate(z)
+    g = 1.0 / np.sqrt(1.0 + dr * dr)
+    # tangent: d/dv of (r cos v, r sin v, z) with dz/dv = ±p/2π
+    dzdv = direction * pitch / (2.0 * math.pi)
+    t_vec = np.stack([dr * dzdv * np.cos(v) - r * np.sin(v), dr * dzdv * np.sin(v) + r * np.cos(v),
+                      dzdv * np.ones_like(v)], axis=1)
+    ds = np.linalg.norm(t_vec, axis=1)
+    tau = t_vec / ds[:, None]
+    beta = np.arctan2(r, np.abs(dzdv) / g)  # tan β = r dv / dm, dm = dz·sqrt(1 + r'²)
+    dv = np.diff(v)
+    s = np.concatenate([[0.0], np.cumsum(0.5 * (ds[1:] + ds[:-1]) * dv)])
+    xyz = np.stack([r * np.cos(v), r * np.sin(v), z], axis=1)
+    normal = np.stack([g * np.cos(v), g * np.sin(v), -g * dr], axis=1)
+    lam = dr * np.sin(beta) ** 2 * direction  # geodesic curvature of a near-parallel over its normal one
+    lam_abs = np.abs(lam)
+    slips: list[tuple[float, float]] = []
+    if (lam_abs > mu + 1e-12).any():
+        zz = z[lam_abs > mu + 1e-12]
+        slips = [(float(zz.min()), float(zz.max()))]
+    i_max = int(np.argmax(lam_abs))
+    n = z.size
+    notes = [f"hoop: {passes} pass(es) over z {z0:.6g}..{z1:.6g} mm, pitch {pitch:.6g} mm per turn, "
+             f"{turns:.4g} turns per pass"]
+    return WindingLine(
+        z=z, r=r, dr=dr, v=v, beta=beta, direction=direction, C=r * np.sin(beta), lam=lam, s=s, xyz=xyz,
+        tau=tau, normal=normal, circuit=np.zeros(n, dtype=np.int64), pass_id=pass_id,
+        dwell=np.zeros(n, dtype=bool), mode="hoop", lambda_=float(lam[i_max]), max_abs_lambda=float(lam_abs[i_max]),
+        z_at_max_lambda=float(z[i_max]), mu=float(mu), slips=slips, bridging=[], circuits=1, pattern_p=1,
+        pattern_q=0, lead="leading", twist_per_circuit_rad=float(v[-1]), dwell_rad=(0.0, 0.0),
+        coverage={"fraction": 1.0 / (1.0 - layer.overlap), "pitch_mm": pitch, "band_along_parallel_mm": b,
+                  "overlap_mm": b - pitch, "gap_mm": 0.0, "at_z_mm": 0.5 * (z0 + z1),
+                  "at_r_mm": float(mandrel.r(0.5 * (z0 + z1))), "beta_deg": float(math.degrees(beta[n // 2])),
+                  "circuits_for_full_coverage": 1},
+        circuit_order=[0], z_turn=(z0, z1), end_kinds=("hoop", "hoop"), points_per_circuit=n - 1,
+        band_width_mm=b, notes=notes)
+
+
+# --------------------------------------------------------------------------------------------------
+# Thickness and growth
+# --------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Thickness:
+    """A layer's thickness along the meridian of the surface it was wound on.
+
+    Arrays on the meridian grid (length M): ``m`` arc length (mm), ``z``, ``r`` of the surface (mm),
+    ``nz``, ``nr`` its outward unit normal, ``t`` thickness (mm, along the normal), ``z_out``, ``r_out``
+    the outer boundary (surface + t·n, mm).  ``volume_mm3`` is the volume between the two boundaries.
+    """
+
+    m: FloatArray
+    z: FloatArray
+    r: FloatArray
+    nz: FloatArray
+    nr: FloatArray
+    t: FloatArray
+    z_out: FloatArray
+    r_out: FloatArray
+    volume_mm3: float
+
+    def at(self, z: ArrayLikeF) -> FloatArray:
+        """Thickness (mm) at axial positions ``z`` (mm) of the wound surface."""
+        return np.interp(np.asarray(z, dtype=float), self.z, self.t)
+
+
+ArrayLikeF = Any
+
+
+def meridian_grid(mandrel: Any, n: int = THICKNESS_GRID) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """(m, z, r, dr): ``n`` points equally spaced in meridian arc length m (mm) over the winding zone."""
+    zf = np.linspace(mandrel.z_min, mandrel.z_max, 8 * n)
+    rf, drf, _ = mandrel.evaluate(zf)
+    dm = np.hypot(np.diff(zf), np.diff(rf))
+    mf = np.concatenate([[0.0], np.cumsum(dm)])
+    m = np.linspace(0.0, mf[-1], n)
+    z = np.interp(m, mf, zf)
+    r, dr, _ = mandrel.evaluate(z)
+    return m, z, r, dr
+
+
+def ring_volume(z_in: FloatArray, r_in: FloatArray, z_out: FloatArray, r_out: FloatArray) -> float:
+    """Volume (mm³) of the solid of revolution of the region between two meridian polylines of equal length
+    (outer point i is inner point i moved along the normal)."""
+    # one quadrilateral per grid step (inner i, i+1, outer i+1, i), each by Pappus, ∬ r dA exact for a
+    # polygon: a fold of the outer boundary near a polar opening cannot cancel area as one big polygon would
+    zq = np.stack([z_in[:-1], z_in[1:], z_out[1:], z_out[:-1]], axis=1)
+    rq = np.stack([r_in[:-1], r_in[1:], r_out[1:], r_out[:-1]], axis=1)
+    z2, r2 = np.roll(zq, -1, axis=1), np.roll(rq, -1, axis=1)
+    moment = np.sum((zq * r2 - z2 * rq) * (rq + r2), axis=1) / 6.0
+    return float(2.0 * math.pi * np.abs(moment).sum())
+
+
+def _smooth(m: FloatArray, y: FloatArray, width: float) -> FloatArray:
+    """Moving average of y over ``width`` (mm of arc length) on the uniform grid ``m``; the window shrinks
+    at the ends and the result is rescaled so ∫ y dm is kept."""
+    h = float(m[1] - m[0])
+    k = int(round(width / h))
+    if k < 2:
+        return y
+    k += 1 - k % 2
+    kernel = np.ones(k) / k
+    out = np.convolve(y, kernel, mode="same") / np.convolve(np.ones_like(y), kernel, mode="same")
+    total = float(out.sum())
+    return out * (float(y.sum()) / total) if total > 0 else out
+
+
+def dwell_length(line: Any, side: int) -> float:
+    """Laid length (mm) of the dwell arcs at the left (0) or right (1) end of ``line`` over all circuits."""
+    if not line.dwell.any():
+        return 0.0
+    ds = np.diff(line.s)
+    on = line.dwell[1:]
+    zt = line.z_turn[side]
+    at = np.abs(line.z[1:] - zt) <= 1e-6 * max(1.0, abs(zt))
+    return float(ds[on & at].sum())
+
+
+def off_part_length(line: Any) -> float:
+    """Length (mm) of the line laid off the part: dwell arcs at open ends (turns on pins)."""
+    return sum(dwell_length(line, side) for side in (0, 1) if line.end_kinds[side] == "open")
+
+
+def layer_thickness(surface: Any, line: Any, band_width: float, band_thickness: float, kind: str,
+                    n: int = THICKNESS_GRID) -> Thickness:
+    """Thickness a layer leaves on ``surface`` (mm), from fibre-count conservation.
+
+    Through a parallel of radius r the band crosses ``N`` times (2 per circuit for a helical line, once
+    per turn and pass for a hoop); a band of width b and thickness t_b crossing at angle β to the meridian
+    lays ``b·t_b / cos β`` of volume per unit meridian length.  Away from the turnaround this is
+    ``t(r) = N·b·t_b / (2π r cos β)`` (thin shell).  Two refinements:
+
+    * *band-width averaging at the turnaround*: the band's fibres have Clairaut constants spread over
+      ``C ± κ b/2``, κ = |dr/dm| at the turnaround parallel (each fibre turns on its own parallel), and
+      ``b / cos β`` is replaced by its average over them,
+      ``r·[asin(min(1, C_hi/r)) − asin(min(1, C_lo/r))] / κ`` — finite everywhere, zero below C_lo;
+    * *mid-thickness radius*: the fibre count holds on the parallel at the layer's mid-thickness, so the
+      annulus area solves ``2π t (r + t n_r/2) = A (1 + t sin²β/(2r))`` (A the volume per unit meridian
+      length on the surface); then the volume between the surfaces equals the volume laid, and a hoop pass
+      is exactly one band thickness / (1 − overlap).
+
+    The field is finally averaged over one band width along the meridian (the band smears any step).
+    """
+    m, z, r, dr = meridian_grid(surface, n)
+    g = 1.0 / np.sqrt(1.0 + dr * dr)
+    nz, nr = -dr * g, g
+    b, tb = float(band_width), float(band_thickness)
+    A = np.zeros_like(z)
+    sin2b = np.ones_like(z)
+    if kind == "hoop":
+        # one crossing per turn of every pass: per unit z, turns / pitch; meridian length dm = dz / g
+        # covered multiplicity: w/p inside, ramping over one band width at each end (the helix's first and
+        # last turn leave a triangle of half a turn uncovered): cover = clip(min(z - z0, z1 - z, b), 0) / p
+        z0, z1 = line.z_turn
+        pitch = float(line.coverage["pitch_mm"])
+        passes = int(line.pass_id.max()) + 1
+        cover = np.clip(np.minimum(np.minimum(z - z0, z1 - z), b), 0.0, None) / pitch
+        A = passes * 2.0 * math.pi * r * tb * cover * g
+    else:
+        # centre line's Clairaut function C(z) on its outgoing pass (circuit 0, pass 0, no dwell)
+        sel = (line.pass_id == 0) & ~line.dwell
+        zc, Cc = line.z[sel], line.C[sel]
+        order = np.argsort(zc)
+        zc, Cc = zc[order], Cc[order]
+        # fibres of the band with C below the centre's turn beyond the centre's turning parallel (toward the
+        # pole), so a turning end does not limit the wound zone: r > C_lo does
+        wound = np.ones_like(z, dtype=bool)
+        if line.end_kinds[0] == "open":
+            wound &= z >= zc[0] - 1e-9
+        if line.end_kinds[1] == "open":
+            wound &= z <= zc[-1] + 1e-9
+        C = np.interp(z, zc, Cc)
+        N = 2.0 * line.circuits
+        # κ at each turnaround (|dr/dm| where the line turns), else 0 (the line leaves the surface there)
+        kap = np.zeros_like(z)
+        zmid = 0.5 * (zc[0] + zc[-1])
+        for side, zt in ((0, zc[0]), (1, zc[-1])):
+            kind_end = line.end_kinds[side]
+            k = 0.0
+            if kind_end not in ("open", "pins", "free") and "pin" not in kind_end:
+                _, d1, _ = surface.evaluate(np.array([zt]))
+                k = float(min(1.0, abs(d1[0]) / math.sqrt(1.0 + d1[0] ** 2)))
+            kap[(z < zmid) if side == 0 else (z >= zmid)] = k
+        half = 0.5 * kap * b
+        c_lo, c_hi = C - half, C + half
+        with np.errstate(divide="ignore", invalid="ignore"):
+            narrow = half < 1e-9 * np.maximum(r, 1.0)
+            avg_inv_cos = np.where(
+                narrow,
+                r / np.sqrt(np.maximum(r * r - C * C, 1e-300)),
+                r * (np.arcsin(np.clip(c_hi / r, -1, 1)) - np.arcsin(np.clip(c_lo / r, -1, 1)))
+                / np.maximum(2.0 * half, 1e-300),
+            )
+        reach = r > c_lo + 1e-12
+        avg_inv_cos = np.where(reach & wound & np.isfinite(avg_inv_cos), avg_inv_cos, 0.0)
+        A = N * b * tb * avg_inv_cos
+        # dwell arcs laid on the surface at a turnaround (not on pins beyond an open end): a ring of the
+        # dwell length × t_b spread over one band width of meridian around the turn parallel
+        for side, zt in ((0, zc[0]), (1, zc[-1])):
+            if line.end_kinds[side] == "open":
+                continue
+            L_d = dwell_length(line, side)
+            if L_d > 0:
+                i = int(np.argmin(np.abs(z - zt)))
+                win = np.abs(m - m[i]) <= 0.5 * b
+                A[win] += L_d * tb / max(float(np.ptp(m[win])) if win.sum() > 1 else b, 1e-9) * b / b
+        sin2b = np.clip((C / np.maximum(r, 1e-300)) ** 2, 0.0, 1.0)
+    # mid-thickness annulus: π n_r t² + (2π r − A sin²β/(2r)) t − A = 0, the positive root
+    a2 = math.pi * nr
+    a1 = 2.0 * math.pi * r - A * sin2b / (2.0 * np.maximum(r, 1e-300))
+    with np.errstate(invalid="ignore"):
+        disc = np.maximum(a1 * a1 + 4.0 * a2 * A, 0.0)
+        t = np.where(A > 0, 2.0 * A / (a1 + np.sqrt(disc)), 0.0)
+    t = _smooth(m, t, b)
+    z_out = z + t * nz
+    r_out = r + t * nr
+    vol = ring_volume(z, r, z_out, r_out)
+    return Thickness(m=m, z=z, r=r, nz=nz, nr=nr, t=t, z_out=z_out, r_out=r_out, volume_mm3=vol)
+
+
+def grow_surface(surface: Any, th: Thickness, name: str = "grown", n: int = GROWN_POINTS) -> Any:
+    """The surface after a layer: the outer boundary, made a graph r(z) again and re-fitted as a C2 spline.
+
+    Where a thick turnaround band folds the offset back in z near a polar opening (the laminate's edge
+    faces the opening), the boundary is cut at its axial crest: the polar opening grows to the crest's
+    radius.  Points steeper than |dr/dz| = 12 at the ends are dropped (a C2 spline needs a finite slope).
+    """
+    from engine.mandrel import CONCAVE_GAP_TOL_MM, Mandrel
+
+    if float(th.t.max()) <= 0.0:
+        return surface
+    z, r = th.z_out.copy(), th.r_out.copy()
+    n0 = z.size
+    half = n0 // 2
+    built = th.t > 1e-9 * max(1.0, float(th.t.max()))
+    # an end with no build-up keeps its shape (no crest cut, no slope trim)
+    k_end = max(2, int(round(0.02 * n0)))
+    left_built, right_built = bool(built[:k_end].any()), bool(built[-k_end:].any())
+    # axial crests at the ends (fold-over at an opening): keep the part between them
+    lo = int(np.argmin(z[:half])) if left_built else 0
+    hi = half + int(np.argmax(z[half:])) if right_built else n0 - 1
+    z, r = z[lo:hi + 1], r[lo:hi + 1]
+    # strictly increasing z (drop folded points inside, if any)
+    keep = np.concatenate([[True], np.diff(np.maximum.accumulate(z)) > 1e-9])
+    keep &= z >= np.maximum.accumulate(z)
+    z, r = z[keep], r[keep]
+    # finite end slopes
+    slope = np.abs(np.diff(r) / np.maximum(np.diff(z), 1e-300))
+    a, bidx = 0, z.size - 1
+    while left_built and a < bidx - 8 and slope[a] > 12.0:
+        a += 1
+    while right_built and bidx > a + 8 and slope[bidx - 1] > 12.0:
+        bidx -= 1
+    z, r = z[a:bidx + 1], r[a:bidx + 1]
+    # spline points spread by arc length
+    dm = np.hypot(np.diff(z), np.diff(r))
+    mm = np.concatenate([[0.0], np.cumsum(dm)])
+    pick = np.unique(np.searchsorted(mm, np.linspace(0.0, mm[-1], n)).clip(0, z.size - 1))
+    zs, rs = z[pick], np.maximum(r[pick], 0.0)
+    grown = Mandrel.from_points(zs, rs, name=name, source="grown")
+    # concave zones shallower than half the thickest build-up step are bridged by design (resin-filled):
+    # a line on the grown surface keeps the mode the bare mandrel asks for
+    prev = surface.meta.get("concave_tol_mm", CONCAVE_GAP_TOL_MM) if isinstance(surface.meta, dict) else \
+        CONCAVE_GAP_TOL_MM
+    tol = max(float(prev), 0.5 * float(th.t.max()))
+    return replace(grown, meta={**grown.meta, "concave_tol_mm": tol})
+
+
+# --------------------------------------------------------------------------------------------------
+# Transitions
+# --------------------------------------------------------------------------------------------------
+def trapezoid_move(machine: Any, q0: FloatArray, q1: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Blocks of a straight axis-space move from rest at ``q0`` to rest at ``q1`` (controller units).
+
+    The move follows a trapezoidal (or triangular) speed profile in the path parameter whose peak speed
+    and acceleration keep every axis's ``max_speed`` and ``max_accel``; blocks last at most
+    ``min(max_jump / max_accel)`` so the speed step between neighbouring blocks stays within every
+    ``max_jump``.  Returns (q (n+1, n_axes), time (n,)) .
+    """
+    q0 = np.asarray(q0, dtype=float)
+    q1 = np.asarray(q1, dtype=float)
+    D = np.abs(q1 - q0)
+    if not (D > 1e-12).any():
+        return np.stack([q0, q1]), np.array([machine.min_block_time])
+    V = machine.limits("max_speed")
+    A = machine.limits("max_accel")
+    J = machine.limits("max_jump")
+    mv = D > 1e-12
+    vmax = float(np.min(V[mv] / D[mv]))  # path speed (1/s)
+    amax = float(np.min(A[mv] / D[mv]))
+    # trapezoid in s ∈ [0, 1]
+    t_acc = vmax / amax
+    if amax * t_acc * t_acc >= 1.0:  # triangular
+        t_acc = math.sqrt(1.0 / amax)
+        vmax = amax * t_acc
+        t_flat = 0.0
+    else:
+        t_flat = (1.0 - amax * t_acc * t_acc) / vmax
+    T = 2.0 * t_acc + t_flat
+    dt_max = 0.9 * float(np.min(np.where(mv, J / np.maximum(A, 1e-300), np.inf)))
+    dt_max = max(min(dt_max, 0.05), 2.0 * machine.min_block_time)
+    nb = max(2, int(math.ceil(T / dt_max)))
+    tk = np.linspace(0.0, T, nb + 1)
+
+    def s_of(t: FloatArray) -> FloatArray:
+        out = np.empty_like(t)
+        a = t <= t_acc
+        out[a] = 0.5 * amax * t[a] ** 2
+        c = (t > t_acc) & (t <= t_acc + t_flat)
+        out[c] = 0.5 * amax * t_acc**2 + vmax * (t[c] - t_acc)
+        d = t > t_acc + t_flat
+        td = T - t[d]
+        out[d] = 1.0 - 0.5 * amax * td**2
+        return out
+
+    s = np.clip(s_of(tk), 0.0, 1.0)
+    s[-1] = 1.0
+    q = q0[None, :] + s[:, None] * (q1 - q0)[None, :]
+    return q, np.diff(tk)
+
+
+def transition_blocks(machine: Any, q_end: FloatArray, q_start: FloatArray, clearance_mm: float,
+                      lead_in: FloatArray | None = None) -> tuple[FloatArray, FloatArray]:
+    """The move between two layers: retract the cross axis (eye away from the mandrel) by the clearance,
+    move the carriage and the mandrel to the next layer's start, and feed the cross axis in again.
+
+    ``q_start`` is the next layer's first position; the mandrel axis of the next layer is shifted before
+    this call so that no mandrel turn back is needed (:func:`run_laminate`).  ``lead_in``: a position the
+    carriage passes through just before the start (the layer's lead-in).  Returns (q, time) with the first
+    row ``q_end`` and the last row ``q_start``; every piece starts and ends at rest.
+    """
+    ci = machine.axis_index("cross")
+    pts = [np.asarray(q_end, dtype=float)]
+    if ci is not None:
+        ax = machine.axes[ci]
+        up = max(q_end[ci], q_start[ci]) + abs(ax.scale) * clearance_mm
+        up = min(up, ax.max)
+        a = pts[-1].copy()
+        a[ci] = up
+        pts.append(a)
+        b = np.asarray(q_start if lead_in is None else lead_in, dtype=float).copy()
+        b[ci] = up
+        pts.append(b)
+    if lead_in is not None:
+        pts.append(np.asarray(lead_in, dtype=float))
+    pts.append(np.asarray(q_start, dtype=float))
+    qs, ts = [pts[0][None, :]], []
+    for p0, p1 in zip(pts[:-1], pts[1:]):
+        if np.allclose(p0, p1, atol=1e-12, rtol=0):
+            continue
+        q, t = trapezoid_move(machine, p0, p1)
+        qs.append(q[1:])
+        ts.append(t)
+    if not ts:
+        return np.stack([pts[0], pts[-1]]), np.array([machine.min_block_time])
+    return np.concatenate(qs), np.concatenate(ts)
+
+
+# --------------------------------------------------------------------------------------------------
+# Results
+# --------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class LayerResult:
+    """One wound layer: the surface it was wound on, its single-line pipeline result, its thickness, the
+    surface it leaves, and its production figures (``figures``)."""
+
+    index: int
+    name: str
+    kind: str
+    key: str
+    surface: Any
+    grown: Any
+    result: Any = None
+    """:class:`engine.pipeline.PipelineResult` of the layer (None for a skip layer)."""
+    thickness: Thickness | None = None
+    figures: dict[str, Any] = field(default_factory=dict)
+    mandrel_shift: float = 0.0
+    """Added to the layer's mandrel axis (controller units) so it continues from the previous layer."""
+
+
+@dataclass(frozen=True)
+class LaminateResult:
+    """The whole stack: one :class:`LayerResult` per enabled layer, the joined program and its report."""
+
+    job: Job
+    job_path: str | None
+    mandrel: Any
+    layers: tuple[LayerResult, ...]
+    machine: Any = None
+    blocks: Any = None
+    nc_text: str | None = None
+    post_name: str | None = None
+    extension: str = ".nc"
+    transitions: tuple[tuple[int, int, float], ...] = ()
+    """(first block, block count, time s) of each transition move in :attr:`blocks`."""
+    sections: tuple[tuple[int, str], ...] = ()
+    stage_times: dict[str, float] = field(default_factory=dict)
+    reused: tuple[int, ...] = ()
+
+    @property
+    def final_surface(self) -> Any:
+        return self.layers[-1].grown if self.layers else self.mandrel
+
+    def layer(self, index: int) -> LayerResult:
+        """The result of job layer ``index`` (0-based)."""
+        for lr in self.layers:
+            if lr.index == index:
+                return lr
+        raise KeyError(index)
+
+    @property
+    def volume_laid_mm3(self) -> float:
+        return float(sum(lr.figures.get("volume_laid_mm3", 0.0) for lr in self.layers))
+
+    @property
+    def volume_between_surfaces_mm3(self) -> float:
+        return float(sum(lr.thickness.volume_mm3 for lr in self.layers if lr.thickness is not None))
+
+    @property
+    def violations(self) -> list[Any]:
+        out: list[Any] = []
+        for lr in self.layers:
+            if lr.result is not None:
+                out += list(lr.result.violations)
+        return out
+
+    def warnings(self) -> list[str]:
+        out: list[str] = []
+        for lr in self.layers:
+            if lr.result is not None:
+                out += [f"layer {lr.index + 1} ({lr.name}): {w}" for w in lr.result.warnings()]
+        return out
+
+    def layup(self) -> dict[str, Any]:
+        """The layup table (``winder layup --json``): per-layer figures, totals and the volume check."""
+        rows = [dict(lr.figures) for lr in self.layers]
+        keys = ("time_s", "fibre_length_m", "fibre_mass_kg", "resin_mass_kg", "volume_laid_mm3")
+        total: dict[str, Any] = {k: float(sum(r.get(k, 0.0) for r in rows)) for k in keys}
+        total["transition_time_s"] = float(sum(t for *_, t in self.transitions))
+        total["program_time_s"] = total["time_s"] + total["transition_time_s"]
+        total["thickness_cyl_mm"] = float(sum(r.get("thickness_cyl_mm", 0.0) for r in rows))
+        fs = self.final_surface
+        total["thickness_max_mm"] = float(_total_thickness(self).max()) if self.layers else 0.0
+        total["layers"] = len(rows)
+        total["final_pole_radii_mm"] = list(fs.pole_radii)
+        for r in rows:
+            r.pop("volume_laid_mm3", None)
+        return {
+            "job": self.job.name,
+            "layers": rows,
+            "total": total,
+            "volume_laid_mm3": self.volume_laid_mm3,
+            "volume_between_surfaces_mm3": self.volume_between_surfaces_mm3,
+            "volume_error": (self.volume_between_surfaces_mm3 / self.volume_laid_mm3 - 1.0)
+            if self.volume_laid_mm3 > 0 else 0.0,
+        }
+
+    def report(self) -> dict[str, Any]:
+        """The run report of a layered job (``winder run --report``)."""
+        rep = self.layup()
+        rep["stage_times_s"] = dict(self.stage_times)
+        if self.machine is not None:
+            rep["machine"] = self.machine.name
+            rep["axes"] = list(self.machine.axis_names)
+        if self.blocks is not None:
+            rep["blocks"] = int(self.blocks.n)
+            rep["program_time_s"] = float(self.blocks.total)
+            rep["program_time_t17_s"] = float(self.blocks.total_t17)
+        rep["warnings"] = self.warnings()
+        rep["violations"] = [getattr(v, "message", str(v)) for v in self.violations]
+        return rep
+
+
+def _total_thickness(res: LaminateResult) -> FloatArray:
+    """Total laminate thickness (mm) along the bare mandrel's grid: distance between bare and final surface
+    measured along the bare surface's normal (sum of the layers' thicknesses, each at the same z)."""
+    m, z, r, dr = meridian_grid(res.mandrel, 601)
+    tot = np.zeros_like(z)
+    for lr in res.layers:
+        if lr.thickness is not None:
+            tot += np.interp(z, lr.thickness.z, lr.thickness.t, left=0.0, right=0.0)
+    return tot
+
+
+# --------------------------------------------------------------------------------------------------
+# The stack
+# --------------------------------------------------------------------------------------------------
+def _layer_job(job: Job, layer: Any, surface: Any) -> Job:
+    """The single-line job of one layer: its band and winding values, the job's other sections."""
+    band = effective_band(job, layer)
+    if isinstance(layer, HelicalLayer):
+        win = effective_winding(job, layer, surface)
+        if isinstance(layer, PolarLayer) and layer.pole_c_mm is None:
+            rp = surface.pole_radii
+            win = win.model_copy(update={"pole_c_mm": (rp[0] + 0.5 * band.width_mm, rp[1] + 0.5 * band.width_mm)})
+    else:
+        win = job.winding
+    return job.model_copy(update={"band": band, "winding": win, "layers": [layer]})
+
+
+def _hash(*parts: Any) -> str:
+    h = hashlib.sha256()
+    for p in parts:
+        h.update(json.dumps(p, sort_keys=True, default=str).encode())
+    return h.hexdigest()[:16]
+
+
+def layer_keys(job: Job) -> list[str]:
+    """A key per layer of every input it depends on: the job's sections and all layers up to it."""
+    data = job.model_dump(mode="json")
+    layers = data.pop("layers")
+    base = _hash(data)
+    return [_hash(base, layers[: k + 1]) for k in range(len(layers))]
+
+
+def _check_polar(surface: Any, index: int) -> None:
+    rp = surface.pole_radii
+    rmax = surface.r_max
+    if max(rp) >= 0.999 * rmax:
+        raise InputError(
+            f"layer {index + 1} (polar): a polar layer needs two polar openings (domes at both ends); this "
+            f"surface ends with radii {rp[0]:.6g} and {rp[1]:.6g} mm against r_max {rmax:.6g} mm",
+            field=f"layer.{index + 1}.kind")
+
+
+def _located(exc: InputError, job_path: str | None, index: int, layer: Any) -> InputError:
+    fld = exc.location.field or ""
+    if fld.startswith(("winding.", "band.")):
+        fld = f"layer.{index + 1}.{fld.split('.', 1)[1]}" if fld.startswith("winding.") else \
+            f"layer.{index + 1}.band.{fld.split('.', 1)[1]}"
+    msg = exc.message if exc.message.startswith("layer ") else \
+        f"layer {index + 1} ({layer_name(layer, index)}): {exc.message}"
+    return type(exc)(msg, file=exc.location.file or job_path, line=exc.location.line, field=fld or None)
+
+
+def run_laminate(
+    job: Job,
+    job_path: str | Path | None = None,
+    *,
+    previous: LaminateResult | None = None,
+    post_name: str | None = None,
+    state: State | None = None,
+    upto: str = "nc",
+) -> LaminateResult:
+    """Wind every enabled layer of ``job`` in order and join them into one program.
+
+    Parameters
+    ----------
+    job, job_path:
+        The job (schema 2) and its file (relative paths, error locations).
+    previous:
+        An earlier result of the same job: layers whose key (:func:`layer_keys`) is unchanged are re-used.
+    post_name:
+        Post-processor overriding ``job.post.post``.
+    state:
+        Progress / cancellation.
+    upto:
+        Last single-line stage run for each layer (``"nc"`` also joins and renders the program).
+    """
+    from engine.pipeline import load_machine_for_job, run_pipeline
+
+    if post_name is not None:
+        job = job.replace(post={**job.post.model_dump(), "post": post_name})
+    jp = str(job_path) if job_path is not None else None
+    t0 = time.perf_counter()
+    bare = build_mandrel(job, jp)
+    keys = layer_keys(job)
+    prev_by_key = {lr.key: lr for lr in previous.layers} if previous is not None else {}
+    active = job.active_layers
+    if not active:
+        raise InputError("every layer is disabled: nothing to wind", file=jp, field="layer")
+    surface = bare
+    results: list[LayerResult] = []
+    reused: list[int] = []
+    layer_upto = "blocks" if upto == "nc" else upto
+    n = len(active)
+    for j, (i, layer) in enumerate(active):
+        check_cancel(state)
+        sub = SubState(state, j / n, (j + 1) / n) if state is not None else None
+        key = keys[i]
+        old = prev_by_key.get(key)
+        if old is not None and old.surface is not None and _same_surface(old.surface, surface):
+            results.append(old)
+            reused.append(i)
+            surface = old.grown
+            continue
+        name = layer_name(layer, i)
+        try:
+            lr = _wind_layer(job, jp, i, layer, name, key, surface, layer_upto, sub, run_pipeline, bare=bare)
+        except InputError as exc:
+            raise _located(exc, jp, i, layer) from None
+        except InfeasibleError as exc:
+            raise _located(exc, jp, i, layer) from None
+        results.append(lr)
+        surface = lr.grown
+    res = LaminateResult(job=job, job_path=jp, mandrel=bare, layers=tuple(results), reused=tuple(reused))
+    if upto == "nc":
+        machine = load_machine_for_job(job, jp)
+        res = _join(res, machine)
+    return replace(res, stage_times={"total": time.perf_counter() - t0})
+
+
+def _same_surface(a: Any, b: Any) -> bool:
+    if a is b:
+        return True
+    za, ra = a.sample(200)
+    zb, rb = b.sample(200)
+    return za.shape == zb.shape and bool(np.allclose(za, zb, atol=1e-9) and np.allclose(ra, rb, atol=1e-9))
+
+
+def _wind_layer(job: Job, jp: str | None, i: int, layer: Any, name: str, key: str, surface: Any, upto: str,
+                state: State | None, run_pipeline: Any, bare: Any = None) -> LayerResult:
+    if isinstance(layer, SkipLayer):
+        return LayerResult(index=i, name=name, kind="skip", key=key, surface=surface, grown=surface,
+                           figures=_figures_skip(i, name, layer))
+    ljob = _layer_job(job, layer, surface)
+    band = ljob.band
+    if isinstance(layer, HoopLayer):
+        line = hoop_line(surface, band.width_mm, band.friction, layer, i, bare=bare)
+    else:
+        if isinstance(layer, PolarLayer):
+            _check_polar(surface, i)
+        from engine.winding import winding_line
+
+        line = winding_line(surface, band.width_mm, band.friction, ljob.winding, state,
+                            _ctx={"file": jp, "job": True})
+    res = run_pipeline(ljob, jp, upto=upto, mandrel=surface, line=line, state=state)
+    th = layer_thickness(surface, line, band.width_mm, band.thickness_mm, layer.kind)
+    grown = grow_surface(surface, th, name=f"after layer {i + 1}")
+    figs = _figures(job, i, name, layer, ljob, surface, line, th, res)
+    return LayerResult(index=i, name=name, kind=layer.kind, key=key, surface=surface, grown=grown, result=res,
+                       thickness=th, figures=figs)
+
+
+def _figures_skip(i: int, name: str, layer: SkipLayer) -> dict[str, Any]:
+    return {"index": i + 1, "name": name, "kind": "skip", "angle_deg_cylinder": None, "circuits": 0, "passes": 0,
+            "band_width_mm": 0.0, "band_thickness_mm": 0.0, "overlap": 0.0, "radius_cyl_mm": None,
+            "coverage": 0.0, "thickness_cyl_mm": 0.0, "thickness_max_mm": 0.0, "time_s": 0.0,
+            "fibre_length_m": 0.0, "fibre_mass_kg": 0.0, "resin_mass_kg": 0.0, "volume_laid_mm3": 0.0,
+            "skip_deg": float(layer.angle_deg)}
+
+
+def _figures(job: Job, i: int, name: str, layer: Any, ljob: Job, surface: Any, line: Any, th: Thickness,
+             res: Any) -> dict[str, Any]:
+    from engine.mandrel import cylinder_range
+
+    band = ljob.band
+    b, tb = band.width_mm, band.thickness_mm
+    za, zb = cylinder_range(surface)
+    zc = 0.5 * (za + zb)
+    rc = float(surface.r(zc))
+    # angle on the cylinder middle: from the outgoing pass
+    sel = (line.pass_id == line.pass_id[0]) & ~line.dwell
+    beta_c = float(np.interp(zc, *_sorted(line.z[sel], line.beta[sel])))
+    # laid volume: band length at mid-thickness (circumferential stretch (r + t n_r/2)/r) × b × t_b
+    t_line = np.interp(line.z, th.z, th.t)
+    nr_line = np.interp(line.z, th.z, th.nr)
+    stretch = 1.0 + 0.5 * t_line * nr_line * np.sin(line.beta) ** 2 / np.maximum(line.r, 1e-300)
+    ds = np.diff(line.s)
+    on_part = np.ones(ds.size, dtype=bool)
+    if layer.kind != "hoop":
+        for side in (0, 1):
+            if line.end_kinds[side] == "open":
+                zt = line.z_turn[side]
+                on_part &= ~(line.dwell[1:] & (np.abs(line.z[1:] - zt) <= 1e-6 * max(1.0, abs(zt))))
+    length_mid = float(np.sum((ds * 0.5 * (stretch[1:] + stretch[:-1]))[on_part]))
+    vol = length_mid * b * tb
+    mat = find_material(band.material)
+    mass_f, mass_r = mat.masses_kg(vol)
+    cov = line.coverage
+    if layer.kind == "hoop":
+        coverage = float(cov["fraction"])
+        circuits = 0
+        passes = 1 if layer.terminal else layer.passes
+        overlap = float(layer.overlap)
+    else:
+        coverage = float(cov.get("fraction", 0.0))
+        circuits = int(line.circuits)
+        passes = 2 * circuits
+        overlap = float(max(cov.get("overlap_mm", 0.0), 0.0) / b)
+    time_s = float(res.blocks.total) if getattr(res, "blocks", None) is not None else 0.0
+    return {
+        "index": i + 1, "name": name, "kind": layer.kind,
+        "angle_deg_cylinder": math.degrees(beta_c),
+        "circuits": circuits, "passes": passes,
+        "band_width_mm": b, "band_thickness_mm": tb, "overlap": overlap,
+        "radius_cyl_mm": rc, "coverage": coverage,
+        "thickness_cyl_mm": float(th.at(zc)), "thickness_max_mm": float(th.t.max()),
+        "thickness_pole_mm": [float(th.t[np.argmax(th.t > 1e-9)]) if (th.t > 1e-9).any() else 0.0,
+                              float(th.t[::-1][np.argmax(th.t[::-1] > 1e-9)]) if (th.t > 1e-9).any() else 0.0],
+        "time_s": time_s, "fibre_length_m": float(line.s[-1]) * 1e-3,
+        "fibre_mass_kg": mass_f, "resin_mass_kg": mass_r, "material": mat.name,
+        "volume_laid_mm3": vol, "volume_between_mm3": th.volume_mm3,
+        "pole_radii_after_mm": None,
+    }
+
+
+def _sorted(x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
+    o = np.argsort(x)
+    return x[o], y[o]
+
+
+def _join(res: LaminateResult, machine: Any) -> LaminateResult:
+    """Join the layers' blocks with transition moves into one program and render it."""
+    from engine.blocks import Blocks
+    from engine.post import get_post, load_controller
+
+    job = res.job
+    mi = machine.axis_index("mandrel")
+    qs: list[FloatArray] = []
+    times: list[FloatArray] = []
+    t17: list[FloatArray] = []
+    errs: list[FloatArray] = []
+    sections: list[tuple[int, str]] = []
+    transitions: list[tuple[int, int, float]] = []
+    nb = 0
+    last_q: FloatArray | None = None
+    pending_skip = 0.0
+    new_layers: list[LayerResult] = []
+    prev_index: int | None = None
+    for lr in res.layers:
+        if lr.result is None:  # skip layer: a mandrel reposition folded into the next transition
+            pending_skip += float(lr.figures.get("skip_deg", 0.0))
+            new_layers.append(lr)
+            continue
+        b = lr.result.blocks
+        q = np.array(b.q, dtype=float)
+        shift = 0.0
+        if mi is not None and last_q is not None:
+            ax = machine.axes[mi]
+            fwd = 1.0 if (q[-1, mi] - q[0, mi]) >= 0 else -1.0
+            lead_out = float(job.layers[prev_index].lead_out_deg) if prev_index is not None else 0.0
+            target = last_q[mi] + fwd * _deg_to_units(ax, pending_skip + lead_out)
+            shift = target - q[0, mi]
+            q[:, mi] += shift
+        if last_q is not None:
+            tq, tt = transition_blocks(machine, last_q, q[0], job.payout.clearance_mm,
+                                       lead_in=_lead_in(machine, q, float(job.layers[lr.index].lead_in_mm)))
+            sections.append((nb, f"transition to layer {lr.index + 1}: {tt.sum():.3f} s"))
+            transitions.append((nb, int(tt.size), float(tt.sum())))
+            qs.append(tq[1:])
+            times.append(tt)
+            t17.append(tt)
+            errs.append(np.zeros(tt.size))
+            nb += tt.size
+        f = lr.figures
+        sections.append((nb, f"layer {lr.index + 1} {lr.name} ({lr.kind}): {f['time_s']:.3f} s, "
+                             f"fibre {f['fibre_length_m']:.3f} m"))
+        qs.append(q if last_q is None else q[1:])
+        times.append(np.asarray(b.time, dtype=float))
+        t17.append(np.asarray(b.t17, dtype=float))
+        errs.append(np.asarray(b.max_error, dtype=float))
+        nb += b.n
+        last_q = q[-1]
+        prev_index = lr.index
+        pending_skip = 0.0
+        new_layers.append(replace(lr, mandrel_shift=shift))
+    if not qs:
+        raise InputError("the laminate has no layer that lays fibre (only skip layers)", file=res.job_path,
+                         field="layer")
+    q_all = np.concatenate(qs)
+    time_all = np.concatenate(times)
+    blocks = Blocks(
+        machine=machine.name, axis_names=machine.axis_names, index=np.arange(q_all.shape[0]), q=q_all,
+        delta=np.diff(q_all, axis=0), t17=np.concatenate(t17), time=time_all, alpha=np.ones(time_all.size),
+        max_error=np.concatenate(errs), tol_mm=job.post.tolerance_mm, cyclic=False,
+        total_t17=float(np.concatenate(t17).sum()), total_start=float(time_all.sum()),
+        sections=tuple(sections))
+    post = get_post(job.post.post)
+    profile = load_controller(job.post.controller or post.name)
+    text = post.render(blocks, machine, profile)
+    return replace(res, layers=tuple(new_layers), machine=machine, blocks=blocks, nc_text=text,
+                   post_name=post.name, extension=post.extension, transitions=tuple(transitions),
+                   sections=tuple(sections))
+
+
+def _lead_in(machine: Any, q: FloatArray, lead_in_mm: float) -> FloatArray | None:
+    """The position ``lead_in_mm`` back along the carriage from the layer's first point (None when 0)."""
+    ci = machine.axis_index("carriage")
+    if ci is None or lead_in_mm <= 0:
+        return None
+    ax = machine.axes[ci]
+    k = min(len(q) - 1, 50)
+    d = float(np.sign(q[k, ci] - q[0, ci])) or 1.0
+    p = np.array(q[0], dtype=float)
+    p[ci] = float(np.clip(p[ci] - d * abs(ax.scale) * lead_in_mm, ax.min, ax.max))
+    return p
+
+
+def _deg_to_units(ax: Any, deg: float) -> float:
+    """A mandrel rotation of ``deg`` degrees in the axis's controller units (magnitude)."""
+    return abs(ax.scale) * math.radians(deg)
+
+
+def write_laminate(result: LaminateResult, path: str | Path, force: bool = False) -> Path:
+    """Write the joined program atomically (:func:`engine.post.write_nc`): refused (InfeasibleError) when a
+    layer violates a machine limit or its line slips, unless ``force``."""
+    from engine.post import write_nc
+
+    if result.nc_text is None:
+        raise InputError("no NC program was produced (the laminate stopped before the NC stage)")
+    problems: list[Any] = []
+    for lr in result.layers:
+        if lr.result is None:
+            continue
+        for v in lr.result.violations:
+            problems.append(_Msg(f"layer {lr.index + 1} ({lr.name}): {getattr(v, 'message', v)}"))
+        line = lr.result.line
+        for z0, z1 in getattr(line, "slips", ()) or ():
+            problems.append(_Msg(f"layer {lr.index + 1} ({lr.name}): the band slips (|λ| up to "
+                                 f"{line.max_abs_lambda:.4g} > μ = {line.mu:g}) for z in [{z0:.2f}, {z1:.2f}] mm"))
+    return write_nc(path, result.nc_text, problems, force=force)
+
+
+@dataclass(frozen=True)
+class _Msg:
+    message: str
+
+
+def thickness_table(result: LaminateResult) -> tuple[list[str], list[list[float]]]:
+    """Rows (z, r) of every layer boundary for ``--thickness CSV``: columns ``z_bare, r_bare, z_1, r_1, ...``
+    on the bare mandrel's meridian grid (each boundary along its own surface's grid)."""
+    cols = ["z_0_mm", "r_0_mm"]
+    data: list[FloatArray] = []
+    m, z, r, _ = meridian_grid(result.mandrel, THICKNESS_GRID)
+    data += [z, r]
+    for lr in result.layers:
+        if lr.thickness is None:
+            continue
+        cols += [f"z_{lr.index + 1}_mm", f"r_{lr.index + 1}_mm"]
+        data += [lr.thickness.z_out, lr.thickness.r_out]
+    n = max(len(d) for d in data)
+    rows = []
+    for k in range(n):
+        rows.append([float(d[k]) if k < len(d) else float("nan") for d in data])
+    return cols, rows
