@@ -354,7 +354,8 @@ class HelicalLayer(_LayerBase):
     pole_c_mm: tuple[NonNegMM, NonNegMM] | None = None
     angles: list[AngleRequirement] | None = None
     angle_deg: Annotated[float, Field(gt=0, lt=90)] | None = None
-    """Shortcut: the winding angle on the middle parallel of the cylindrical part (or of the surface)."""
+    """Shortcut: the winding angle on the middle parallel of the cylindrical part (or of the surface); the
+    layer is then the geodesic through it (turning where r = C) unless ``mode`` says otherwise."""
     dwell_deg: tuple[NonNegMM, NonNegMM] | None = None
     points_per_pass: Annotated[int, Field(ge=50, le=200_000)] | None = None
     circuits: Annotated[int, Field(ge=1)] | None = None
@@ -415,6 +416,10 @@ def effective_winding(job: Job, layer: Any, mandrel: Any = None) -> WindingSpec:
 
         z0, z1 = cylinder_range(mandrel)
         data["angles"] = [{"z_mm": 0.5 * (z0 + z1), "angle_deg": ang}]
+        if getattr(layer, "mode", None) is None:
+            # the shortcut means "a helical layer at this angle": the geodesic through it (turning where
+            # r = C), not a non-geodesic line also pinned to the default pole values
+            data["mode"] = "geodesic"
     return WindingSpec.model_validate(data)
 
 

@@ -49,8 +49,10 @@ FloatArray = NDArray[np.float64]
 
 THICKNESS_GRID = 1201
 """Points of the meridian grid on which each layer's thickness is computed."""
-GROWN_POINTS = 241
-"""Spline points of a grown surface (spread by arc length, joints of the thickness field included)."""
+GROWN_POINTS = 401
+"""Spline points of a grown surface (spread by arc length)."""
+_MAX_END_SLOPE = 5.0
+"""A grown surface's ends are cut where |dr/dz| exceeds this (a C2 spline r(z) needs a finite slope)."""
 
 
 # --------------------------------------------------------------------------------------------------
@@ -384,7 +386,9 @@ def layer_thickness(surface: Any, line: Any, band_width: float, band_thickness: 
     with np.errstate(invalid="ignore"):
         disc = np.maximum(a1 * a1 + 4.0 * a2 * A, 0.0)
         t = np.where(A > 0, 2.0 * A / (a1 + np.sqrt(disc)), 0.0)
-    t = _smooth(m, t, b)
+    # the band smears any step over its width; a hoop layer's ends are tapered over three band widths
+    # (staggered turnarounds), so the next layers do not have to follow a sharp step
+    t = _smooth(m, t, 3.0 * b if kind == "hoop" else b)
     z_out = z + t * nz
     r_out = r + t * nr
     vol = ring_volume(z, r, z_out, r_out)
@@ -396,7 +400,7 @@ def grow_surface(surface: Any, th: Thickness, name: str = "grown", n: int = GROW
 
     Where a thick turnaround band folds the offset back in z near a polar opening (the laminate's edge
     faces the opening), the boundary is cut at its axial crest: the polar opening grows to the crest's
-    radius.  Points steeper than |dr/dz| = 12 at the ends are dropped (a C2 spline needs a finite slope).
+    radius.  Points steeper than |dr/dz| = _MAX_END_SLOPE at the ends are dropped (a C2 spline needs a finite slope).
     """
     from engine.mandrel import CONCAVE_GAP_TOL_MM, Mandrel
 
@@ -420,9 +424,9 @@ def grow_surface(surface: Any, th: Thickness, name: str = "grown", n: int = GROW
     # finite end slopes
     slope = np.abs(np.diff(r) / np.maximum(np.diff(z), 1e-300))
     a, bidx = 0, z.size - 1
-    while left_built and a < bidx - 8 and slope[a] > 12.0:
+    while left_built and a < bidx - 8 and slope[a] > _MAX_END_SLOPE:
         a += 1
-    while right_built and bidx > a + 8 and slope[bidx - 1] > 12.0:
+    while right_built and bidx > a + 8 and slope[bidx - 1] > _MAX_END_SLOPE:
         bidx -= 1
     z, r = z[a:bidx + 1], r[a:bidx + 1]
     # spline points spread by arc length
@@ -431,11 +435,11 @@ def grow_surface(surface: Any, th: Thickness, name: str = "grown", n: int = GROW
     pick = np.unique(np.searchsorted(mm, np.linspace(0.0, mm[-1], n)).clip(0, z.size - 1))
     zs, rs = z[pick], np.maximum(r[pick], 0.0)
     grown = Mandrel.from_points(zs, rs, name=name, source="grown")
-    # concave zones shallower than half the thickest build-up step are bridged by design (resin-filled):
+    # concave zones shallower than the thickest build-up step are bridged by design (resin-filled):
     # a line on the grown surface keeps the mode the bare mandrel asks for
     prev = surface.meta.get("concave_tol_mm", CONCAVE_GAP_TOL_MM) if isinstance(surface.meta, dict) else \
         CONCAVE_GAP_TOL_MM
-    tol = max(float(prev), 0.5 * float(th.t.max()))
+    tol = max(float(prev), float(th.t.max()))
     return replace(grown, meta={**grown.meta, "concave_tol_mm": tol})
 
 
@@ -601,7 +605,10 @@ class LaminateResult:
         out: list[str] = []
         for lr in self.layers:
             if lr.result is not None:
-                out += [f"layer {lr.index + 1} ({lr.name}): {w}" for w in lr.result.warnings()]
+                ws = lr.result.warnings()
+                if lr.kind == "hoop":  # a hoop layer is no repeated circuit: its ends need not meet
+                    ws = [w for w in ws if "not cyclic" not in w]
+                out += [f"layer {lr.index + 1} ({lr.name}): {w}" for w in ws]
         return out
 
     def layup(self) -> dict[str, Any]:
@@ -668,7 +675,12 @@ def _layer_job(job: Job, layer: Any, surface: Any) -> Job:
             win = win.model_copy(update={"pole_c_mm": (rp[0] + 0.5 * band.width_mm, rp[1] + 0.5 * band.width_mm)})
     else:
         win = job.winding
-    return job.model_copy(update={"band": band, "winding": win, "layers": [layer]})
+    payout = job.payout
+    if isinstance(layer, HoopLayer) and payout.law != "parallel":
+        # a hoop's free fibre leaves the mandrel along the parallel: the eye rides on a cylinder above the
+        # contact (the 'parallel' law), the other laws' envelopes are built for turnarounds
+        payout = payout.model_copy(update={"law": "parallel"})
+    return job.model_copy(update={"band": band, "winding": win, "payout": payout, "layers": [layer]})
 
 
 def _hash(*parts: Any) -> str:
@@ -797,6 +809,15 @@ def _wind_layer(job: Job, jp: str | None, i: int, layer: Any, name: str, key: st
 
         line = winding_line(surface, band.width_mm, band.friction, ljob.winding, state,
                             _ctx={"file": jp, "job": True})
+        if isinstance(layer, PolarLayer) and layer.pole_c_mm is None and line.slips:
+            # unequal openings: no line tangent to both is held by friction; the geodesic tangent to the
+            # larger opening passes the smaller one at a distance (the usual polar layup of such a vessel)
+            c = max(ljob.winding.pole_c_mm or (0.0, 0.0))
+            win = ljob.winding.model_copy(update={"pole_c_mm": (c, c), "mode": "geodesic"})
+            ljob = ljob.model_copy(update={"winding": win})
+            line = winding_line(surface, band.width_mm, band.friction, win, state, _ctx={"file": jp, "job": True})
+            line = replace(line, notes=[*line.notes, f"polar layer: the line tangent to both openings slips; "
+                                                     f"wound as the geodesic tangent to the larger one (C {c:.6g} mm)"])
     res = run_pipeline(ljob, jp, upto=upto, mandrel=surface, line=line, state=state)
     th = layer_thickness(surface, line, band.width_mm, band.thickness_mm, layer.kind)
     grown = grow_surface(surface, th, name=f"after layer {i + 1}")

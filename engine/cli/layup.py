@@ -51,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
 
     job = load_job(args.job)
     result = run_laminate(job, args.job, state=CliState(quiet=args.quiet or args.json),
-                          upto="winding" if args.no_program else "blocks")
+                          upto="winding" if args.no_program else "nc")
     if args.thickness:
         atomic_write_text(args.thickness, thickness_csv(result))
     data = result.layup()
