@@ -267,17 +267,17 @@ def ring_volume(z_in: FloatArray, r_in: FloatArray, z_out: FloatArray, r_out: Fl
 
 
 def _smooth(m: FloatArray, y: FloatArray, width: float) -> FloatArray:
-    """Moving average of y over ``width`` (mm of arc length) on the uniform grid ``m``; the window shrinks
-    at the ends and the result is rescaled so ∫ y dm is kept."""
+    """Moving average of y over ``width`` (mm of arc length) on the uniform grid ``m``, mirrored at the ends:
+    what would spill over an end is folded back, so ∫ y dm is kept exactly and a plateau keeps its value."""
     h = float(m[1] - m[0])
     k = int(round(width / h))
-    if k < 2:
+    if k < 2 or k >= y.size:
         return y
     k += 1 - k % 2
-    kernel = np.ones(k) / k
-    out = np.convolve(y, kernel, mode="same") / np.convolve(np.ones_like(y), kernel, mode="same")
-    total = float(out.sum())
-    return out * (float(y.sum()) / total) if total > 0 else out
+    half = k // 2
+    padded = np.pad(y, half, mode="symmetric")
+    c = np.concatenate([[0.0], np.cumsum(padded)])
+    return (c[k:] - c[:-k]) / k
 
 
 def dwell_length(line: Any, side: int) -> float:
@@ -378,7 +378,7 @@ def layer_thickness(surface: Any, line: Any, band_width: float, band_thickness: 
             if L_d > 0:
                 i = int(np.argmin(np.abs(z - zt)))
                 win = np.abs(m - m[i]) <= 0.5 * b
-                A[win] += L_d * tb / max(float(np.ptp(m[win])) if win.sum() > 1 else b, 1e-9) * b / b
+                A[win] += L_d * b * tb / max(float(np.ptp(m[win])) if win.sum() > 1 else b, 1e-9)
         sin2b = np.clip((C / np.maximum(r, 1e-300)) ** 2, 0.0, 1.0)
     # mid-thickness annulus: π n_r t² + (2π r − A sin²β/(2r)) t − A = 0, the positive root
     a2 = math.pi * nr
@@ -386,6 +386,15 @@ def layer_thickness(surface: Any, line: Any, band_width: float, band_thickness: 
     with np.errstate(invalid="ignore"):
         disc = np.maximum(a1 * a1 + 4.0 * a2 * A, 0.0)
         t = np.where(A > 0, 2.0 * A / (a1 + np.sqrt(disc)), 0.0)
+    # meridional curvature κ_m: the shell element between the offsets is 2π ∫0^t (r + h n_r)(1 + h κ_m) dh;
+    # a few Newton steps on  2π [r t + t²/2 (n_r + r κ_m) + t³/3 n_r κ_m] = A (1 + t sin²β/(2r))
+    _, _, d2 = surface.evaluate(z)
+    km = -d2 * g**3
+    for _ in range(4):
+        f = 2.0 * math.pi * (r * t + 0.5 * t * t * (nr + r * km) + t**3 / 3.0 * nr * km) \
+            - A * (1.0 + t * sin2b / (2.0 * np.maximum(r, 1e-300)))
+        df = 2.0 * math.pi * (r + t * (nr + r * km) + t * t * nr * km) - A * sin2b / (2.0 * np.maximum(r, 1e-300))
+        t = np.where(A > 0, np.maximum(t - f / np.where(np.abs(df) > 1e-300, df, 1e-300), 0.0), 0.0)
     # the band smears any step over its width; a hoop layer's ends are tapered over three band widths
     # (staggered turnarounds), so the next layers do not have to follow a sharp step
     t = _smooth(m, t, 3.0 * b if kind == "hoop" else b)
@@ -818,12 +827,34 @@ def _wind_layer(job: Job, jp: str | None, i: int, layer: Any, name: str, key: st
             line = winding_line(surface, band.width_mm, band.friction, win, state, _ctx={"file": jp, "job": True})
             line = replace(line, notes=[*line.notes, f"polar layer: the line tangent to both openings slips; "
                                                      f"wound as the geodesic tangent to the larger one (C {c:.6g} mm)"])
+    if not isinstance(layer, HoopLayer):
+        _check_band_on_surface(surface, line, band.width_mm, i, layer)
     res = run_pipeline(ljob, jp, upto=upto, mandrel=surface, line=line, state=state)
     th = layer_thickness(surface, line, band.width_mm, band.thickness_mm, layer.kind)
     grown = grow_surface(surface, th, name=f"after layer {i + 1}")
     figs = _figures(job, i, name, layer, ljob, surface, line, th, res)
     return LayerResult(index=i, name=name, kind=layer.kind, key=key, surface=surface, grown=grown, result=res,
                        thickness=th, figures=figs)
+
+
+def _check_band_on_surface(surface: Any, line: Any, b: float, i: int, layer: Any) -> None:
+    """A line turning on a dome must keep its whole band on the surface: C − κ·b/2 >= the opening radius."""
+    rp = surface.pole_radii
+    for side in (0, 1):
+        if line.end_kinds[side] == "open":
+            continue
+        zt = line.z_turn[side]
+        r_t, d1, _ = surface.evaluate(np.array([zt]))
+        kap = min(1.0, abs(float(d1[0])) / math.sqrt(1.0 + float(d1[0]) ** 2))
+        c_lo = float(r_t[0]) - 0.5 * kap * b
+        if c_lo < rp[side] - 1e-6 * max(1.0, rp[side]):
+            end = ("left", "right")[side]
+            raise InputError(
+                f"layer {i + 1} ({layer_name(layer, i)}): the line turns at r = {float(r_t[0]):.4g} mm on the {end} "
+                f"dome, closer than half the band ({b:g} mm) to the polar opening (r = {rp[side]:.4g} mm): the band "
+                f"would hang over its edge; choose a smaller angle or a pole C >= {rp[side] + 0.5 * b:.4g} mm",
+                field=f"layer.{i + 1}.angle_deg" if getattr(layer, "angle_deg", None) is not None
+                else f"layer.{i + 1}.pole_c_mm")
 
 
 def _figures_skip(i: int, name: str, layer: SkipLayer) -> dict[str, Any]:
