@@ -443,16 +443,13 @@ class Job(_Model):
     @model_validator(mode="before")
     @classmethod
     def _migrate(cls, data: Any) -> Any:
-        # version 1: no [[layer]]; winding.layers repeats the one helical pattern
+        # version 1: no [[layer]]: one helical layer inheriting everything (winding.layers stays its repeat
+        # count, so every message still names the field the user wrote)
         if isinstance(data, dict) and data.get("schema_version", SCHEMA_VERSION) == 1:
             data = dict(data)
             data["schema_version"] = SCHEMA_VERSION
             if "layer" not in data and "layers" not in data:
-                win = data.get("winding")
-                rep = win.get("layers", 1) if isinstance(win, dict) else 1
-                data["layer"] = [{"kind": "helical", **({"repeat": rep} if rep != 1 else {})}]
-                if isinstance(win, dict) and "layers" in win:
-                    data["winding"] = {k: v for k, v in win.items() if k != "layers"}
+                data["layer"] = [{"kind": "helical"}]
         return data
 
     @property

@@ -1017,24 +1017,30 @@ def _deg_to_units(ax: Any, deg: float) -> float:
     return abs(ax.scale) * math.radians(deg)
 
 
-def write_laminate(result: LaminateResult, path: str | Path, force: bool = False) -> Path:
-    """Write the joined program atomically (:func:`engine.post.write_nc`): refused (InfeasibleError) when a
-    layer violates a machine limit or its line slips, unless ``force``."""
-    from engine.post import write_nc
-
-    if result.nc_text is None:
-        raise InputError("no NC program was produced (the laminate stopped before the NC stage)")
-    problems: list[Any] = []
+def laminate_refusals(result: LaminateResult) -> list[str]:
+    """Why the joined program must not be written (each naming its layer): machine-limit violations and
+    slipping lines of every layer; empty when it may be written."""
+    out: list[str] = []
     for lr in result.layers:
         if lr.result is None:
             continue
         for v in lr.result.violations:
-            problems.append(_Msg(f"layer {lr.index + 1} ({lr.name}): {getattr(v, 'message', v)}"))
+            out.append(f"layer {lr.index + 1} ({lr.name}): {getattr(v, 'message', v)}")
         line = lr.result.line
         for z0, z1 in getattr(line, "slips", ()) or ():
-            problems.append(_Msg(f"layer {lr.index + 1} ({lr.name}): the band slips (|λ| up to "
-                                 f"{line.max_abs_lambda:.4g} > μ = {line.mu:g}) for z in [{z0:.2f}, {z1:.2f}] mm"))
-    return write_nc(path, result.nc_text, problems, force=force)
+            out.append(f"layer {lr.index + 1} ({lr.name}): the band slips (|λ| up to {line.max_abs_lambda:.4g} > "
+                       f"μ = {line.mu:g}) for z in [{z0:.2f}, {z1:.2f}] mm")
+    return out
+
+
+def write_laminate(result: LaminateResult, path: str | Path, force: bool = False) -> Path:
+    """Write the joined program atomically (:func:`engine.post.write_nc`): refused (InfeasibleError) when a
+    layer violates a machine limit or its line slips (:func:`laminate_refusals`), unless ``force``."""
+    from engine.post import write_nc
+
+    if result.nc_text is None:
+        raise InputError("no NC program was produced (the laminate stopped before the NC stage)")
+    return write_nc(path, result.nc_text, [_Msg(m) for m in laminate_refusals(result)], force=force)
 
 
 @dataclass(frozen=True)

@@ -90,8 +90,10 @@ def test_negative_and_nan_values() -> None:
 def test_broken_toml_and_schema_version() -> None:
     e = _err(VESSEL.replace("[band]", "[band"))
     assert "TOML" in e.message and e.location.line is not None
-    e = _err(VESSEL.replace("schema_version = 1", "schema_version = 7"))
-    assert e.location.field == "schema_version" and e.location.line == 2
+    e = _err(VESSEL.replace("schema_version = 2", "schema_version = 7"))
+    assert e.location.field == "schema_version"
+    assert e.location.line == VESSEL.splitlines().index("schema_version = 2") + 1
+    assert "7" in e.message and "1, 2" in e.message
 
 
 def test_empty_binary_and_missing_files(tmp_path: Path) -> None:

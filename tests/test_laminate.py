@@ -87,7 +87,8 @@ def test_v1_file_loads_as_one_helical_layer_and_saves_as_v2(tmp_path: Path) -> N
     v1 = text[:cut].replace('mode = "geodesic"', 'mode = "geodesic"\nlayers = 3')
     job = parse_job(v1)
     assert job.schema_version == 2 and len(job.layers) == 1 and job.layers[0].kind == "helical"
-    assert job.layers[0].repeat == 3 and job.winding.layers == 1
+    assert job.layers[0].repeat is None and job.winding.layers == 3  # the layer inherits the repeat count
+    assert job.is_single_line
     out = save_job(job, tmp_path / "j.toml")
     saved = out.read_text()
     assert "schema_version = 2" in saved and "[[layer]]" in saved

@@ -65,7 +65,12 @@ def run(args: argparse.Namespace) -> int:
     report["output"] = str(out)
     rc = 0
     try:
-        refusals = process_refusals(result) if job.is_single_line else []  # a laminate refuses per layer
+        if job.is_single_line:
+            refusals = process_refusals(result)  # what `trajectory` / `payout` report as failing (exit 1)
+        else:
+            from engine.laminate import laminate_refusals
+
+            refusals = laminate_refusals(result)
         if refusals and not args.force:
             raise InfeasibleError(f"not written: {'; '.join(refusals)}. Use --force to write it anyway.", file=out)
         write(result, out, force=args.force)
