@@ -648,6 +648,14 @@ class LaminateResult:
         """The run report of a layered job (``winder run --report``)."""
         rep = self.layup()
         rep["stage_times_s"] = dict(self.stage_times)
+        laws = [lr.result.timelaw for lr in self.layers if lr.result is not None and lr.result.timelaw]
+        if laws:
+            rep["timelaw"] = {
+                "method": self.job.timelaw.method,
+                "total_time_s": float(self.blocks.total) if self.blocks is not None else
+                float(sum(x.get("total_time_s", 0.0) for x in laws)),
+                "layers": laws,
+            }
         if self.machine is not None:
             rep["machine"] = self.machine.name
             rep["axes"] = list(self.machine.axis_names)
@@ -788,10 +796,18 @@ def run_laminate(
         results.append(lr)
         surface = lr.grown
     res = LaminateResult(job=job, job_path=jp, mandrel=bare, layers=tuple(results), reused=tuple(reused))
+    times: dict[str, float] = {}
+    for lr in results:
+        if lr.result is not None and lr.index not in reused:
+            for k, v in lr.result.stage_times.items():
+                times[k] = times.get(k, 0.0) + float(v)
     if upto == "nc":
+        t1 = time.perf_counter()
         machine = load_machine_for_job(job, jp)
         res = _join(res, machine)
-    return replace(res, stage_times={"total": time.perf_counter() - t0})
+        times["nc"] = times.get("nc", 0.0) + time.perf_counter() - t1
+    times["total"] = time.perf_counter() - t0
+    return replace(res, stage_times=times)
 
 
 def _same_surface(a: Any, b: Any) -> bool:
