@@ -562,6 +562,10 @@ class LayerResult:
     figures: dict[str, Any] = field(default_factory=dict)
     mandrel_shift: float = 0.0
     """Added to the layer's mandrel axis (controller units) so it continues from the previous layer."""
+    block0: int = 0
+    """Index of the layer's first block in the joined program."""
+    t0: float = 0.0
+    """Program time (s) at which the layer starts."""
 
 
 @dataclass(frozen=True)
@@ -602,6 +606,11 @@ class LaminateResult:
     def volume_between_surfaces_mm3(self) -> float:
         return float(sum(lr.thickness.volume_mm3 for lr in self.layers if lr.thickness is not None))
 
+    placement: Any = None
+    """The one mandrel placement shared by every layer (:class:`engine.machine_setup.Placement`)."""
+    program_problems: tuple[str, ...] = ()
+    """Limits the joined program breaks beyond the layers' own checks (positions after the common placement)."""
+
     @property
     def violations(self) -> list[Any]:
         out: list[Any] = []
@@ -610,14 +619,36 @@ class LaminateResult:
                 out += list(lr.result.violations)
         return out
 
+    def violation_groups(self) -> list[Any]:
+        """Every layer's violations grouped (kind, axis, worst, count), located by NC line and time in the joined
+        program, circuit and layer."""
+        from engine.machine_setup import Locator, group_violations, nc_move_lines
+
+        lines = nc_move_lines(self.nc_text) if self.nc_text else np.zeros(0, dtype=np.int64)
+        out: list[Any] = []
+        for lr in self.layers:
+            if lr.result is None or not lr.result.violations:
+                continue
+            loc = Locator(lr.result, layer=lr.index + 1)
+            if self.nc_text is not None and loc.block_start is not None:
+                nb = int(lr.result.blocks.n)
+                loc.lines = lines[lr.block0: lr.block0 + nb + 1]
+                loc.block_start = loc.block_start + lr.t0
+            out += group_violations(list(lr.result.violations), loc)
+        return out
+
     def warnings(self) -> list[str]:
         out: list[str] = []
+        groups = {id(g): g for g in self.violation_groups()}
+        grouped_msgs = {g.message for g in groups.values()}
         for lr in self.layers:
             if lr.result is not None:
-                ws = lr.result.warnings()
+                own = {g.message for g in lr.result.violation_groups()} if lr.result.violations else set()
+                ws = [w for w in lr.result.warnings() if w not in own]
                 if lr.kind == "hoop":  # a hoop layer is no repeated circuit: its ends need not meet
                     ws = [w for w in ws if "not cyclic" not in w]
                 out += [f"layer {lr.index + 1} ({lr.name}): {w}" for w in ws]
+        out += sorted(grouped_msgs) + list(self.program_problems)
         return out
 
     def layup(self) -> dict[str, Any]:
@@ -663,8 +694,23 @@ class LaminateResult:
             rep["blocks"] = int(self.blocks.n)
             rep["program_time_s"] = float(self.blocks.total)
             rep["program_time_t17_s"] = float(self.blocks.total_t17)
+        if self.placement is not None:
+            p = self.placement
+            rep["placement"] = {"axis": p.axis, "mode": p.mode, "mandrel_z0": p.z0, "range": [p.q_min, p.q_max],
+                                "travel": [p.lo, p.hi], "fits": p.fits,
+                                "z0_fit": list(p.z0_fit) if p.z0_fit else None, "message": p.message()}
+        if self.blocks is not None and self.machine is not None:
+            qb = np.asarray(self.blocks.q, dtype=float)
+            rep["axis_ranges"] = {n: [float(qb[:, k].min()), float(qb[:, k].max())]
+                                  for k, n in enumerate(self.machine.axis_names)}
+        rep["fibre_length_mm"] = 1e3 * float(sum(lr.figures.get("fibre_length_m", 0.0) for lr in self.layers))
+        rep["violations"] = [{"kind": g.kind, "axis": g.axis, "what": g.what, "worst": g.worst, "value": g.value,
+                              "limit": g.limit, "places": g.places, "count": g.points, **g.first}
+                             for g in self.violation_groups()]
+        if self.post_name:
+            rep["post"] = self.post_name
         rep["warnings"] = self.warnings()
-        rep["violations"] = [getattr(v, "message", str(v)) for v in self.violations]
+        rep["reused_layers"] = [i + 1 for i in self.reused]
         return rep
 
 
@@ -803,7 +849,8 @@ def run_laminate(
                 times[k] = times.get(k, 0.0) + float(v)
     if upto == "nc":
         t1 = time.perf_counter()
-        machine = load_machine_for_job(job, jp)
+        laid = [lr for lr in results if lr.result is not None and lr.result.machine is not None]
+        machine = laid[0].result.machine if laid else load_machine_for_job(job, jp)
         res = _join(res, machine)
         times["nc"] = times.get("nc", 0.0) + time.perf_counter() - t1
     times["total"] = time.perf_counter() - t0
@@ -947,6 +994,7 @@ def _join(res: LaminateResult, machine: Any) -> LaminateResult:
     from engine.post import get_post, load_controller
 
     job = res.job
+    machine, shifts, placement = _common_placement(res, machine)
     mi = machine.axis_index("mandrel")
     qs: list[FloatArray] = []
     times: list[FloatArray] = []
@@ -966,6 +1014,8 @@ def _join(res: LaminateResult, machine: Any) -> LaminateResult:
             continue
         b = lr.result.blocks
         q = np.array(b.q, dtype=float)
+        if lr.index in shifts:
+            q[:, shifts[lr.index][0]] += shifts[lr.index][1]
         shift = 0.0
         if mi is not None and last_q is not None:
             ax = machine.axes[mi]
@@ -987,6 +1037,7 @@ def _join(res: LaminateResult, machine: Any) -> LaminateResult:
         f = lr.figures
         sections.append((nb, f"layer {lr.index + 1} {lr.name} ({lr.kind}): {f['time_s']:.3f} s, "
                              f"fibre {f['fibre_length_m']:.3f} m"))
+        block0, t_start = nb, float(sum(float(np.sum(x)) for x in times))
         qs.append(q if last_q is None else q[1:])
         times.append(np.asarray(b.time, dtype=float))
         t17.append(np.asarray(b.t17, dtype=float))
@@ -995,7 +1046,7 @@ def _join(res: LaminateResult, machine: Any) -> LaminateResult:
         last_q = q[-1]
         prev_index = lr.index
         pending_skip = 0.0
-        new_layers.append(replace(lr, mandrel_shift=shift))
+        new_layers.append(replace(lr, mandrel_shift=shift, block0=block0, t0=t_start))
     if not qs:
         raise InputError("the laminate has no layer that lays fibre (only skip layers)", file=res.job_path,
                          field="layer")
@@ -1010,9 +1061,50 @@ def _join(res: LaminateResult, machine: Any) -> LaminateResult:
     post = get_post(job.post.post)
     profile = load_controller(job.post.controller or post.name)
     text = post.render(blocks, machine, profile)
+    problems: list[str] = []
+    lo, hi = machine.limits("min"), machine.limits("max")
+    for k, ax in enumerate(machine.axes):
+        col = q_all[:, k]
+        for side, bad in (("below its minimum", col < lo[k] - 1e-9), ("above its maximum", col > hi[k] + 1e-9)):
+            if bad.any():
+                i = int(np.argmax(bad))
+                worst = float(col.min() if side.startswith("below") else col.max())
+                problems.append(f"axis {ax.name}: the joined program goes {side} ({worst:.4g} against "
+                                f"{lo[k] if side.startswith('below') else hi[k]:g} {ax.units}) at {int(bad.sum())} "
+                                f"block boundaries, first at block {i}")
     return replace(res, layers=tuple(new_layers), machine=machine, blocks=blocks, nc_text=text,
                    post_name=post.name, extension=post.extension, transitions=tuple(transitions),
-                   sections=tuple(sections))
+                   sections=tuple(sections), placement=placement, program_problems=tuple(problems))
+
+
+def _common_placement(res: LaminateResult, machine: Any) -> tuple[Any, dict[int, tuple[int, float]], Any]:
+    """One mandrel placement for every layer: each layer was placed on its own (its carriage range centred
+    in the travel); the joined program centres the union of the ranges instead and shifts each layer's
+    carriage column by the difference of datums.  Returns (machine with the common datum,
+    {layer index: (axis column, shift)}, Placement)."""
+    from engine.machine_setup import Placement, carriage_index
+
+    k = carriage_index(machine)
+    laid = [lr for lr in res.layers if lr.result is not None and lr.result.placement is not None]
+    if k is None or not laid:
+        return machine, {}, None
+    ps = [lr.result.placement for lr in laid]
+    ax = machine.axes[k]
+    lo, hi = float(ax.min), float(ax.max)
+    rel_lo = min(p.q_min - p.z0 for p in ps)
+    rel_hi = max(p.q_max - p.z0 for p in ps)
+    finite = math.isfinite(lo) and math.isfinite(hi) and hi - lo < 1e11
+    if any(p.mode == "fixed" for p in ps) or not finite:
+        z0 = ps[0].z0
+    else:
+        z0 = round(0.5 * (lo + hi) - 0.5 * (rel_lo + rel_hi), 1)
+    shifts = {lr.index: (k, z0 - lr.result.placement.z0) for lr in laid}
+    q_min, q_max = z0 + rel_lo, z0 + rel_hi
+    fit = (lo - rel_lo, hi - rel_hi) if finite and rel_hi - rel_lo <= hi - lo + 1e-9 else None
+    placement = Placement(ax.name, ps[0].mode, z0, q_min, q_max, lo, hi, fit)
+    axes = list(machine.axes)
+    axes[k] = replace(ax, offset=z0)
+    return replace(machine, axes=tuple(axes)), shifts, placement
 
 
 def _lead_in(machine: Any, q: FloatArray, lead_in_mm: float) -> FloatArray | None:
@@ -1036,12 +1128,10 @@ def _deg_to_units(ax: Any, deg: float) -> float:
 def laminate_refusals(result: LaminateResult) -> list[str]:
     """Why the joined program must not be written (each naming its layer): machine-limit violations and
     slipping lines of every layer; empty when it may be written."""
-    out: list[str] = []
+    out: list[str] = [g.message for g in result.violation_groups()] + list(result.program_problems)
     for lr in result.layers:
         if lr.result is None:
             continue
-        for v in lr.result.violations:
-            out.append(f"layer {lr.index + 1} ({lr.name}): {getattr(v, 'message', v)}")
         line = lr.result.line
         for z0, z1 in getattr(line, "slips", ()) or ():
             out.append(f"layer {lr.index + 1} ({lr.name}): the band slips (|λ| up to {line.max_abs_lambda:.4g} > "
@@ -1056,6 +1146,14 @@ def write_laminate(result: LaminateResult, path: str | Path, force: bool = False
 
     if result.nc_text is None:
         raise InputError("no NC program was produced (the laminate stopped before the NC stage)")
+    b = result.blocks
+    t = np.asarray(b.time, dtype=float)
+    bad = np.flatnonzero(~(np.isfinite(t) & (t > 0)))
+    if bad.size or not np.all(np.isfinite(np.asarray(b.q, dtype=float))):
+        i = int(bad[0]) if bad.size else 0
+        raise InputError(f"not written: {bad.size} block(s) have a non-finite or zero duration (block {i}: "
+                         f"{t[i]!r} s), which would be an infinite or zero feed", file=path,
+                         field="post.min_block_time_s")
     return write_nc(path, result.nc_text, [_Msg(m) for m in laminate_refusals(result)], force=force)
 
 
