@@ -681,10 +681,12 @@ class LaminateResult:
         rep["stage_times_s"] = dict(self.stage_times)
         laws = [lr.result.timelaw for lr in self.layers if lr.result is not None and lr.result.timelaw]
         if laws:
+            law_total = float(sum(float(x.get("total_time_s", 0.0)) for x in laws))
+            program = float(self.blocks.total) if self.blocks is not None else law_total
             rep["timelaw"] = {
                 "method": self.job.timelaw.method,
-                "total_time_s": float(self.blocks.total) if self.blocks is not None else
-                float(sum(x.get("total_time_s", 0.0) for x in laws)),
+                "total_time_s": law_total,
+                "time_added_s": program - law_total,
                 "layers": laws,
             }
         if self.machine is not None:
