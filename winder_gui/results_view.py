@@ -111,7 +111,8 @@ class ResultsPresenter(QObject):
             self._paths_key = res.keys.get("payout")
             self.queue(lambda: v.view3d.set_paths(out.paths))
         warns = list(self.doc.run_warnings)
-        self.queue(lambda: v.nc_panel.set_result(res, warns), lambda: self._on_stale(self.doc.is_stale()))
+        self.queue(lambda: v.nc_panel.set_result(res, warns), lambda: self._on_stale(self.doc.is_stale()),
+                   lambda: v.machine_panel.show_placement(res.machine, getattr(res, "placement", None)))
         took = time.monotonic() - self.ctl.run_t0
         reused = f" (re-used: {', '.join(res.reused)})" if res.reused else ""
         program = f"; program time {res.blocks.total:.2f} s" if res.blocks is not None else ""

@@ -8,7 +8,11 @@ axis's name, type, units, travel limits and speed/acceleration/jump limits (cont
 deg, per s).  The limit cells are editable: a value different from the template's becomes an override
 in the job (``[machine.axes.<name>]``); a blank cell restores the template's value.  Post-processor
 (:func:`engine.post.list_posts`) and controller profile
-(:func:`engine.post.list_controllers`) are chosen below.
+(:func:`engine.post.list_controllers`) are chosen below; both lists offer only what can address the
+template's axes (:func:`engine.machine_setup.compatible_posts`).  The set-up group edits
+``[machine.setup]`` (:class:`engine.job.SetupSpec`): where the mandrel sits on the machine (blank:
+centred), the eye radius and head offsets, the shafts, chuck and tailstock, the clearance and the
+back-turn tolerance; the schematic draws the part and its supports at that placement.
 """
 
 from __future__ import annotations
@@ -18,7 +22,16 @@ from typing import Any
 
 from PySide6.QtCore import Qt
 from PySide6.QtGui import QBrush, QColor, QIcon, QPixmap
-from PySide6.QtWidgets import QComboBox, QFormLayout, QGroupBox, QHeaderView, QLabel, QTableWidget, QTableWidgetItem
+from PySide6.QtWidgets import (
+    QComboBox,
+    QFormLayout,
+    QGroupBox,
+    QHeaderView,
+    QLabel,
+    QLineEdit,
+    QTableWidget,
+    QTableWidgetItem,
+)
 
 from engine.job import Job
 from winder_gui.panels.section_panel import Field, SectionPanel, fmt
@@ -33,6 +46,26 @@ LIMIT_COLUMNS: tuple[tuple[str, str], ...] = (
 )
 UNLIMITED = 1e11
 DEFAULT_CONTROLLER = "(post's own)"
+
+# [machine.setup] editors: key, label, optional (blank = the engine's default)
+SETUP_FIELDS: tuple[tuple[str, str, bool], ...] = (
+    ("mandrel_z0_mm", "Mandrel z = 0 at carriage [mm]", True),
+    ("eye_radius_mm", "Eye radius (fixed-radius machine) [mm]", True),
+    ("head_offset_mm.0", "Head offset radial [mm]", False),
+    ("head_offset_mm.1", "Head offset vertical [mm]", False),
+    ("head_offset_mm.2", "Head offset axial [mm]", False),
+    ("shaft_radius_mm", "Shaft radius [mm]", True),
+    ("shaft_length_mm", "Free shaft length [mm]", False),
+    ("chuck_radius_mm", "Chuck radius [mm]", True),
+    ("chuck_length_mm", "Chuck length [mm]", False),
+    ("tailstock_radius_mm", "Tailstock radius [mm]", True),
+    ("tailstock_length_mm", "Tailstock length [mm]", False),
+    ("clearance_mm", "Clearance to supports [mm]", False),
+    ("back_turn_tol_deg", "Back-turn tolerance [deg]", False),
+)
+SETUP_DEFAULT_TEXT = {"mandrel_z0_mm": "centred", "eye_radius_mm": "template's",
+                      "shaft_radius_mm": "0.6 x end radius", "chuck_radius_mm": "2 x shaft",
+                      "tailstock_radius_mm": "1.5 x shaft"}
 
 POST_FIELDS: tuple[Field, ...] = (
     Field("post", "tolerance_mm", "Path tolerance [mm]", group="NC output"),
@@ -94,13 +127,35 @@ class MachinePanel(SectionPanel):
         self.controller_combo.addItems([DEFAULT_CONTROLLER, *list_controllers()])
         pform.addRow("Dialect", self.post_combo)
         pform.addRow("Controller profile", self.controller_combo)
-        # template + post first, then the NC output fields of the base class
+        self.post_note = QLabel("")
+        self.post_note.setWordWrap(True)
+        self.post_note.setStyleSheet("color: #555; font-size: 9pt;")
+        pform.addRow(self.post_note)
+        sbox = QGroupBox("Set-up (placement, head, supports)")
+        sform = QFormLayout(sbox)
+        self.setup_edits: dict[str, QLineEdit] = {}
+        for key, label, optional in SETUP_FIELDS:
+            ed = QLineEdit()
+            ed.setObjectName(f"machine.setup.{key}")
+            ed.setAlignment(Qt.AlignmentFlag.AlignRight)
+            if optional:
+                ed.setPlaceholderText(SETUP_DEFAULT_TEXT.get(key, "default"))
+            ed.textEdited.connect(lambda _t: self._on_edited())
+            sform.addRow(label, ed)
+            self.setup_edits[key] = ed
+        self.placement_label = QLabel("")
+        self.placement_label.setObjectName("machine.placement")
+        self.placement_label.setWordWrap(True)
+        self.placement_label.setStyleSheet("color: #555; font-size: 9pt;")
+        sform.addRow(self.placement_label)
+        # template + post first, then the set-up, then the NC output fields of the base class
         self.lay.insertWidget(1, box)
         self.lay.insertWidget(2, pbox)
+        self.lay.insertWidget(3, sbox)
         self.finish()
         self.template: Any = None
         self.template_combo.activated.connect(self._on_template)
-        self.post_combo.activated.connect(lambda _i: self._on_edited())
+        self.post_combo.activated.connect(lambda _i: self._on_post())
         self.controller_combo.activated.connect(lambda _i: self._on_edited())
         self.table.itemChanged.connect(lambda _it: self._on_edited())
         self.table.itemChanged.connect(lambda _it: self._update_schematic_limits())
@@ -113,9 +168,78 @@ class MachinePanel(SectionPanel):
         if self.template_combo.findText(name) < 0:
             self.template_combo.addItem(name)
         self.template_combo.setCurrentText(name)
-        self.post_combo.setCurrentText(job.post.post)
-        self.controller_combo.setCurrentText(job.post.controller or DEFAULT_CONTROLLER)
         self._fill_table(job)
+        self._fill_posts(job.post.post, job.post.controller)
+        su = job.machine.setup.model_dump()
+        for key, _label, _opt in SETUP_FIELDS:
+            base, _, idx = key.partition(".")
+            v = su[base] if not idx else su[base][int(idx)]
+            self.setup_edits[key].setText("" if v is None else fmt(v))
+        self.placement_label.setText("")
+
+    def _fill_posts(self, post: str, controller: str | None) -> None:
+        """Only the dialects and profiles that can address the template's axes (all when unknown)."""
+        from engine.machine_setup import compatible_posts
+        from engine.post import list_controllers, list_posts
+
+        pairs = compatible_posts(self.template) if self.template is not None else \
+            [(p, c) for p in list_posts() for c in list_controllers()]
+        posts = sorted({p for p, _c in pairs})
+        self.post_combo.blockSignals(True)
+        self.controller_combo.blockSignals(True)
+        try:
+            self.post_combo.clear()
+            self.post_combo.addItems(posts)
+            note = ""
+            if post in posts:
+                self.post_combo.setCurrentText(post)
+            elif posts:
+                pick = "linuxcnc" if "linuxcnc" in posts else posts[0]
+                self.post_combo.setCurrentText(pick)
+                note = (f"{post or 'no post'} cannot address the axes of {getattr(self.template, 'name', '?')}: "
+                        f"{pick} chosen")
+            ctls = [c for p, c in pairs if p == self.post_combo.currentText()]
+            self.controller_combo.clear()
+            self.controller_combo.addItems([DEFAULT_CONTROLLER, *ctls])
+            if controller and controller in ctls:
+                self.controller_combo.setCurrentText(controller)
+            elif controller:
+                note = (note + "; " if note else "") + f"controller {controller} does not fit: the dialect's own used"
+            self.post_note.setText(note)
+        finally:
+            self.post_combo.blockSignals(False)
+            self.controller_combo.blockSignals(False)
+
+    def show_placement(self, machine: Any, placement: Any) -> None:
+        """After a run: the template as placed (carriage offset) and the placement sentence."""
+        self.placement_label.setText(placement.message() if placement is not None else "")
+        self._placed = machine
+        if machine is not None and self.template is not None and machine.name == self.template.name:
+            self._show_part(machine)
+
+    def _show_part(self, machine: Any) -> None:
+        """The schematic of ``machine`` with the job's mandrel and supports (analytic mandrels only: an
+        imported profile is not read on the GUI thread; the nominal mandrel is drawn then)."""
+        from engine.errors import InputError
+        from engine.job import build_mandrel
+        from engine.machine_setup import apply_setup, support_obstacles
+
+        job = getattr(self, "job_for_part", None)
+        part = None
+        if job is not None and job.mandrel.kind != "file":
+            try:
+                mandrel = build_mandrel(job)
+                obs = support_obstacles(mandrel, job.machine.setup)
+                part = (mandrel.z_min, mandrel.z_max, float(mandrel.r_max), [(o.name, o.z0, o.z1, o.radius)
+                                                                            for o in obs])
+                if machine is not None and job.machine.setup.mandrel_z0_mm is not None:
+                    machine = apply_setup(machine, job.machine.setup)
+                elif machine is not None and machine is not getattr(self, "_placed", None):
+                    machine = _centre_estimate(machine, mandrel)
+            except InputError:
+                part = None
+        self.schematic.set_part(part)
+        self.schematic.set_machine(machine)
 
     def _fill_table(self, job: Job) -> None:
         from engine.errors import InputError
@@ -134,7 +258,8 @@ class MachinePanel(SectionPanel):
                 self.title_label.setText(exc.message)
                 self.schematic.set_machine(None, str(exc))
                 return
-            self.schematic.set_machine(shown)
+            self.job_for_part = job
+            self._show_part(shown)
             self.title_label.setText(f"{self.template.title} ({self.template.kind})")
             self.table.setRowCount(len(shown.axes))
             # every row and column in view: the page scrolls, not the table
@@ -202,7 +327,12 @@ class MachinePanel(SectionPanel):
                 text = it.text().strip().replace(",", ".") if it is not None else ""
                 lim[key] = float(text) if text and _num(text) else float(getattr(ax, key))
             axes.append(replace(ax, **lim) if lim["min"] < lim["max"] else ax)
-        self.schematic.set_machine(replace(self.template, axes=tuple(axes)))
+        self._show_part(replace(self.template, axes=tuple(axes)))
+
+    def _on_post(self) -> None:
+        ctl = self.controller_combo.currentText()
+        self._fill_posts(self.post_combo.currentText(), None if ctl == DEFAULT_CONTROLLER else ctl)
+        self._on_edited()
 
     def select_template(self, name: str) -> None:
         self.template_combo.setCurrentText(name)
@@ -215,11 +345,13 @@ class MachinePanel(SectionPanel):
         name = self.template_combo.currentText()
         if name == self.job.machine.template:
             return
-        job = self.job.replace(machine={"template": name, "axes": {}})
+        job = self.job.replace(machine={"template": name, "axes": {}, "setup": self.job.machine.setup})
         self.job = job
         self._loading = True
         try:
             self._fill_table(job)
+            ctl = self.controller_combo.currentText()
+            self._fill_posts(self.post_combo.currentText(), None if ctl == DEFAULT_CONTROLLER else ctl)
         finally:
             self._loading = False
         self._on_edited()
@@ -258,7 +390,26 @@ class MachinePanel(SectionPanel):
                 bad.append(f"axis {base.name}: min {fmt(lo)} > max {fmt(hi)}")
             if ov:
                 axes[base.name] = ov
-        sections["machine"] = {"template": self.template_combo.currentText(), "axes": axes}
+        setup: dict[str, Any] = {}
+        offs = [0.0, 0.0, 0.0]
+        for key, label, optional in SETUP_FIELDS:
+            text = self.setup_edits[key].text().strip().replace(",", ".")
+            base, _, idx = key.partition(".")
+            if not text:
+                if not optional and not idx:
+                    from engine.job import SetupSpec
+
+                    setup[base] = SetupSpec.model_fields[base].default
+                continue
+            if not _num(text):
+                bad.append(f"{label}: not a number ({text!r})")
+                continue
+            if idx:
+                offs[int(idx)] = float(text)
+            else:
+                setup[base] = float(text)
+        setup["head_offset_mm"] = tuple(offs)
+        sections["machine"] = {"template": self.template_combo.currentText(), "axes": axes, "setup": setup}
         if bad:
             errs["machine.axes"] = "; ".join(bad)
 
@@ -282,6 +433,23 @@ class MachinePanel(SectionPanel):
             self.status.setText("")
             self.table_error.setText(msg)
             self.table_error.show()
+
+
+def _centre_estimate(machine: Any, mandrel: Any) -> Any:
+    """Before a run: the carriage offset that centres the mandrel's length in the travel (the run
+    centres the eye path, engine.machine_setup.place_on_machine)."""
+    from dataclasses import replace
+
+    from engine.machine_setup import carriage_index
+
+    k = carriage_index(machine)
+    if k is None:
+        return machine
+    ax = machine.axes[k]
+    if abs(ax.min) >= UNLIMITED or abs(ax.max) >= UNLIMITED:
+        return machine
+    off = round(0.5 * (ax.min + ax.max) - ax.scale * 0.5 * (mandrel.z_min + mandrel.z_max), 1)
+    return replace(machine, axes=tuple(replace(a, offset=off) if i == k else a for i, a in enumerate(machine.axes)))
 
 
 def _num(text: str) -> bool:

@@ -131,6 +131,8 @@ class Schematic:
     mandrel_radius: float
     mandrel_z: tuple[float, float]
     size: float
+    supports: tuple[tuple[str, float, float, float], ...] = ()
+    """The job's shafts, chuck and tailstock: ``(name, z0, z1, radius)`` in the machine frame (mm)."""
 
     @property
     def eye(self) -> np.ndarray:
@@ -273,8 +275,12 @@ def _range_text(ax: Any) -> str:
     return f"{ax.name} {ax.min:g}…{ax.max:g} {ax.units}"
 
 
-def build_schematic(machine: Any) -> Schematic:
-    """The schematic of ``machine`` (an :class:`engine.kinematics.MachineTemplate`)."""
+def build_schematic(machine: Any, part: tuple[float, float, float, tuple] | None = None) -> Schematic:
+    """The schematic of ``machine`` (an :class:`engine.kinematics.MachineTemplate`).
+
+    ``part``: ``(z_min, z_max, r_max, supports)`` of the job's mandrel (mm, mandrel frame = machine
+    frame at mandrel angle 0) and its supports ``(name, z0, z1, radius)``: drawn instead of the nominal
+    mandrel, where the set-up places them relative to the carriage travel."""
     q_int = neutral_pose(machine)
     T = _frame(machine, q_int)
     eye, eye_axis = T[:3, 3].copy(), T[:3, 2].copy()
@@ -332,10 +338,15 @@ def build_schematic(machine: Any) -> Schematic:
         half = 3.0 * radius
     zc = float(eye[2]) if machine.kind == "robot" else 0.0
     mandrel_z = (zc - half, zc + half)
+    supports: tuple[tuple[str, float, float, float], ...] = ()
+    if part is not None:
+        mandrel_z, radius, supports = (float(part[0]), float(part[1])), float(part[2]), tuple(part[3])
     pts = [eye, *links, np.array([radius, radius, mandrel_z[0]]), np.array([-radius, -radius, mandrel_z[1]])]
     for e in ends.values():
         if e is not None:
             pts.extend(e)
+    for _n, z0s, z1s, rs in supports:
+        pts += [np.array([rs, rs, z0s]), np.array([-rs, -rs, z1s])]
     size = float(np.ptp(project(np.array(pts)), axis=0).max()) or 500.0
     # rotary axes: mandrel at the headstock; eye rotations through the eye; robot joints at their origins
     glyphs: list[AxisGlyph] = []
@@ -379,7 +390,7 @@ def build_schematic(machine: Any) -> Schematic:
         glyphs.append(AxisGlyph(ax.name, ax.role, ax.type, k, label, c, w, None, r, project(c),
                                 _unit2(project(w)), None))
     return Schematic(machine, machine.to_controller(q_int), eye, eye_axis, np.array(links), tuple(glyphs),
-                     radius, mandrel_z, size)
+                     radius, mandrel_z, size, supports)
 
 
 def place_labels(anchors: list[tuple[float, float]], sizes: list[tuple[float, float]],
@@ -512,12 +523,17 @@ class MachineSchematic(QWidget):
         self.message = message
         if machine is not None:
             try:
-                self.schematic = build_schematic(machine)
+                self.schematic = build_schematic(machine, getattr(self, "part", None))
             except Exception as exc:     # noqa: BLE001 - a drawing must never take the panel down
                 self.message = f"cannot draw the scheme of {getattr(machine, 'name', 'the machine')}: {exc}"
         if self.schematic is not None and self.highlighted not in self.labels():
             self.highlighted = None
         self.update()
+
+    def set_part(self, part: tuple[float, float, float, tuple] | None) -> None:
+        """Draw the job's mandrel ``(z_min, z_max, r_max, supports)`` instead of the nominal one (None:
+        nominal); takes effect with the next :meth:`set_machine`."""
+        self.part = part
 
     def set_template(self, name_or_path: str | Path) -> None:
         """Load a template by name or path and show it (or the loader's message)."""
@@ -553,6 +569,8 @@ class MachineSchematic(QWidget):
     # -- painting ----------------------------------------------------------------------------------
     def _fit(self, sch: Schematic) -> None:
         pts = [sch.links, sch.eye[None, :], project(self._mandrel_points(sch))]
+        for _n, z0, z1, r in sch.supports:
+            pts.append(project(self._cylinder_points(z0, z1, r, 8)))
         for g in sch.axes:
             if g.type == "linear":
                 pts.append(project(self._linear_ends(g, sch)))
@@ -567,6 +585,14 @@ class MachineSchematic(QWidget):
         x0 = mx + 0.5 * (w - s * span[0]) - s * lo[0]
         y0 = my + 0.5 * (h - s * span[1]) + s * hi[1]
         self._map = (s, x0, y0)
+
+    @staticmethod
+    def _cylinder_points(z0: float, z1: float, r: float, n: int = 40) -> np.ndarray:
+        t = np.linspace(0, 2 * math.pi, n, endpoint=False)
+        ring = np.stack([r * np.cos(t), r * np.sin(t), np.zeros(n)], axis=1)
+        a, b = ring.copy(), ring.copy()
+        a[:, 2], b[:, 2] = z0, z1
+        return np.vstack([a, b])
 
     @staticmethod
     def _mandrel_points(sch: Schematic, n: int = 40) -> np.ndarray:
@@ -641,6 +667,11 @@ class MachineSchematic(QWidget):
 
         if behind:
             headstock()
+        for _n, sz0, sz1, sr in sch.supports:          # shafts, chuck, tailstock
+            p.setPen(QPen(QColor("#777"), 0.8))
+            p.setBrush(QBrush(_alpha("#b0b0b0", 200)))
+            p.drawPolygon(QPolygonF([self.to_pixels(q) for q in _hull(project(self._cylinder_points(sz0, sz1, sr,
+                                                                                                   24)))]))
         hull = _hull(project(pts))
         p.setPen(QPen(QColor("#6c7a88"), 1.0))
         p.setBrush(QBrush(_alpha(MANDREL_COLOUR, 170)))
