@@ -902,7 +902,7 @@ def _split_for_jumps(machine: Any, axes: Any, blocks: Any, T: np.ndarray, tau: f
         k = np.clip(np.searchsorted(old, idx[:-1]), 0, old.size - 2)
         same = (old[k] == idx[:-1]) & (old[k + 1] == idx[1:])
         new_err = np.where(same, err[k], 0.0)
-        new_err[~same] = _block_errors(machine, axes, idx)[~same]
+        new_err[~same] = _block_errors(machine, axes, idx, ~same)[~same]
         err = new_err
     arrs = []
     for a in (idx, qb, delta, t17, time_b, alpha, err):
@@ -940,20 +940,29 @@ def timelaw_block_check(machine: Any, blocks: Any) -> tuple[list[Any], list[str]
     return check_blocks(machine, blocks), []
 
 
-def _block_errors(machine: Any, axes: Any, idx: np.ndarray) -> np.ndarray:
+def _block_errors(machine: Any, axes: Any, idx: np.ndarray, sel: np.ndarray | None = None) -> np.ndarray:
     """Largest eye-position error of the linear interpolation inside every block (as make_blocks
-    measures it: a path point is compared at its (17) time fraction of the block), mm."""
+    measures it: a path point is compared at its (17) time fraction of the block), mm; with ``sel``
+    (a mask over the blocks) only those blocks are measured (the others get 0)."""
     from engine.kinematics import forward_kinematics
 
     q = np.asarray(axes.q, dtype=float)
     eye = np.asarray(axes.eye_xyz, dtype=float)
     fmax = machine.limits("max_speed")
-    w = np.concatenate(([0.0], np.cumsum(np.max(np.abs(np.diff(q, axis=0)) / fmax, axis=1))))
     nb = idx.size - 1
-    pts = np.arange(q.shape[0])
-    blk = np.clip(np.searchsorted(idx, pts, side="right") - 1, 0, nb - 1)
-    inner = pts != idx[blk]
-    pts, blk = pts[inner], blk[inner]
+    chosen = np.arange(nb) if sel is None else np.flatnonzero(sel)
+    # inner points of each chosen block; the last block also counts the program's end point (as the
+    # make_blocks measure does: its FK residual)
+    lengths = idx[chosen + 1] - idx[chosen] - 1 + (chosen == nb - 1)
+    chosen, lengths = chosen[lengths > 0], lengths[lengths > 0]
+    out = np.zeros(nb)
+    if chosen.size == 0:
+        return out
+    blk = np.repeat(chosen, lengths)
+    first = np.concatenate([[0], np.cumsum(lengths)[:-1]])
+    pts = np.arange(int(lengths.sum())) - np.repeat(first - idx[chosen] - 1, lengths)
+    # the (17) time metric w at the points used (a cumulative sum over the path)
+    w = np.concatenate(([0.0], np.cumsum(np.max(np.abs(np.diff(q, axis=0)) / fmax, axis=1))))
     a, b = idx[blk], idx[blk + 1]
     span = w[b] - w[a]
     u = np.where(span > 0, (w[pts] - w[a]) / np.where(span > 0, span, 1.0), (pts - a) / (b - a))
@@ -961,10 +970,7 @@ def _block_errors(machine: Any, axes: Any, idx: np.ndarray) -> np.ndarray:
     e_fk, _ = forward_kinematics(machine, qi, fibre=False)
     e_fk -= eye[pts]
     err = np.linalg.norm(e_fk, axis=1)
-    out = np.zeros(nb)
-    if err.size:                             # blk is sorted: one reduceat instead of maximum.at
-        first = np.flatnonzero(np.concatenate([[True], blk[1:] != blk[:-1]]))
-        out[blk[first]] = np.maximum.reduceat(err, first)
+    out[chosen] = np.maximum.reduceat(err, first)            # blk is sorted: one reduceat per block
     return out
 
 
