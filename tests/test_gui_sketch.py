@@ -354,7 +354,10 @@ def test_template_offers_convert_to_sketch(qtbot) -> None:
     from engine.job import build_mandrel
 
     template = build_mandrel(w.job)
-    panel.convert_button.click()
+    # "Sketched points" in the kind selector samples the template (Convert to sketch gives exact segments:
+    # tests/test_gui_segments.py)
+    panel.kind_combo.setCurrentIndex(panel.kind_combo.findData("points"))
+    panel.kind_combo.activated.emit(panel.kind_combo.currentIndex())
     assert w.wait_idle()
     assert panel.current_kind() == "points" and panel.points_table.isVisibleTo(panel)
     z, r = _job_points(w)

@@ -65,6 +65,7 @@ from winder_gui.tasks import (  # noqa: F401 - JobTimeLawResult re-exported
     mandrel_io_available,
     open_task,
     profile_ref,
+    sketch_task,
 )
 
 STEP_TABS = {"mandrel": "generatrix", "winding": "winding", "payout": "pull_speed", "machine": "axes",
@@ -187,6 +188,7 @@ class MainWindow(QMainWindow):
         self.mandrel_panel.spec_edited.connect(self._on_spec_edited)
         self.mandrel_panel.checked.connect(self._update_run_state)
         self.mandrel_panel.points_requested.connect(self._convert_to_points)
+        self.mandrel_panel.sketch_requested.connect(self._convert_to_sketch)
         self.mandrel_panel.import_requested.connect(lambda: window_menus.action_import(self))
         self.plot.points_edited.connect(self._on_points_edited)
         self.mandrel_panel.attach_plot(self.plot)  # live table while dragging, shared selection
@@ -376,6 +378,12 @@ class MainWindow(QMainWindow):
             self.mandrel_panel.set_spec(self.job.mandrel)
             return
         self.ctl.build("points", convert_task, self.job, self.mandrel, self.job_path)
+
+    def _convert_to_sketch(self) -> None:
+        if self.view_data is None:
+            self.mandrel_panel.set_spec(self.job.mandrel)
+            return
+        self.ctl.build("points", sketch_task, self.job, self.mandrel, self.job_path)
 
     def _toggle_auto_run(self, on: bool) -> None:
         self.auto_run = bool(on)

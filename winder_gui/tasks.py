@@ -122,6 +122,16 @@ def convert_task(job: Job, mandrel: Mandrel, path: Path | None, *, state: Any) -
     return build_task(job.replace(mandrel=spec), path, state=state)
 
 
+def sketch_task(job: Job, mandrel: Mandrel, path: Path | None, *, state: Any) -> BuildResult:
+    """``job`` with its mandrel replaced by the sketch of its exact segments (engine.sketch), built (worker)."""
+    from engine.job import SegmentsSpec
+    from engine.sketch import sketch_from_mandrel
+
+    state.progress(0.0, "converting the generatrix to a sketch of exact segments")
+    spec = SegmentsSpec.model_validate(sketch_from_mandrel(mandrel))
+    return build_task(job.replace(mandrel=spec), path, state=state)
+
+
 def open_task(path: Path, *, state: Any) -> BuildResult:
     """Read a job file and build its mandrel (worker thread)."""
     return build_task(load_job(path), path, state=state)

@@ -36,15 +36,17 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from engine.job import BottleSpec, ConeSpec, FileSpec, PipeSpec, PointsSpec, VesselSpec
+from engine.job import BottleSpec, ConeSpec, FileSpec, PipeSpec, PointsSpec, SegmentsSpec, VesselSpec
 from winder_gui.panels.points_table import PointsTable
 from winder_gui.panels.points_table import fmt as table_fmt
+from winder_gui.panels.segments_table import SegmentsTable
 
 KINDS: tuple[tuple[str, str], ...] = (
     ("vessel", "Vessel — cylinder + two domes"),
     ("cone", "Cone — frustum"),
     ("pipe", "Pipe — cylinder"),
     ("bottle", "Bottle — concave neck"),
+    ("segments", "Sketch — lines, arcs, domes (exact)"),
     ("points", "Sketched points (spline)"),
     ("file", "Imported profile (CSV/DXF/STEP)"),
 )
@@ -54,6 +56,7 @@ SPEC_TYPES: dict[str, type] = {
     "pipe": PipeSpec,
     "bottle": BottleSpec,
     "points": PointsSpec,
+    "segments": SegmentsSpec,
     "file": FileSpec,
 }
 DOMES = ("hemisphere", "ellipse", "isotensoid")
@@ -86,6 +89,7 @@ FIELDS: dict[str, tuple[tuple[str, str], ...]] = {
         ("bottom_pole_radius_mm", "Bottom pole opening radius [mm]"),
     ),
     "points": (),
+    "segments": (),
     "file": (("path", "Profile file"),),
 }
 
@@ -121,6 +125,8 @@ class MandrelPanel(QWidget):
     checked = Signal()
     """Emitted after every check of the fields (valid or not): the window re-evaluates Run."""
     points_requested = Signal()
+    sketch_requested = Signal()
+    """The user asked for "Convert to sketch": the window replaces the template by its exact segments."""
     import_requested = Signal()
 
     def __init__(self, parent: QWidget | None = None) -> None:
@@ -173,6 +179,16 @@ class MandrelPanel(QWidget):
                 form.addRow(self.points_info)
                 self.points_table = PointsTable()
                 form.addRow(self.points_table)
+            if kind == "segments":
+                box.setTitle("Segments")
+                note = QLabel("Joints are tangent unless Corner is ticked (then rounded by Fillet). Arc: Centre, "
+                              "or a signed Radius (> 0 convex, < 0 concave), or neither (tangent arc). Isotensoid: "
+                              "Pole r (dome down to it) or Radius (dome up to that equator).")
+                note.setWordWrap(True)
+                note.setStyleSheet("color: #666;")
+                form.addRow(note)
+                self.segments_table = SegmentsTable()
+                form.addRow(self.segments_table)
             if kind == "file":
                 note = QLabel("The profile is read from the file each time the job is opened.")
                 note.setWordWrap(True)
@@ -180,11 +196,11 @@ class MandrelPanel(QWidget):
                 form.addRow(note)
             self.page_index[kind] = self.pages.addWidget(box)
         lay.addWidget(self.pages)
-        self.convert_button = QPushButton("Convert to sketch (editable points)")
+        self.convert_button = QPushButton("Convert to sketch (exact segments)")
         self.convert_button.setObjectName("convertToSketch")
         self.convert_button.setToolTip(
-            "Replace the template by a sketched generatrix through points sampled from it;\n"
-            "the points can then be edited in a table and on the r(z) plot (undo with Ctrl+Z)"
+            "Replace the template by a sketch of its exact segments (lines, arcs, ellipse arcs, domes);\n"
+            "the segments can then be edited in a table (undo with Ctrl+Z)"
         )
         self.convert_button.clicked.connect(self.convert_to_sketch)
         lay.addWidget(self.convert_button)
@@ -197,6 +213,8 @@ class MandrelPanel(QWidget):
         self.kind_combo.activated.connect(self._on_kind_activated)
         self.points_table.points_edited.connect(self._on_table_edited)
         self.points_table.problem.connect(self._on_table_problem)
+        self.segments_table.segments_edited.connect(self._on_segments_edited)
+        self.segments_table.problem.connect(self._on_table_problem)
 
     def _make_row(self, kind: str, key: str) -> _Row:
         editor: QLineEdit | QComboBox
@@ -267,6 +285,8 @@ class MandrelPanel(QWidget):
             if kind == "points":
                 self.points_table.set_points(spec.z_mm, spec.r_mm)
                 self._update_points_info()
+            if kind == "segments":
+                self.segments_table.set_spec(spec)
             self.clear_errors()
             self._show_page(kind)
         finally:
@@ -280,9 +300,9 @@ class MandrelPanel(QWidget):
         self._set_status(self._table_problem())
 
     def convert_to_sketch(self) -> None:
-        """Ask the window to replace the template by editable points sampled from it."""
-        if self.spec is not None and self.spec.kind != "points":
-            self.points_requested.emit()
+        """Ask the window to replace the template by the sketch of its exact segments."""
+        if self.spec is not None and self.spec.kind not in ("points", "segments"):
+            self.sketch_requested.emit()
 
     def attach_plot(self, plot: Any) -> None:
         """Follow the r(z) plot (:class:`winder_gui.views.profile_plot.ProfilePlot`) live.
@@ -302,6 +322,9 @@ class MandrelPanel(QWidget):
         """Show an error of the built mandrel at its field (``mandrel.<name>``) or under the fields."""
         key = (field or "").removeprefix("mandrel.").split(".")[0]
         kind = self.current_kind()
+        if kind == "segments" and self.segments_table.show_error(field or "", message):
+            self._set_status(self._table_problem())
+            return
         keys = [k for (kk, k) in self.rows if kk == kind]
         cands = [k for k in keys if k.split(".")[0] in (key, f"{key}_mm")]
         if len(cands) > 1:
@@ -335,8 +358,18 @@ class MandrelPanel(QWidget):
         self.status.setVisible(bool(text) and text != self._table_problem())
 
     def _table_problem(self) -> str:
-        msg = self.points_table.message if self.current_kind() == "points" else ""
+        kind = self.current_kind()
+        if kind == "segments":
+            msg = self.segments_table.message
+            return f"sketch: {msg}" if msg else ""
+        msg = self.points_table.message if kind == "points" else ""
         return f"sketch table {msg}" if msg else ""
+
+    def _on_segments_edited(self, spec: Any) -> None:
+        if self._loading:
+            return
+        self.spec_edited.emit(spec)
+        self.checked.emit()
 
     def _on_table_edited(self, z: Any, r: Any) -> None:
         if self._loading:
@@ -367,7 +400,7 @@ class MandrelPanel(QWidget):
 
     def _show_page(self, kind: str) -> None:
         self.pages.setCurrentIndex(self.page_index[kind])
-        sketch = kind == "points"
+        sketch = kind in ("points", "segments")
         self.convert_button.setVisible(not sketch)
         self._stretch.setVisible(not sketch)
         self.pages.setSizePolicy(QSizePolicy.Policy.Preferred,
@@ -467,6 +500,9 @@ class MandrelPanel(QWidget):
             return
         if kind == "points":
             self.points_requested.emit()
+            return
+        if kind == "segments":
+            self.sketch_requested.emit()
             return
         if kind == "file":
             self.import_requested.emit()
