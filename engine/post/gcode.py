@@ -41,31 +41,35 @@ class GcodePost(PostProcessor):
         body += self.mode_lines(profile, opts)
         if opts["rapid_to_start"]:
             body.append(" ".join([self.g_rapid] + [self.address(L, v) for L, v in zip(letters, pos[0])]))
-        last = list(pos[0])
         inverse = profile.feed_mode == "inverse_time"
-        last_f = None
         notes: dict[int, list[str]] = {}
         if opts["comments"]:
             for i, text in getattr(blocks, "sections", ()):
                 notes.setdefault(int(i), []).append(self.comment(profile, text))
-        for i in range(blocks.n):
+        n = blocks.n
+        # column-wise: an axis word where the formatted value changes (the same rule as block by block)
+        cols = list(zip(*pos)) if pos else []
+        words_k = []
+        for k, L in enumerate(letters):
+            c = cols[k]
+            words_k.append([self.address(L, b) if b != a else "" for a, b in zip(c[:-1], c[1:])])
+        f_str = [fmt(float(x), profile.decimals_feed, self.force_point) for x in np.asarray(feeds, dtype=float)]
+        first_word = [self.address(letters[0], v) for v in cols[0][1:]] if cols else []
+        g = self.g_linear
+        last_f = None
+        for i in range(n):
             if i in notes:
                 body += notes[i]
-            words = [self.g_linear]
-            row = pos[i + 1]
-            for k, L in enumerate(letters):
-                if row[k] != last[k]:
-                    words.append(self.address(L, row[k]))
-            last = row
-            if len(words) == 1:
+            ax = [w[i] for w in words_k if w[i]]
+            if not ax:
                 # no axis moves at output precision: keep the block as a dwell-free repeat so the
                 # timing stays intact (controllers accept a G1 with only F in inverse-time mode)
-                words.append(self.address(letters[0], row[0]))
-            f = fmt(float(feeds[i]), profile.decimals_feed, self.force_point)
+                ax = [first_word[i]]
+            f = f_str[i]
             if inverse or f != last_f:
-                words.append(f"F{f}")
+                ax.append(f"F{f}")
             last_f = f
-            body.append(" ".join(words))
+            body.append(g + " " + " ".join(ax))
         body += self.end_lines(profile, opts)
         body += list(profile.postamble)
         return self.number(body, profile)
