@@ -57,7 +57,7 @@ def main() -> None:
     for r in lay["layers"]:
         print(f"  layer {r['index']:>2} {r['name']:<12} {r['kind']:<8} program {r['time_s']:8.1f} s  "
               f"fibre {r['fibre_length_m']:7.2f} m  t_cyl {r['thickness_cyl_mm']:.3f} mm")
-    print(f"stage times (s): " + ", ".join(f"{k} {v:.2f}" for k, v in res.stage_times.items()))
+    print("stage times (s): " + ", ".join(f"{k} {v:.2f}" for k, v in res.stage_times.items()))
     print(f"10-layer vessel run: {full:.2f} s wall (target {TARGET_S:.0f} s): ratio {full / TARGET_S:.3f}")
     print(f"volume laid {lay['volume_laid_mm3']:.6g} mm3, between surfaces {lay['volume_between_surfaces_mm3']:.6g} "
           f"mm3: error {100 * lay['volume_error']:+.3f} %")

@@ -976,13 +976,21 @@ def _figures(job: Job, i: int, name: str, layer: Any, ljob: Job, surface: Any, l
         "band_width_mm": b, "band_thickness_mm": tb, "overlap": overlap,
         "radius_cyl_mm": rc, "coverage": coverage,
         "thickness_cyl_mm": float(th.at(zc)), "thickness_max_mm": float(th.t.max()),
-        "thickness_pole_mm": [float(th.t[np.argmax(th.t > 1e-9)]) if (th.t > 1e-9).any() else 0.0,
-                              float(th.t[::-1][np.argmax(th.t[::-1] > 1e-9)]) if (th.t > 1e-9).any() else 0.0],
+        "thickness_pole_mm": _pole_thickness(th, b),
         "time_s": time_s, "fibre_length_m": float(line.s[-1]) * 1e-3,
         "fibre_mass_kg": mass_f, "resin_mass_kg": mass_r, "material": mat.name,
         "volume_laid_mm3": vol, "volume_between_mm3": th.volume_mm3,
         "pole_radii_after_mm": None,
     }
+
+
+def _pole_thickness(th: Thickness, b: float) -> list[float]:
+    """Largest thickness (mm) within two band widths of meridian from each end of the surface (the build-up at
+    a polar opening; on an open end the thickness at the end)."""
+    m = th.m
+    near_l = m <= m[0] + 2.0 * b
+    near_r = m >= m[-1] - 2.0 * b
+    return [float(th.t[near_l].max()), float(th.t[near_r].max())]
 
 
 def _sorted(x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:

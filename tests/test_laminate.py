@@ -341,3 +341,24 @@ def test_fibre_mass_from_material_file() -> None:
 def test_job_model_defaults_one_helical_layer() -> None:
     job = Job.model_validate({"mandrel": {"kind": "pipe", "radius_mm": 10.0, "length_mm": 10.0}})
     assert job.is_single_line and [lay.kind for lay in job.layers] == ["helical"]
+
+
+def test_non_geodesic_layer_on_grown_surface_kg_over_kn_equals_lambda() -> None:
+    from tests.test_winding import measured_ratio
+
+    text = VESSEL.replace('[[layer]]\nkind = "polar"\n', "").replace(
+        'angle_deg = 45.0', "pole_c_mm = [30.0, 40.0]\nmode = \"constant-lambda\"\npoints_per_pass = 3000")
+    res = _lam(text)
+    lr = res.layers[1]
+    line = lr.result.line
+    assert line.mode == "constant-lambda" and abs(line.lambda_) > 1e-3
+    sel = (line.circuit == 0) & (line.pass_id == 0) & ~line.dwell
+    P = line.xyz[sel]
+    z, ratio = measured_ratio(lr.surface, P)
+    # away from the turnarounds (where β -> 90° and k_n -> r-dependent limits) the measured ratio is λ
+    lam = np.interp(z, line.z[sel], line.lam[sel])
+    r = lr.surface.r(z)
+    keep = (r > line.C[sel].max() + 10.0)
+    assert keep.sum() > 500
+    assert np.max(np.abs(ratio[keep] - lam[keep])) < 2e-3
+    assert line.max_abs_lambda <= line.mu
