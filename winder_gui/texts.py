@@ -15,8 +15,11 @@ EXPORT_STALE = "the NC program is out of date: the job changed since the last ru
 EXPORT_RUNNING = "the pipeline is still running on the current job"
 NOTHING_CHANGED = "Nothing was changed: the current job is still loaded."
 
-CUT_DIRECTION = {"up": "up-cut", "down": "down-cut", "climb": "climb (down-cut)"}
-"""Milling directions of the slot dialog (the seeds' ПР/ВР, "попутное"/"встречное")."""
+CUT_MODE = {"down-cut": "down-cut (climb milling: the tool turns with the feed)",
+            "up-cut": "up-cut (conventional milling: the tool turns against the feed)",
+            "fixed part": "fixed part (i = 0)"}
+"""Milling directions of the slot dialog: the seeds' ПР (попутное) is down-cut, ВР (встречное) up-cut."""
+CUT_MODE_SHORT = {"down-cut": "down-cut", "up-cut": "up-cut", "fixed part": "fixed part"}
 
 
 def export_refused(reason: str) -> str:

@@ -52,6 +52,7 @@ from engine.slotting import (
     slot_study,
     write_table_csv,
 )
+from winder_gui.texts import CUT_MODE, CUT_MODE_SHORT
 from winder_gui.workers import JobRunner
 
 _ERR_STYLE = "color: #b00020;"
@@ -77,7 +78,7 @@ _FIELDS: tuple[tuple[str, str, str, str], ...] = (
     ("tool_radius", "Tool radius R_u, mm", "-95",
      "Signed, as in the paper: negative = external scheme (tool outside), positive = internal."),
     ("ratio", "Kinematic ratio i = ω_d/ω_u", "-2",
-     "Part over tool angular speed. i·R_u > 0 is down-cut (ПР), i·R_u < 0 up-cut (ВР), 0 a fixed part."),
+     "Part over tool angular speed. i·R_u > 0 is down-cut, i·R_u < 0 up-cut, 0 a fixed part."),
     ("lengths", "Slot lengths l, mm (from:to:step)", "2:20:2", "FROM:TO:STEP, one value, or a list a, b, c."),
     ("tol", "Admissible rel. error [Δ], –", "0.005", "Stop test of the iteration: |Δ| ≤ [Δ]."),
     ("max_iter", "Iteration budget, –", "100", "Steps before the iteration is declared non-convergent."),
@@ -336,8 +337,8 @@ class SlotDialog(QDialog):
         kia = abs(s.k * s.ratio)
         mode = cutting_mode(s.ratio, s.tool_radius)
         extra = {
-            "down-cut": "down-cut (попутное, ПР): the error of the iteration decays monotonically",
-            "up-cut": "up-cut (встречное, ВР): the error of the iteration alternates in sign",
+            "down-cut": f"{CUT_MODE['down-cut']}: the error of the iteration decays monotonically",
+            "up-cut": f"{CUT_MODE['up-cut']}: the error of the iteration alternates in sign",
             "fixed part": "fixed part (i = 0): the iteration ends at the first step",
         }[mode]
         text = f"{s.scheme.capitalize()} scheme; {extra}. |ρ·i/R_u| = {kia:.3g}"
@@ -465,8 +466,8 @@ class SlotDialog(QDialog):
         finite = c.A[np.isfinite(c.A)]
         if finite.size and c.ratios.size:
             bottom = float(finite.min())
-            neg_label = "← down-cut (ПР)" if setup.tool_radius < 0 else "← up-cut (ВР)"
-            pos_label = "up-cut (ВР) →" if setup.tool_radius < 0 else "down-cut (ПР) →"
+            neg_label = "← down-cut" if setup.tool_radius < 0 else "← up-cut"
+            pos_label = "up-cut →" if setup.tool_radius < 0 else "down-cut →"
             lo, hi = float(c.ratios.min()), float(c.ratios.max())
             for text, anchor, show in ((neg_label, (1, 1), lo < 0), (pos_label, (0, 1), hi > 0)):
                 if show:
@@ -486,7 +487,7 @@ class SlotDialog(QDialog):
                 continue
             color = pg.intColor(m, hues=max(n, 1), values=1, maxValue=200)
             mode = cutting_mode(ratio, study.table.setup.tool_radius)
-            tag = {"down-cut": "ПР", "up-cut": "ВР", "fixed part": "fixed part"}[mode]
+            tag = CUT_MODE_SHORT[mode]
             conv = "" if it.converged else " (no conv.)"
             dd = np.clip(d, -2.0, 2.0)  # keep a divergent history from flattening the others
             p.plot(np.arange(d.size), dd, pen=pg.mkPen(color, width=2), symbol="o", symbolSize=5,
