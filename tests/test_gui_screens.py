@@ -188,3 +188,46 @@ def test_label_placement_keeps_labels_apart() -> None:
             assert not (a[0] < b[0] + b[2] and b[0] < a[0] + a[2] and a[1] < b[1] + b[3] and b[1] < a[1] + a[3])
     # the first label sits right next to its point
     assert np.hypot(rects[0][0] - 100.0, rects[0][1] + 7.0 - 80.0) < 20.0
+
+
+def test_scrubbing_shows_the_band_laid_up_to_that_time(qt_display, qtbot) -> None:
+    """The band of true width is drawn up to the scrubbed time: the laid chunks and the chunk being
+    laid hold exactly the quads wound by then; at the end the whole band, at 0 none."""
+    from winder_gui.main_window import MainWindow
+
+    w = MainWindow(ROOT / "resources/examples/pipe.toml")
+    w.confirm_discard = False
+    qtbot.addWidget(w)
+    w.resize(*SIZES[0])
+    w.show()
+    try:
+        assert w.wait_idle()
+        qtbot.waitUntil(lambda: w.view3d.backend != "pending", timeout=30000)
+        assert w.run_pipeline_now() and w.wait_idle(300000) and w.last_error == ""
+        v = w.view3d
+        band = v.paths.band
+        assert band is not None and band.width_mm == w.job.band.width_mm
+        assert v.band_quads == band.m - 1  # a new program is shown at its end: the whole band
+        for frac in (0.0, 0.37, 0.8):
+            t = frac * v.timeline.total_s
+            v.set_time(t)
+            k = band.quads_until(t)
+            assert v.band_quads == k
+            drawn = 0
+            for j in range(len(v._band["chunks"])):
+                a = v.plotter.actors[f"band{j}"]
+                if a.GetVisibility():
+                    drawn += a.mapper.dataset.n_cells
+            now = v.plotter.actors.get("band_now")
+            if now is not None:
+                drawn += now.mapper.dataset.n_cells
+            assert drawn == k, (frac, drawn, k)
+            # the eye is where the program is at that time
+            assert v.timeline.times[v.frame] <= t + 1e-9
+        v.set_camera("axis")
+        assert v.points_in_view(v.scene_points()[::50]).all()
+        v.set_camera("side")
+        assert v.points_in_view(v.scene_points()[::50]).all()
+        w.screenshot().save(str(SHOTS_DIR / "band_scrubbed.png"))
+    finally:
+        w.close()

@@ -26,6 +26,7 @@ from engine.job import load_job
 from winder_gui.main_window import AUTOSAVE_HEADER, MainWindow, autosave_origin
 from winder_gui.views.geometry import to_view
 from winder_gui.views.view3d import MAX_FRAMES, TRAIL_FRAMES
+from winder_gui.views.view3d_playback import SLIDER_STEPS_PER_S
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "resources" / "examples"
@@ -407,21 +408,34 @@ def test_plot_export_png_svg_csv(pipe_window, tmp_path) -> None:
 
 
 def test_animation_play_pause_scrub(pipe_window, qtbot) -> None:
+    """The animation runs in machine time: the slider in tenths of a second over the program time,
+    speeds ×1…×1000, a jump to a circuit; a new program starts at its end."""
     w = pipe_window
     _run(w)
     v = w.view3d
     n = v.paths.frame_index.size
-    assert 2 <= n <= MAX_FRAMES and v.slider.maximum() == n - 1
-    v.slider.setValue(n // 2)
-    assert v.frame == n // 2
+    total = w.result.blocks.total
+    assert 2 <= n <= MAX_FRAMES
+    assert v.timeline.total_s == pytest.approx(total, rel=1e-9)  # the frames' times come from the NC blocks
+    assert v.slider.maximum() == round(total * SLIDER_STEPS_PER_S)
+    assert v.frame == n - 1 and v.time_s == pytest.approx(total)
+    assert "s" in v.frame_label.text() and f"{total:.1f}" in v.frame_label.text()
+    v.slider.setValue(v.slider.maximum() // 2)
+    assert v.time_s == pytest.approx((v.slider.maximum() // 2) / SLIDER_STEPS_PER_S)
+    assert v.frame == v.timeline.frame_at(v.time_s)
+    assert v.timeline.times[v.frame] <= v.time_s < v.timeline.times[min(v.frame + 1, n - 1)] + 1e-9
+    v.set_speed(100)
+    t0 = v.time_s
     v.play()
-    assert v.is_playing()
-    qtbot.waitUntil(lambda: v.frame > n // 2 + 2, timeout=5000)
+    assert v.is_playing() and v.play_button.text() == "Pause"
+    qtbot.waitUntil(lambda: v.time_s > t0 + 5.0, timeout=5000)  # ×100: 5 machine seconds in ~0.05 s
     w.actions["play"].trigger()  # Space toggles
-    assert not v.is_playing()
+    assert not v.is_playing() and v.play_button.text() == "Play"
     f = v.frame
     qtbot.wait(100)
     assert v.frame == f
+    v.jump_to_circuit(3)
+    assert v.timeline.circuits[v.frame] == 3 and (v.frame == 0 or v.timeline.circuits[v.frame - 1] != 3)
     for name in ("winding angle β [deg]", "λ [–]", "pull speed u", "circuit"):
         v.set_colour_by(name)
         assert v.colour_scalars().size == v.paths.line_xyz.shape[0]

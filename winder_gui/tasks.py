@@ -44,7 +44,8 @@ def pipeline_task(job: Job, job_path: Path | None, previous: Any, upto: str, *, 
 
     res = run_pipeline(job, job_path, upto=upto, previous=previous, state=state)
     check_cancel(state)
-    paths = paths_view_data(res.line, res.eye, MAX_DISPLAY_POINTS, MAX_FRAMES) if res.line is not None else None
+    paths = (paths_view_data(res.line, res.eye, MAX_DISPLAY_POINTS, MAX_FRAMES, blocks=res.blocks)
+             if res.line is not None else None)
     return RunOutput(res, res.warnings(), list(res.violations), paths)
 
 

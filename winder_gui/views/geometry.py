@@ -206,6 +206,14 @@ class PathsViewData:
     contact_xyz: FloatArray
     n_line: int
     lod_index: NDArray[np.int64] | None = None
+    frame_time_s: FloatArray | None = None
+    """Program time (s) of each animation frame (from the NC blocks; ``None`` without blocks)."""
+    frame_circuit: NDArray[np.int64] | None = None
+    """Circuit of each animation frame."""
+    band: Any = None
+    """:class:`winder_gui.views.playback.BandStrip`: the band of true width along a thinned line."""
+    band_scalars: dict[str, FloatArray] | None = None
+    """Colour arrays per band centre point (keys as :attr:`scalars`)."""
 
 
 def feature_indices(xyz: FloatArray, circuit: NDArray | None = None, rel_tol: float = 1e-9) -> NDArray[np.int64]:
@@ -261,7 +269,8 @@ def decimate_indices(xyz: FloatArray, max_points: int, circuit: NDArray | None =
 
 
 def paths_view_data(line: object, eye: object, max_points: int = 200_000, max_frames: int = 1500,
-                    lift: float | None = None, lod_points: int = LOD_POINTS) -> PathsViewData:
+                    lift: float | None = None, lod_points: int = LOD_POINTS, blocks: object = None,
+                    band_points: int | None = None) -> PathsViewData:
     """Thin the engine's winding ``line`` and full-line ``eye`` path for the 3D view (no new maths).
 
     ``max_points`` bounds the line drawn at rest, ``lod_points`` the coarse copy drawn while the view
@@ -297,4 +306,21 @@ def paths_view_data(line: object, eye: object, max_points: int = 200_000, max_fr
     else:
         fidx = np.zeros(0, dtype=np.int64)
         exyz = cxyz = np.zeros((0, 3))
-    return PathsViewData(idx, stride, to_view(xyz), scalars, float(lift), fidx, exyz, cxyz, n, lod)
+    from winder_gui.views.playback import BAND_POINTS, band_strip, point_times
+
+    t_pts = (point_times(n, np.asarray(blocks.index), np.asarray(blocks.time),  # type: ignore[attr-defined]
+                         getattr(line, "s", None)) if blocks is not None else None)
+    frame_time = t_pts[np.minimum(fidx, n - 1)] if t_pts is not None and fidx.size else None
+    frame_circuit = circuit_all[np.minimum(fidx, n - 1)].astype(np.int64) if fidx.size else None
+    band = band_scalars = None
+    normal = getattr(line, "normal", None)
+    width = float(getattr(line, "band_width_mm", 0.0) or 0.0)
+    if t_pts is not None and normal is not None and width > 0:
+        bidx, _ = decimate_indices(xyz_all, band_points or BAND_POINTS, circuit_all)
+        band = band_strip(to_view(xyz_all[bidx]), to_view(np.asarray(normal)[bidx]), t_pts[bidx], width, 0.6 * lift)
+        u_b = u_pt[bidx]
+        band_scalars = {"circuit": np.asarray(circuit_all, dtype=float)[bidx],
+                        "beta_deg": np.degrees(np.asarray(line.beta))[bidx],  # type: ignore[attr-defined]
+                        "lam": np.asarray(line.lam, dtype=float)[bidx], "u": u_b}  # type: ignore[attr-defined]
+    return PathsViewData(idx, stride, to_view(xyz), scalars, float(lift), fidx, exyz, cxyz, n, lod,
+                         frame_time, frame_circuit, band, band_scalars)

@@ -29,9 +29,16 @@ from typing import Any
 import numpy as np
 from PySide6.QtCore import Qt, QTimer
 from PySide6.QtGui import QGuiApplication, QImage
-from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QPushButton, QSlider, QVBoxLayout, QWidget
+from PySide6.QtWidgets import (
+    QLabel,
+    QVBoxLayout,
+    QWidget,
+)
 
 from winder_gui.views.geometry import MandrelViewData, PathsViewData
+from winder_gui.views.playback import Timeline
+from winder_gui.views.view3d_playback import COLOUR_KEYS, FRAME_MS, SLIDER_STEPS_PER_S, PlaybackMixin, SceneMixin
+from winder_gui.views.vtk_widget import _preload_vtk, interactor_class
 from winder_gui.workers import JobRunner
 
 HEADLESS_PLATFORMS = {"offscreen", "minimal", "vnc"}
@@ -58,7 +65,7 @@ MAX_FRAMES = 20_000
 TRAIL_FRAMES = 60
 """The eye's trajectory is drawn over the last this many frames (its whole path would hide the mandrel)."""
 COLOUR_BY = ("circuit", "winding angle β [deg]", "λ [–]", "pull speed u")
-FRAME_MS = 33
+
 VTK_TITLES = dict(zip(COLOUR_BY, ("circuit", "beta (deg)", "lambda", "pull speed u"), strict=True))
 """Scalar-bar titles in ASCII (VTK's default font has no Greek letters)."""
 
@@ -70,99 +77,7 @@ def gl_available() -> bool:
     return QGuiApplication.platformName() not in HEADLESS_PLATFORMS
 
 
-def _scene_stamp(render_window: Any) -> tuple[int, ...]:
-    """What the picture of ``render_window`` depends on: its size and the modification times of its renderers,
-    cameras and props (``GetRedrawMTime`` includes the mapper and its input data).  Unchanged stamp: a new
-    render would draw the same picture."""
-    stamp = [*render_window.GetSize(), render_window.GetMTime()]
-    renderers = render_window.GetRenderers()
-    renderers.InitTraversal()
-    for _ in range(renderers.GetNumberOfItems()):
-        ren = renderers.GetNextItem()
-        stamp += [ren.GetMTime(), ren.GetActiveCamera().GetMTime()]
-        props = ren.GetViewProps()
-        props.InitTraversal()
-        for _ in range(props.GetNumberOfItems()):
-            prop = props.GetNextProp()
-            stamp += [prop.GetMTime(), prop.GetRedrawMTime(), prop.GetVisibility()]
-    return tuple(stamp)
-
-
-_INTERACTOR_CLASS: Any = None
-
-
-def interactor_class() -> Any:
-    """pyvistaqt's ``QtInteractor`` that renders once per frame instead of twice (imports pyvistaqt).
-
-    pyvistaqt's widget renders in VTK first (``plotter.render()``, or the interactor style on every mouse
-    move), which schedules a Qt paint, and its ``paintGL`` then always renders again before it blits VTK's
-    frame into the widget: every frame cost two renders (``benchmarks/bench_gui_3d.py``).  Here the paint
-    only blits when the frame VTK finished last is still current: rendered since the last paint, the
-    widget not resized or its GL context re-made since, and :func:`_scene_stamp` unchanged (pyvista may
-    move the camera or change an actor without rendering: then the paint renders, as before).  A paint
-    that is not preceded by a render (exposure, ``update()``, the animation) renders as before.  A mouse-drag
-    frame of a million-point program: ~100 -> ~60 ms, a full-detail frame ~225 -> ~125 ms on llvmpipe.
-    """
-    global _INTERACTOR_CLASS
-    if _INTERACTOR_CLASS is not None:
-        return _INTERACTOR_CLASS
-    from pyvistaqt import QtInteractor
-
-    class SingleRenderInteractor(QtInteractor):
-        def __init__(self, *args: Any, **kwargs: Any) -> None:
-            self._fresh_stamp: tuple[int, ...] | None = None
-            self.paint_renders = 0
-            """Renders done by Qt paints (the others were done before the paint, which only blitted)."""
-            self.blit_only_paints = 0
-            """Paints that only copied VTK's last frame to the widget."""
-            super().__init__(*args, **kwargs)
-            rw = self.GetRenderWindow()
-            tag = rw.AddObserver("EndEvent", self._on_render_end)
-            if isinstance(getattr(self, "_vtk_observers", None), list):
-                self._vtk_observers.append((rw, tag))  # pyvistaqt removes its observers on close
-
-        def _on_render_end(self, *_args: Any) -> None:
-            # a render outside paintGL: VTK's display framebuffer holds this picture
-            in_paint = getattr(self, "_in_paint", False)
-            self._fresh_stamp = None if in_paint else _scene_stamp(self.GetRenderWindow())
-
-        def initializeGL(self) -> None:  # noqa: N802 - Qt override
-            self._fresh_stamp = None
-            super().initializeGL()
-
-        def resizeGL(self, w: int, h: int) -> None:  # noqa: N802 - Qt override
-            self._fresh_stamp = None
-            super().resizeGL(w, h)
-
-        def paintGL(self) -> None:  # noqa: N802 - Qt override
-            rw = self.GetRenderWindow()
-            fresh = (self._fresh_stamp is not None and rw is not None and "_in_paint" in self.__dict__
-                     and not self._in_paint and self._fresh_stamp == _scene_stamp(rw))
-            self._fresh_stamp = None
-            if not fresh:
-                self.paint_renders += 1
-                super().paintGL()
-                return
-            self.blit_only_paints += 1
-            self._in_paint = True  # pyvistaqt's paintGL then blits VTK's last frame without rendering
-            try:
-                super().paintGL()
-            finally:
-                self._in_paint = False
-
-    _INTERACTOR_CLASS = SingleRenderInteractor
-    return _INTERACTOR_CLASS
-
-
-def _preload_vtk(*, state: Any) -> bool:
-    """Import pyvista/pyvistaqt (seconds of VTK loading) off the GUI thread."""
-    import pyvista  # noqa: F401
-    import pyvistaqt  # noqa: F401
-
-    return True
-
-
-class MandrelView3D(QWidget):
+class MandrelView3D(PlaybackMixin, SceneMixin, QWidget):
     """Container for the 3D view; :attr:`backend` is ``"pending"``, ``"vtk"`` or ``"placeholder"``."""
 
     def __init__(self, parent: QWidget | None = None) -> None:
@@ -186,6 +101,9 @@ class MandrelView3D(QWidget):
         engine busy -- a full-detail frame of a million points takes ~0.25 s on software GL, longer
         than the GUI thread may be held while the engine works)."""
         self._eye_meshes: dict[str, Any] = {}
+        self._band: Any = None
+        self.band_quads = 0
+        """Quads of the band drawn (laid by the current time)."""
         self._path_meshes: dict[str, Any] = {}
         self._was_busy = False
         self._anim = QTimer(self)
@@ -196,39 +114,6 @@ class MandrelView3D(QWidget):
         self._label.setAlignment(Qt.AlignmentFlag.AlignCenter)
         self._label.setStyleSheet("color: #555; background: #eef0f4;")
         self._layout.addWidget(self._label, 1)
-
-    def _build_controls(self) -> None:
-        bar = QWidget()
-        h = QHBoxLayout(bar)
-        h.setContentsMargins(4, 2, 4, 2)
-        self.play_button = QPushButton("▶ Play")
-        self.play_button.setObjectName("view3d.play")
-        self.play_button.setCheckable(True)
-        self.play_button.setToolTip("Animate the winding: the eye moves along its path (Space)")
-        self.play_button.toggled.connect(self._on_play)
-        self.slider = QSlider(Qt.Orientation.Horizontal)
-        self.slider.setObjectName("view3d.scrub")
-        self.slider.setToolTip("Scrub through the winding")
-        self.slider.valueChanged.connect(self.set_frame)
-        self.colour_combo = QComboBox()
-        self.colour_combo.setObjectName("view3d.colour")
-        self.colour_combo.addItems(list(COLOUR_BY))
-        self.colour_combo.setToolTip("Colour the winding paths by")
-        self.colour_combo.currentTextChanged.connect(self.set_colour_by)
-        self.frame_label = QLabel("")
-        self.frame_label.setMinimumWidth(120)
-        h.addWidget(self.play_button)
-        h.addWidget(self.slider, 1)
-        h.addWidget(self.frame_label)
-        h.addWidget(QLabel("colour:"))
-        h.addWidget(self.colour_combo)
-        self.controls = bar
-        self._layout.addWidget(bar)
-        self._set_controls_enabled(False)
-
-    def _set_controls_enabled(self, on: bool) -> None:
-        for w in (self.play_button, self.slider, self.colour_combo):
-            w.setEnabled(on)
 
     # -- lifecycle -------------------------------------------------------------------------------
     def showEvent(self, event) -> None:  # noqa: N802 - Qt override
@@ -323,17 +208,28 @@ class MandrelView3D(QWidget):
 
     # -- winding paths and animation -------------------------------------------------------------
     def set_paths(self, paths: PathsViewData | None) -> None:
-        """Show the winding paths, eye trajectory and fibre of a pipeline result (``None``: remove them)."""
+        """Show the winding paths, eye trajectory, band and fibre of a pipeline result (``None``: remove
+        them).  The animation is in machine time; a new program starts at its end (all the band laid)."""
         self.paths = paths
         n = 0 if paths is None else paths.frame_index.size
         self._set_controls_enabled(n > 0)
+        if paths is not None and paths.frame_time_s is not None and n:
+            times = np.asarray(paths.frame_time_s, dtype=float)
+        else:
+            times = np.arange(n, dtype=float) * FRAME_MS / 1000.0   # no blocks: one frame per tick at ×1
+        circuits = (np.asarray(paths.frame_circuit, dtype=np.int64) if paths is not None
+                    and paths.frame_circuit is not None else np.zeros(n, dtype=np.int64))
+        self.timeline = Timeline(times, circuits) if n else None
         self.slider.blockSignals(True)
-        self.slider.setRange(0, max(n - 1, 0))
-        self.slider.setValue(min(self.frame, max(n - 1, 0)))
+        self.slider.setRange(0, int(round(self.timeline.total_s * SLIDER_STEPS_PER_S)) if n else 0)
         self.slider.blockSignals(False)
-        self.frame = self.slider.value()
+        if n:
+            self.circuit_spin.setRange(int(circuits.min()), int(circuits.max()))
         if n == 0:
             self.pause()
+        self.frame = max(n - 1, 0)
+        self.time_s = self.timeline.total_s if n else 0.0
+        self._sync_slider()
         if self.backend == "vtk":
             self._render_paths()
             if paths is not None:
@@ -346,8 +242,7 @@ class MandrelView3D(QWidget):
         """The colour values of the shown path points for the current :attr:`colour_by`."""
         if self.paths is None:
             return None
-        key = {"circuit": "circuit", "winding angle β [deg]": "beta_deg", "λ [–]": "lam", "pull speed u": "u"}
-        return self.paths.scalars[key[self.colour_by]]
+        return self.paths.scalars[COLOUR_KEYS[self.colour_by]]
 
     def set_colour_by(self, name: str) -> None:
         """Colour the paths by ``name`` (one of :data:`COLOUR_BY`)."""
@@ -367,60 +262,13 @@ class MandrelView3D(QWidget):
             return None
         return self.paths.eye_xyz[self.frame], self.paths.contact_xyz[self.frame]
 
-    def set_frame(self, i: int) -> None:
-        """Move the animation to frame ``i`` (the eye and the free fibre follow)."""
-        if self.paths is None or self.paths.frame_index.size == 0:
-            return
-        i = int(np.clip(i, 0, self.paths.frame_index.size - 1))
-        self.frame = i
-        if self.slider.value() != i:
-            self.slider.blockSignals(True)
-            self.slider.setValue(i)
-            self.slider.blockSignals(False)
-        self.frame_label.setText(self._frame_text(short=True))
-        if self.backend == "vtk":
-            self._update_eye()
-
-    def play(self) -> None:
-        """Start the animation."""
-        if self.paths is not None and self.paths.frame_index.size:
-            self.play_button.setChecked(True)
-
-    def pause(self) -> None:
-        """Stop the animation (at the current frame)."""
-        self.play_button.setChecked(False)
-
-    def is_playing(self) -> bool:
-        return self._anim.isActive()
-
-    def _on_play(self, on: bool) -> None:
-        self.play_button.setText("⏸ Pause" if on else "▶ Play")
-        if on:
-            self._anim.start()
-        else:
-            self._anim.stop()
-            if self.plotter is not None and self.lod_active:
-                self.plotter.render()  # back to the full line
-
-    def _tick(self) -> None:
-        if self.paths is None or self.paths.frame_index.size == 0:
-            self.pause()
-            return
-        n = self.paths.frame_index.size
-        self.set_frame((self.frame + max(1, n // 3000)) % n)  # a whole program plays in about 100 s
-
-    def _frame_text(self, short: bool = False) -> str:
-        if self.paths is None or self.paths.frame_index.size == 0:
-            return ""
-        n = self.paths.frame_index.size
-        point = int(self.paths.frame_index[self.frame])
-        return f"frame {self.frame + 1}/{n}" + ("" if short else f" (path point {point})")
-
     def _render_paths(self) -> None:
 
         assert self.plotter is not None
-        for name in ("paths", "paths_lod", "eye_path", "eye", "fibre"):
+        for name in ("paths", "paths_lod", "eye_path", "eye", "fibre", "band_now", "eye_path_all",
+                     *(f"band{j}" for j in range(len(self._band["chunks"]) if self._band else 0))):
             self.plotter.remove_actor(name, render=False)
+        self._band = None
         self._eye_meshes.clear()
         self._path_meshes.clear()
         p = self.paths
@@ -440,6 +288,7 @@ class MandrelView3D(QWidget):
         self.plotter.suppress_rendering = True
         try:
             self._add_path_actors(p, c, cmap, clim, lod if coarse else None)
+            self._add_band_actor(p, cmap, clim)
             self._update_eye()
         finally:
             self.plotter.suppress_rendering = False
@@ -498,6 +347,7 @@ class MandrelView3D(QWidget):
         at = self.eye_at_frame()
         if at is None or self.plotter is None:
             return
+        self._update_band()
         eye, contact = at
         actors = self.plotter.actors
         meshes = self._eye_meshes
@@ -592,54 +442,6 @@ class MandrelView3D(QWidget):
             self.plotter.camera.azimuth = -28.0
             self.frame_all(render=False)   # the whole mandrel (and eye path) in view, also after a STEP import
             self._reset_camera = False
-
-    def scene_points(self) -> np.ndarray:
-        """Points that must be in view (view frame, mm): the mandrel's surface, the eye trajectory and
-        the winding paths' extremes."""
-        pts = []
-        if self.data is not None:
-            d = self.data
-            pts.append(np.column_stack([d.surface_x.ravel(), d.surface_y.ravel(), d.surface_z.ravel()])[::7])
-        if self.paths is not None and self.paths.eye_xyz.size:
-            pts.append(self.paths.eye_xyz)
-        return np.vstack(pts) if pts else np.zeros((0, 3))
-
-    def frame_all(self, render: bool = True) -> None:
-        """Frame the mandrel, the whole eye trajectory and the head (auto-framing after a run; View ->
-        Frame all)."""
-        pts = self.scene_points()
-        if self.plotter is None or pts.shape[0] == 0:
-            return
-        lo, hi = pts.min(axis=0), pts.max(axis=0)
-        pad = 0.04 * float(np.max(hi - lo))
-        bounds = (lo[0] - pad, hi[0] + pad, lo[1] - pad, hi[1] + pad, lo[2] - pad, hi[2] + pad)
-        self.plotter.reset_camera(render=False, bounds=bounds)
-        # VTK fits a sphere round the bounds: a long mandrel then fills a third of the view; zoom in
-        # while every point (a sample of them) stays inside the viewport
-        sample = pts[:: max(1, pts.shape[0] // 300)]
-        cam = self.plotter.camera
-        for _ in range(12):
-            cam.zoom(1.12)
-            if not self.points_in_view(sample, margin=0.03).all():
-                cam.zoom(1.0 / 1.12)
-                break
-        if render:
-            self.plotter.render()
-
-    def points_in_view(self, pts: np.ndarray, margin: float = 0.0) -> np.ndarray:
-        """For each point (view frame, mm): True when it projects inside the 3D viewport (less a
-        ``margin``, a fraction of its size, on every side)."""
-        if self.plotter is None:
-            return np.zeros(len(pts), dtype=bool)
-        ren = self.plotter.renderer
-        w, h = self.plotter.render_window.GetSize()
-        out = np.zeros(len(pts), dtype=bool)
-        for i, p in enumerate(np.asarray(pts, dtype=float)):
-            ren.SetWorldPoint(float(p[0]), float(p[1]), float(p[2]), 1.0)
-            ren.WorldToDisplay()
-            x, y, _z = ren.GetDisplayPoint()
-            out[i] = margin * w <= x <= (1 - margin) * w and margin * h <= y <= (1 - margin) * h
-        return out
 
     def render_image(self) -> QImage | None:
         """The 3D view rendered to an image (VTK draws with GL, which ``QWidget.grab`` may miss)."""

@@ -1,0 +1,75 @@
+"""Playback of a whole program in the 3D view: wall time at each speed and frames per second.
+
+Run under a virtual screen (software OpenGL):
+
+    xvfb-run -a -s "-screen 0 1600x1000x24" env QT_QPA_PLATFORM=xcb .venv/bin/python benchmarks/bench_gui_playback.py
+
+Prints, for the pressure-vessel example at 1280x800: the program time, the wall time to play it at
+x1000 (and x100), the renders per second, and the time of one render with the band half laid.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def main() -> int:
+    tmp = tempfile.mkdtemp(prefix="winder-bench-")
+    os.environ["WINDER_SETTINGS"] = str(Path(tmp) / "s.ini")
+    os.environ["WINDER_AUTOSAVE_DIR"] = str(Path(tmp) / "autosave")
+    from PySide6.QtWidgets import QApplication
+
+    app = QApplication.instance() or QApplication([])
+    from winder_gui.main_window import MainWindow
+
+    job = Path(sys.argv[1]) if len(sys.argv) > 1 else ROOT / "resources/examples/pressure_vessel.toml"
+    w = MainWindow(job)
+    w.confirm_discard = False
+    w.auto_run = False
+    w.resize(1280, 800)
+    w.show()
+    w.wait_idle()
+    t0 = time.monotonic()
+    while w.view3d.backend == "pending" and time.monotonic() - t0 < 60:
+        app.processEvents()
+        time.sleep(0.01)
+    v = w.view3d
+    if v.backend != "vtk":
+        print(f"no 3D view ({v.backend}): run under xvfb-run with QT_QPA_PLATFORM=xcb")
+        return 1
+    w.run_pipeline_now()
+    w.wait_idle(600000)
+    renders = [0]
+    v.plotter.render_window.AddObserver("EndEvent", lambda *_a: renders.__setitem__(0, renders[0] + 1))
+    v.set_time(0.5 * v.timeline.total_s)
+    one = []
+    for _ in range(5):
+        t = time.perf_counter()
+        v.plotter.render()
+        one.append(time.perf_counter() - t)
+    print(f"{job.name}: program {v.timeline.total_s:.1f} s, {v.paths.frame_index.size} frames, "
+          f"band {v.paths.band.m if v.paths.band is not None else 0} points; "
+          f"one render (band half laid) {1000 * min(one):.0f} ms (median {1000 * sorted(one)[2]:.0f} ms)")
+    for speed in (1000, 100):
+        v.set_speed(speed)
+        v.set_time(0.0)
+        renders[0] = 0
+        t = time.monotonic()
+        v.play()
+        while v.is_playing() and time.monotonic() - t < 600:
+            app.processEvents()
+            time.sleep(0.001)
+        dt = time.monotonic() - t
+        print(f"x{speed}: played in {dt:.2f} s wall, {renders[0]} renders, {renders[0] / dt:.1f} frames/s")
+    w.close()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

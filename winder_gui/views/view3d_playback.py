@@ -1,0 +1,331 @@
+"""Playback, band and camera of the 3D view (mixins of :class:`winder_gui.views.view3d.MandrelView3D`).
+
+The program plays in machine time (:class:`winder_gui.views.playback.Timeline`): a slider in tenths
+of a second, speeds ×1…×1000, a jump to a circuit; the band of true width is laid as the time
+advances (static chunks plus the chunk being laid, so a frame re-uploads only a few hundred quads);
+camera presets and framing of the mandrel with the whole eye path.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from PySide6.QtCore import QElapsedTimer, Qt
+from PySide6.QtWidgets import (
+    QComboBox,
+    QHBoxLayout,
+    QLabel,
+    QPushButton,
+    QSlider,
+    QSpinBox,
+    QStyle,
+    QToolButton,
+    QWidget,
+)
+
+from winder_gui.views.geometry import PathsViewData
+from winder_gui.views.playback import SPEEDS, Timeline
+
+FRAME_MS = 40
+"""Animation timer interval (25 frames/s); the program time advances by the wall time times the speed."""
+SLIDER_STEPS_PER_S = 10
+"""The time slider moves in tenths of a machine second."""
+CAMERA_PRESETS = ("iso", "side", "axis")
+BAND_CHUNK = 400
+"""Quads per static piece of the band in 3D (the piece being laid is rebuilt each frame)."""
+COLOUR_KEYS = {"circuit": "circuit", "winding angle β [deg]": "beta_deg", "λ [–]": "lam", "pull speed u": "u"}
+
+
+class PlaybackMixin:
+    """Controls and machine-time animation (needs ``paths``, ``plotter``, ``backend``, ``_anim``,
+    ``_layout``, ``_update_eye`` of the view)."""
+
+    paths: PathsViewData | None
+    timeline: Timeline | None
+
+    def _build_controls(self) -> None:
+        bar = QWidget()
+        h = QHBoxLayout(bar)
+        h.setContentsMargins(4, 2, 4, 2)
+        self.play_button = QPushButton("Play")
+        self.play_button.setObjectName("view3d.play")
+        self.play_button.setCheckable(True)
+        self.play_button.setIcon(self.style().standardIcon(QStyle.StandardPixmap.SP_MediaPlay))
+        self.play_button.setToolTip("Play the program in machine time: the eye moves, the band is laid (Space)")
+        self.play_button.toggled.connect(self._on_play)
+        self.slider = QSlider(Qt.Orientation.Horizontal)
+        self.slider.setObjectName("view3d.scrub")
+        self.slider.setToolTip("Program time: scrub to see the band laid up to that time")
+        self.slider.valueChanged.connect(self._on_slider)
+        self.speed_combo = QComboBox()
+        self.speed_combo.setObjectName("view3d.speed")
+        for sp in SPEEDS:
+            self.speed_combo.addItem(f"×{sp}", sp)
+        self.speed_combo.setCurrentIndex(SPEEDS.index(100))
+        self.speed_combo.setToolTip("Playback speed: machine seconds per second")
+        self.circuit_spin = QSpinBox()
+        self.circuit_spin.setObjectName("view3d.circuit")
+        self.circuit_spin.setPrefix("circuit ")
+        self.circuit_spin.setToolTip("Jump to the start of a circuit")
+        self.circuit_spin.editingFinished.connect(lambda: self.jump_to_circuit(self.circuit_spin.value()))
+        self.frame_label = QLabel("")
+        self.frame_label.setObjectName("view3d.time")
+        self.frame_label.setMinimumWidth(150)
+        for w in (self.play_button, self.slider, self.frame_label, self.speed_combo, self.circuit_spin):
+            h.addWidget(w, 1 if w is self.slider else 0)
+        bar2 = QWidget()
+        h2 = QHBoxLayout(bar2)
+        h2.setContentsMargins(4, 0, 4, 2)
+        self.colour_combo = QComboBox()
+        self.colour_combo.setObjectName("view3d.colour")
+        self.colour_combo.addItems(list(COLOUR_KEYS))
+        self.colour_combo.setToolTip("Colour the winding paths and the band by")
+        self.colour_combo.currentTextChanged.connect(self.set_colour_by)
+        h2.addWidget(QLabel("colour:"))
+        h2.addWidget(self.colour_combo)
+        h2.addStretch(1)
+        h2.addWidget(QLabel("view:"))
+        self.camera_buttons: dict[str, QToolButton] = {}
+        for key, text, tip in (("iso", "Iso", "Isometric view"), ("side", "Side", "Side view (the axis across)"),
+                               ("axis", "Axis", "Along the mandrel axis"),
+                               ("fit", "Fit", "Frame the mandrel, the eye path and the head")):
+            b = QToolButton()
+            b.setObjectName(f"view3d.camera.{key}")
+            b.setText(text)
+            b.setToolTip(tip)
+            b.clicked.connect(lambda _c=False, k=key: self.frame_all() if k == "fit" else self.set_camera(k))
+            self.camera_buttons[key] = b
+            h2.addWidget(b)
+        self.controls = bar
+        self._layout.addWidget(bar)
+        self._layout.addWidget(bar2)
+        self.timeline: Timeline | None = None
+        self.time_s = 0.0
+        self._clock = QElapsedTimer()
+        self._set_controls_enabled(False)
+
+    def _set_controls_enabled(self, on: bool) -> None:
+        for w in (self.play_button, self.slider, self.colour_combo, self.speed_combo, self.circuit_spin):
+            w.setEnabled(on)
+
+    def set_frame(self, i: int) -> None:
+        """Move the animation to frame ``i`` (its machine time; the eye, fibre and band follow)."""
+        if self.paths is None or self.paths.frame_index.size == 0 or self.timeline is None:
+            return
+        i = int(np.clip(i, 0, self.paths.frame_index.size - 1))
+        self._show(i, float(self.timeline.times[i]))
+
+    def set_time(self, t: float) -> None:
+        """Move the animation to machine time ``t`` (s): the eye at its place then, the band laid up to it."""
+        if self.timeline is None:
+            return
+        t = float(np.clip(t, 0.0, self.timeline.total_s))
+        self._show(self.timeline.frame_at(t), t)
+
+    def jump_to_circuit(self, circuit: int) -> None:
+        """Move to the first frame of ``circuit``."""
+        if self.timeline is not None:
+            self.set_frame(self.timeline.circuit_start(int(circuit)))
+
+    def _show(self, frame: int, t: float) -> None:
+        self.frame = frame
+        self.time_s = t
+        self._sync_slider()
+        self.frame_label.setText(self._frame_text(short=True))
+        if self.backend == "vtk":
+            self._update_eye()
+
+    def _sync_slider(self) -> None:
+        v = int(round(self.time_s * SLIDER_STEPS_PER_S))
+        if self.slider.value() != v:
+            self.slider.blockSignals(True)
+            self.slider.setValue(v)
+            self.slider.blockSignals(False)
+        if self.timeline is not None and self.timeline.circuits.size:
+            self.circuit_spin.blockSignals(True)
+            self.circuit_spin.setValue(int(self.timeline.circuits[self.frame]))
+            self.circuit_spin.blockSignals(False)
+
+    def _on_slider(self, value: int) -> None:
+        self.set_time(value / SLIDER_STEPS_PER_S)
+
+    def speed(self) -> float:
+        """Playback speed (machine seconds per wall-clock second)."""
+        return float(self.speed_combo.currentData() or 1)
+
+    def set_speed(self, speed: int) -> None:
+        self.speed_combo.setCurrentIndex(max(self.speed_combo.findData(int(speed)), 0))
+
+    def play(self) -> None:
+        """Start the animation (from the start when at the end)."""
+        if self.paths is not None and self.paths.frame_index.size:
+            if self.timeline is not None and self.time_s >= self.timeline.total_s:
+                self.set_time(0.0)
+            self.play_button.setChecked(True)
+
+    def pause(self) -> None:
+        """Stop the animation (at the current time)."""
+        self.play_button.setChecked(False)
+
+    def is_playing(self) -> bool:
+        return self._anim.isActive()
+
+    def _on_play(self, on: bool) -> None:
+        self.play_button.setText("Pause" if on else "Play")
+        self.play_button.setIcon(self.style().standardIcon(
+            QStyle.StandardPixmap.SP_MediaPause if on else QStyle.StandardPixmap.SP_MediaPlay))
+        if on:
+            self._clock.start()
+            self._anim.start()
+        else:
+            self._anim.stop()
+            if self.plotter is not None and self.lod_active:
+                self.plotter.render()  # back to the full line
+
+    def _tick(self) -> None:
+        if self.paths is None or self.paths.frame_index.size == 0 or self.timeline is None:
+            self.pause()
+            return
+        dt = self._clock.restart() / 1000.0
+        t = self.time_s + self.speed() * dt
+        if t >= self.timeline.total_s:
+            self.set_time(self.timeline.total_s)
+            self.pause()
+            return
+        self.set_time(t)
+
+    def _frame_text(self, short: bool = False) -> str:
+        if self.paths is None or self.paths.frame_index.size == 0 or self.timeline is None:
+            return ""
+        tl = self.timeline
+        circ = f" · circuit {int(tl.circuits[self.frame])}" if tl.circuits.size else ""
+        text = f"t {self.time_s:.1f} / {tl.total_s:.1f} s"
+        return text if short else f"{text}{circ} (frame {self.frame + 1}/{tl.times.size})"
+
+
+class SceneMixin:
+    """The band laid so far, camera presets and framing (needs ``plotter``, ``paths``, ``data``)."""
+
+    def _add_band_actor(self, p: PathsViewData, cmap: str, clim: tuple[float, float]) -> None:
+        """The band of true width and the whole eye trajectory (thin).
+
+        The band is cut into chunks of :data:`BAND_CHUNK` quads in winding order, each a static actor
+        shown once laid; only the chunk being laid is rebuilt per frame (:meth:`_update_band`), so a
+        frame re-uploads a few hundred quads, not the whole band."""
+        import pyvista as pv
+
+        if p.eye_xyz.shape[0] >= 2:
+            self.plotter.add_mesh(pv.lines_from_points(p.eye_xyz), name="eye_path_all", color="#ecd2a8",
+                                  line_width=1.0, reset_camera=False, render=False)
+        band = p.band
+        if band is None or band.m < 2 or p.band_scalars is None:
+            return
+        sc = np.asarray(p.band_scalars[COLOUR_KEYS[self.colour_by]], dtype=float)
+        m = band.m
+        left, right = band.points[:m], band.points[m:]
+        style = {"scalars": "c", "cmap": cmap, "clim": clim, "show_scalar_bar": False, "reset_camera": False,
+                 "render": False}
+
+        def strip(a: int, b: int) -> Any:
+            """Quads a..b-1 (centre points a..b) as a mesh."""
+            pts = np.vstack([left[a:b + 1], right[a:b + 1]])
+            k = b - a
+            i = np.arange(k, dtype=np.int64)
+            faces = np.column_stack([np.full(k, 4), i, i + 1, k + 2 + i, k + 1 + i]).ravel()
+            mesh = pv.PolyData(pts, faces=faces)
+            mesh.point_data["c"] = np.concatenate([sc[a:b + 1], sc[a:b + 1]])
+            return mesh
+
+        chunks = []
+        for j, a in enumerate(range(0, m - 1, BAND_CHUNK)):
+            b = min(a + BAND_CHUNK, m - 1)
+            actor = self.plotter.add_mesh(strip(a, b), name=f"band{j}", **style)
+            chunks.append((a, b, actor))
+        self._band = {"band": band, "strip": strip, "chunks": chunks, "style": style, "last": None}
+        self._update_band()
+
+    def _update_band(self) -> None:
+        """Show the band laid by :attr:`time_s`: the chunks laid whole, and the part of the current one."""
+        if self._band is None:
+            return
+        bd = self._band
+        k = bd["band"].quads_until(self.time_s)
+        self.band_quads = k
+        if bd["last"] == k:
+            return
+        bd["last"] = k
+        current = None
+        for a, b, actor in bd["chunks"]:
+            actor.SetVisibility(b <= k)
+            if a < k < b:
+                current = (a, k)
+        if current is None:
+            self.plotter.remove_actor("band_now", render=False)
+        else:
+            self.plotter.add_mesh(bd["strip"](*current), name="band_now", **bd["style"])
+
+    def set_camera(self, preset: str) -> None:
+        """Camera preset: ``iso`` (from above and the front), ``side`` (the axis across the view) or
+        ``axis`` (along the mandrel axis); then frame the scene."""
+        if preset not in CAMERA_PRESETS:
+            raise ValueError(f"camera preset one of {CAMERA_PRESETS}, not {preset!r}")
+        if self.plotter is None:
+            return
+        if preset == "side":
+            self.plotter.view_xz(negative=False)
+        elif preset == "axis":
+            self.plotter.view_yz(negative=False)
+        else:
+            self.plotter.view_xz(negative=False)
+            self.plotter.camera.elevation = 22.0
+            self.plotter.camera.azimuth = -28.0
+        self.frame_all()
+
+    def scene_points(self) -> np.ndarray:
+        """Points that must be in view (view frame, mm): the mandrel's surface, the eye trajectory and
+        the winding paths' extremes."""
+        pts = []
+        if self.data is not None:
+            d = self.data
+            pts.append(np.column_stack([d.surface_x.ravel(), d.surface_y.ravel(), d.surface_z.ravel()])[::7])
+        if self.paths is not None and self.paths.eye_xyz.size:
+            pts.append(self.paths.eye_xyz)
+        return np.vstack(pts) if pts else np.zeros((0, 3))
+
+    def frame_all(self, render: bool = True) -> None:
+        """Frame the mandrel, the whole eye trajectory and the head (auto-framing after a run; View ->
+        Frame all)."""
+        pts = self.scene_points()
+        if self.plotter is None or pts.shape[0] == 0:
+            return
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        pad = 0.04 * float(np.max(hi - lo))
+        bounds = (lo[0] - pad, hi[0] + pad, lo[1] - pad, hi[1] + pad, lo[2] - pad, hi[2] + pad)
+        self.plotter.reset_camera(render=False, bounds=bounds)
+        # VTK fits a sphere round the bounds: a long mandrel then fills a third of the view; zoom in
+        # while every point (a sample of them) stays inside the viewport
+        sample = pts[:: max(1, pts.shape[0] // 300)]
+        cam = self.plotter.camera
+        for _ in range(12):
+            cam.zoom(1.12)
+            if not self.points_in_view(sample, margin=0.03).all():
+                cam.zoom(1.0 / 1.12)
+                break
+        if render:
+            self.plotter.render()
+
+    def points_in_view(self, pts: np.ndarray, margin: float = 0.0) -> np.ndarray:
+        """For each point (view frame, mm): True when it projects inside the 3D viewport (less a
+        ``margin``, a fraction of its size, on every side)."""
+        if self.plotter is None:
+            return np.zeros(len(pts), dtype=bool)
+        ren = self.plotter.renderer
+        w, h = self.plotter.render_window.GetSize()
+        out = np.zeros(len(pts), dtype=bool)
+        for i, p in enumerate(np.asarray(pts, dtype=float)):
+            ren.SetWorldPoint(float(p[0]), float(p[1]), float(p[2]), 1.0)
+            ren.WorldToDisplay()
+            x, y, _z = ren.GetDisplayPoint()
+            out[i] = margin * w <= x <= (1 - margin) * w and margin * h <= y <= (1 - margin) * h
+        return out
