@@ -120,7 +120,8 @@ def _seg_max(err: np.ndarray, seg_start: np.ndarray) -> np.ndarray:
 
 
 def make_blocks(machine: MachineTemplate, axis_path: AxisPath, tol_mm: float = 0.05, cyclic: bool = True,
-                min_block_time: float | None = None, state: State | None = None) -> Blocks:
+                min_block_time: float | None = None, state: State | None = None,
+                pieces: list[tuple[int, int]] | None = None) -> Blocks:
     """Linear NC blocks within ``tol_mm`` of the eye path, with preliminary times (17).
 
     Parameters
@@ -131,6 +132,12 @@ def make_blocks(machine: MachineTemplate, axis_path: AxisPath, tol_mm: float = 0
     cyclic: the program repeats (last block followed by the first) - used by (18).
     min_block_time: tau of (17), s; default ``machine.min_block_time``.
     state: progress / cancellation.
+    pieces: path-index ranges ``(start, end)`` (inclusive, each starting where the previous ends) of
+        the circuits, when circuits 2 .. n-1 repeat circuit 1 (the same axis motion up to a constant
+        mandrel angle, which the eye-position error does not see): the blocks are then computed for
+        the first, the second and the last circuit, each on its own (a block ends at every circuit
+        start), and the second circuit's blocks are replicated into the repeated ones (the cost of
+        three circuits instead of all).  ``None``: the whole path as one.
 
     Returns
     -------
@@ -148,6 +155,40 @@ def make_blocks(machine: MachineTemplate, axis_path: AxisPath, tol_mm: float = 0
     fmax = machine.limits("max_speed")
     # time-like progress along the path (the metric of (17))
     w = np.concatenate(([0.0], np.cumsum(np.max(np.abs(np.diff(q, axis=0)) / fmax, axis=1))))
+    if pieces is not None and len(pieces) >= 4:
+        breaks = np.zeros(n, dtype=bool)
+        seg_err = np.zeros(n)
+        for k, (a, b) in enumerate([pieces[0], pieces[1], pieces[-1]]):
+            check_cancel(state)
+            br, se = _douglas_peucker(machine, q[a:b + 1], eye[a:b + 1], w[a:b + 1] - w[a], tol_mm, None)
+            breaks[a:b + 1] |= br
+            seg_err[a:b] = se[:-1]
+            if k == 1:                           # the repeated circuits: the second one's blocks
+                for a_k, b_k in pieces[2:-1]:
+                    breaks[a_k:b_k + 1] |= br
+                    seg_err[a_k:b_k] = se[:-1]
+            if state is not None:
+                state.progress(0.3 * (k + 1), f"linear approximation: circuit pieces {k + 1}/3")
+    else:
+        breaks, seg_err = _douglas_peucker(machine, q, eye, w, tol_mm, state)
+    index = np.flatnonzero(breaks)
+    qb = q[index]
+    delta = np.diff(qb, axis=0)
+    t17 = preliminary_times(delta, fmax, tau)
+    max_error = seg_err[index[:-1]]
+    index, qb, delta, t17, t2, alpha, max_error = _ro(index, qb, delta, t17, t17.copy(),
+                                                      np.ones_like(t17), max_error)
+    tot = float(t17.sum())
+    if state is not None:
+        state.progress(1.0, f"{delta.shape[0]} blocks")
+    return Blocks(machine.name, machine.axis_names, index, qb, delta, t17, t2, alpha, max_error,
+                  float(tol_mm), cyclic, tot, tot, (tot,))
+
+
+def _douglas_peucker(machine: MachineTemplate, q: np.ndarray, eye: np.ndarray, w: np.ndarray, tol_mm: float,
+                     state: State | None) -> tuple[np.ndarray, np.ndarray]:
+    """Block ends (bool per point) and the largest error of the block starting at each end."""
+    n = q.shape[0]
     breaks = np.zeros(n, dtype=bool)
     breaks[[0, n - 1]] = True
     seg_err = np.zeros(n)                    # max error of the block starting at each break
@@ -162,18 +203,7 @@ def make_blocks(machine: MachineTemplate, axis_path: AxisPath, tol_mm: float = 0
         _split_level(machine, q, eye, w, P, breaks, seg_err, tol_mm, state)
         if state is not None:
             state.progress(0.9 * (lev + 1) / len(strides), f"linear approximation: {int(breaks.sum())} ends")
-    index = np.flatnonzero(breaks)
-    qb = q[index]
-    delta = np.diff(qb, axis=0)
-    t17 = preliminary_times(delta, fmax, tau)
-    max_error = seg_err[index[:-1]]
-    index, qb, delta, t17, t2, alpha, max_error = _ro(index, qb, delta, t17, t17.copy(),
-                                                      np.ones_like(t17), max_error)
-    tot = float(t17.sum())
-    if state is not None:
-        state.progress(1.0, f"{delta.shape[0]} blocks")
-    return Blocks(machine.name, machine.axis_names, index, qb, delta, t17, t2, alpha, max_error,
-                  float(tol_mm), cyclic, tot, tot, (tot,))
+    return breaks, seg_err
 
 
 def _split_level(machine: MachineTemplate, q: np.ndarray, eye: np.ndarray, w: np.ndarray, P: np.ndarray,

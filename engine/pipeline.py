@@ -442,7 +442,7 @@ def _run_stage(res: PipelineResult, stage: str, state: State | None) -> Pipeline
 
         blocks = make_blocks(
             res.machine, res.axes, tol_mm=job.post.tolerance_mm, min_block_time=job.post.min_block_time_s,
-            state=SubState(state, 0.0, 0.5) if state is not None else None,
+            state=SubState(state, 0.0, 0.5) if state is not None else None, pieces=_block_pieces(res),
         )
         if job.timelaw.method == "blocks":
             blocks = optimise_block_times(blocks, res.machine, state=SubState(state, 0.5, 1.0) if state else None)
@@ -640,6 +640,35 @@ def _circuit_plan(res: PipelineResult, s: np.ndarray, X: np.ndarray) -> list[tup
         if (b - a != b1 - a1 or np.any(np.abs(X[a:b + 1] - X[a] - dq_ref) > tol_q)
                 or np.any(np.abs(s[a:b + 1] - s[a] - ds_ref) > tol_s)):
             return whole
+    return pieces
+
+
+_BLOCKS_REPLICATE_MIN = 100   # circuits from which the blocks of the repeated circuit are computed once
+
+
+def _block_pieces(res: PipelineResult) -> list[tuple[int, int]] | None:
+    """The circuits for :func:`engine.blocks.make_blocks`'s replication, when the program has at
+    least ``_BLOCKS_REPLICATE_MIN`` circuits and circuits 2 .. n-1 repeat circuit 1 up to a constant
+    mandrel angle only (to 1e-9 relative).  Smaller programs (every shipped example) are approximated
+    as a whole, as before."""
+    if int(getattr(res.line, "circuits", 1) or 1) < _BLOCKS_REPLICATE_MIN or res.eye is None:
+        return None
+    machine, q = res.machine, np.asarray(res.axes.q, dtype=float)
+    X = machine.to_internal(q)
+    pieces = _circuit_plan(res, np.asarray(res.eye.s, dtype=float), X)
+    if len(pieces) < 4:
+        return None
+    a1, b1 = pieces[1]
+    ref = X[a1:b1 + 1] - X[a1]
+    tol = 1e-9 * (1.0 + np.abs(X).max(axis=0))
+    mandrel = machine.axis_index("mandrel")
+    if mandrel is None:
+        return None
+    for a, b in pieces[2:-1]:
+        off = X[a] - X[a1]
+        off[mandrel] = 0.0
+        if np.any(np.abs(off) > tol) or np.any(np.abs(X[a:b + 1] - X[a] - ref) > tol):
+            return None
     return pieces
 
 

@@ -302,3 +302,36 @@ def test_state_progress(state):
     b = make_blocks(m, ap, 0.05, state=state)
     optimise_block_times(b, m, state=state)
     assert state.fractions and state.fractions[-1] <= 1.0
+
+
+def test_blocks_of_repeated_circuits_are_computed_once() -> None:
+    """Issue 16: from 100 circuits on, the blocks of circuits 2 .. n-1 are circuit 2's, replicated (the
+    mandrel angle differs, the eye error does not see it).  Every block still holds the tolerance
+    (measured independently on all points), every middle circuit has the same block pattern, and the
+    program is no longer than the whole-path approximation's (within 0.5 %)."""
+    from pathlib import Path
+
+    from engine.job import load_job
+    from engine.pipeline import _block_errors, _block_pieces, run_pipeline
+
+    path = Path(__file__).resolve().parents[1] / "resources" / "examples" / "pressure_vessel.toml"
+    job = load_job(path)
+    job = job.replace(winding={**job.winding.model_dump(), "circuits": 110, "points_per_pass": 120},
+                      payout={**job.payout.model_dump(), "grid_points": 200})
+    res = run_pipeline(job, path, upto="axes")
+    pieces = _block_pieces(res)
+    assert pieces is not None and len(pieces) == 110
+    rep = make_blocks(res.machine, res.axes, tol_mm=0.05, pieces=pieces)
+    whole = make_blocks(res.machine, res.axes, tol_mm=0.05)
+    idx = np.asarray(rep.index)
+    err = _block_errors(res.machine, res.axes, idx)
+    assert err.max() <= 0.05 * (1 + 1e-9)
+    assert np.abs(err - rep.max_error).max() <= 1e-8
+    a1, b1 = pieces[1]
+    pat1 = idx[(idx >= a1) & (idx <= b1)] - a1
+    for a, b in pieces[2:-1]:
+        assert np.array_equal(idx[(idx >= a) & (idx <= b)] - a, pat1)
+    assert rep.t17.sum() <= whole.t17.sum() * 1.005
+    # the shipped examples (fewer than 100 circuits) are approximated as a whole, as before
+    small = run_pipeline(load_job(path), path, upto="axes")
+    assert _block_pieces(small) is None
