@@ -95,3 +95,37 @@ def test_geometric_error_comes_back_to_its_cell_and_corner_fillet(qtbot, tmp_pat
         assert "is not on the" in item.toolTip()
     finally:
         close_window(w)
+
+
+def test_plot_drags_the_joints_of_a_sketch_with_snap(qtbot, tmp_path) -> None:
+    from engine.job import load_job
+
+    job = load_job(ROOT / "resources/examples/pipe.toml").replace(mandrel={
+        "kind": "segments", "start_mm": [0.0, 60.0],
+        "segments": [{"type": "line", "to_mm": [800.0, 75.0]},
+                     {"type": "line", "to_mm": [1000.0, 60.0], "corner": True, "fillet_mm": 50.0}]})
+    p = tmp_path / "seg.toml"
+    p.write_text(job.to_toml(), "utf-8")
+    w = shown_window(qtbot, p)
+    try:
+        ed = w.plot.editor
+        assert ed.segment_mode
+        z, r = ed.committed_points()
+        assert list(z) == [0.0, 800.0, 1000.0] and list(r) == [60.0, 75.0, 60.0]  # start + two ends: 3 joints
+        w.plot.set_snap(True, 0.5)
+        assert ed.move_point(1, 700.2, 80.1) is None
+        assert w.wait_idle()
+        segs = w.job.mandrel.segments
+        assert segs[0].to_mm == (700.0, 80.0) and segs[1].corner and segs[1].fillet_mm == 50.0  # snapped, kept
+        assert w.mandrel_panel.segments_table.table.item(0, 1).text() == "700"  # the table follows
+        assert [s.kind for s in w.mandrel.segments] == ["line", "arc", "line"]
+        # adding or removing a joint on the plot is refused (segments are added in the table)
+        before = w.job
+        assert ed.add_point(900.0, 70.0) is not None
+        assert ed.delete_point(1) is not None
+        assert w.wait_idle() and w.job == before
+        # z must increase
+        assert ed.move_point(1, 1200.0, 70.0) is not None
+        assert w.wait_idle() and w.job == before
+    finally:
+        close_window(w)

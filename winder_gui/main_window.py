@@ -45,7 +45,7 @@ from PySide6.QtWidgets import (
 
 from engine import __version__
 from engine.errors import InputError
-from engine.job import FileSpec, PointsSpec, default_job
+from engine.job import FileSpec, PointsSpec, SegmentsSpec, default_job
 from winder_gui import texts, window_layout, window_menus
 from winder_gui.autosave import (  # noqa: F401 - re-exported for callers of the old module
     AUTOSAVE_HEADER,
@@ -55,6 +55,7 @@ from winder_gui.autosave import (  # noqa: F401 - re-exported for callers of the
     process_autosave_owner,
 )
 from winder_gui.document import JobDocument
+from winder_gui.panels.segments_table import apply_handles, segment_handles
 from winder_gui.results_view import ResultsPresenter
 from winder_gui.run_controller import RunController
 from winder_gui.settings import prompts_enabled, recent_files
@@ -298,6 +299,9 @@ class MainWindow(QMainWindow):
         self.mandrel_panel.hint = (res.mandrel.r_max, res.mandrel.length)
         reset = purpose in ("open", "new", "import", "restore")
         self.plot.set_data(res.data, sketch=isinstance(res.job.mandrel, PointsSpec), reset_view=reset)
+        if isinstance(res.job.mandrel, SegmentsSpec):
+            hz, hr, _ = segment_handles(res.job.mandrel)
+            self.plot.set_segment_handles(hz, hr)
         self.plot.show_message("")
         self.view3d.set_data(res.data, reset_camera=reset)
         m = res.mandrel
@@ -365,6 +369,15 @@ class MainWindow(QMainWindow):
         self._update_run_state()
 
     def _on_points_edited(self, z: Any, r: Any) -> None:
+        if isinstance(self.job.mandrel, SegmentsSpec):  # a joint of the sketch dragged on the plot
+            try:
+                seg = apply_handles(self.job.mandrel, z, r)
+            except ValueError as exc:
+                self.plot.revert_points()
+                self.plot.show_message(f"Not applied: {exc}")
+                return
+            self.ctl.queue_edit(self.job.replace(mandrel=seg), "points")
+            return
         try:
             spec = PointsSpec(z_mm=[float(v) for v in z], r_mm=[float(v) for v in r])
         except ValueError as exc:  # pydantic: not finite

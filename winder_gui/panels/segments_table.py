@@ -384,3 +384,29 @@ class SegmentsTable(QWidget):
         self._set_message("")
         self.problem.emit("")
         self.segments_edited.emit(spec)
+
+
+def segment_handles(spec: SegmentsSpec) -> tuple[list[float], list[float], list[int]]:
+    """The points of a sketch that can be dragged on the r(z) plot: the start point (owner −1) and the
+    end point of every segment that has one (owner = its index); z, r in mm."""
+    z, r, owners = [float(spec.start_mm[0])], [float(spec.start_mm[1])], [-1]
+    for i, sg in enumerate(spec.segments):
+        if sg.to_mm is not None:
+            z.append(float(sg.to_mm[0]))
+            r.append(float(sg.to_mm[1]))
+            owners.append(i)
+    return z, r, owners
+
+
+def apply_handles(spec: SegmentsSpec, z: Any, r: Any) -> SegmentsSpec:
+    """``spec`` with its handles (:func:`segment_handles`) moved to (z, r) mm; same number of handles."""
+    _, _, owners = segment_handles(spec)
+    if len(z) != len(owners) or len(r) != len(owners):
+        raise ValueError("add or remove segments in the table (points of a sketch of segments are its joints)")
+    data = spec.model_dump(exclude_none=True)
+    for k, i in enumerate(owners):
+        if i < 0:
+            data["start_mm"] = [float(z[k]), float(r[k])]
+        else:
+            data["segments"][i]["to_mm"] = [float(z[k]), float(r[k])]
+    return SegmentsSpec.model_validate(data)

@@ -44,6 +44,18 @@ def snap_to_grid(v: float, step: float) -> float:
     return float(round(k * step, digits))
 
 
+def check_joints(z: FloatArray, r: FloatArray) -> tuple[int, str] | None:
+    """The first problem of moved joints of a sketch of segments (z increasing, r >= 0), or None."""
+    for i in range(len(z)):
+        if not (np.isfinite(z[i]) and np.isfinite(r[i])) or r[i] < 0:
+            return i, f"joint {i + 1} must have a finite z and r >= 0"
+    for i in range(1, len(z)):
+        if not z[i] > z[i - 1]:
+            return i, (f"z must increase along the axis: joint {i + 1} at z = {z[i]:.4g} mm is not after "
+                       f"{z[i - 1]:.4g} mm")
+    return None
+
+
 class PointEditor(pg.ScatterPlotItem):
     """Draggable, addable, deletable generatrix points (mm) on a pyqtgraph plot.
 
@@ -78,6 +90,9 @@ class PointEditor(pg.ScatterPlotItem):
         self.message = ""
         self.snap_step = 0.0
         """Grid step of the snap in mm; 0 = snap off."""
+        self.segment_mode = False
+        """True while the points are the joints of a sketch of segments: they move, but are neither added
+        nor removed here (that is a segment of the table), and 2 or 3 of them are enough."""
 
     # -- data ------------------------------------------------------------------------------------
     def set_points(self, z: FloatArray, r: FloatArray, sketch: bool) -> None:
@@ -146,6 +161,9 @@ class PointEditor(pg.ScatterPlotItem):
 
     def add_point(self, z: float, r: float) -> str | None:
         """Insert a point at (z, r) mm (snapped when the snap is on) in order of z."""
+        if self.segment_mode:
+            self._set_message("Not applied: add segments in the table (the points are the joints of the segments)")
+            return self.message
         i = int(np.searchsorted(self._z, z))
         z, r = self.snap(z, r, (i - 1, i))
         i = int(np.searchsorted(self._z, z))
@@ -162,11 +180,14 @@ class PointEditor(pg.ScatterPlotItem):
         """Remove point ``i``."""
         if not 0 <= i < len(self._z):
             return None
+        if self.segment_mode:
+            self._set_message("Not applied: delete segments in the table (the points are the joints of the segments)")
+            return self.message
         self.selected_index = -1
         return self._try(np.delete(self._z, i), np.delete(self._r, i), True, focus=None)
 
     def _try(self, wz: FloatArray, wr: FloatArray, finish: bool, focus: int | None) -> str | None:
-        bad = check_points(wz, wr)
+        bad = check_joints(wz, wr) if self.segment_mode else check_points(wz, wr)
         self._work_z, self._work_r = wz, wr
         self._bad = bad[0] if bad else None
         msg = bad[1] if bad else ""
@@ -352,6 +373,7 @@ class ProfilePlot(QWidget):
                 reg.setZValue(-10)
                 p.addItem(reg)
                 self._regions.append(reg)
+        self.editor.segment_mode = False
         self.editor.set_points(data.handle_z, data.handle_r, sketch)
         zmin, zmax, rmax = float(data.z[0]), float(data.z[-1]), float(np.max(data.r))
         (x0, x1), (y0, y1) = self.plot_r.getViewBox().viewRange()
@@ -371,6 +393,12 @@ class ProfilePlot(QWidget):
         """The plotted r(z) curve (mm)."""
         x, y = self.curve_r.getData()
         return np.asarray(x), np.asarray(y)
+
+    def set_segment_handles(self, z: FloatArray, r: FloatArray) -> None:
+        """Make the joints (z, r mm) of a sketch of segments the editable points: they can be dragged
+        (with the snap), not added or removed (see :func:`winder_gui.panels.segments_table.segment_handles`)."""
+        self.editor.segment_mode = True
+        self.editor.set_points(np.asarray(z, dtype=float), np.asarray(r, dtype=float), True)
 
     def revert_points(self) -> None:
         """Show the points of the current data again (after a rejected edit)."""
