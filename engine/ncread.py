@@ -459,4 +459,46 @@ def match_contacts(eye: np.ndarray, c: np.ndarray, tau: np.ndarray, window: int 
     return idx, miss
 
 
-__all__ = ["NcProgram", "Simulation", "match_contacts", "read_nc", "simulate"]
+def guess_dialect(path: str | Path, text: str) -> str:
+    """The post-processor dialect a program is most likely written in (file suffix, framing, comments)."""
+    ext = Path(path).suffix.lower()
+    head = text[:4000]
+    if ext == ".csv" or ("path_index" in head and head.lstrip().startswith(("# ", "block"))):
+        return "csv"
+    if ext == ".mpf":
+        return "sinumerik"
+    if ext == ".gcode" or (";" in head and "(" not in head[:200]):
+        return "marlin"
+    if text.lstrip().startswith("%"):
+        return "fanuc"
+    return "linuxcnc"
+
+
+def read_back(path: str | Path, machine: MachineTemplate, controller: str | None = None, line: Any | None = None,
+              back_turn_tol_deg: float = 0.01) -> tuple[Simulation, str]:
+    """Read the NC file ``path`` and replay it on ``machine``: ``(simulation, controller profile name)``.
+
+    The profile is ``controller`` or the one of the file's dialect that addresses the machine's axes.
+    """
+    from engine.machine_setup import controller_for
+
+    p = Path(path)
+    try:
+        raw = p.read_bytes()
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", file=p) from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputError("not a text file", file=p, line=raw[: exc.start].count(b"\n") + 1) from None
+    if controller:
+        from engine.post import load_controller
+
+        profile = load_controller(controller)
+    else:
+        profile = controller_for(guess_dialect(p, text), None, machine)
+    prog = read_nc(text, machine, profile, file=p)
+    return simulate(prog, machine, line, back_turn_tol_deg=back_turn_tol_deg), profile.name
+
+
+__all__ = ["NcProgram", "Simulation", "guess_dialect", "match_contacts", "read_back", "read_nc", "simulate"]

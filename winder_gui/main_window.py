@@ -97,6 +97,8 @@ class MainWindow(QMainWindow):
     laws_done = Signal(object)
     timelaw_done = Signal(object)
     nc_written = Signal(object)
+    nc_read = Signal(object)
+    """An NC program was read back (File > Open NC program): :class:`winder_gui.tasks.NcReadback`."""
 
     job = _delegate("doc", "job", "The current :class:`engine.job.Job`.")
     job_path = _delegate("doc", "path", "The job's file (``None``: not saved).")
@@ -170,6 +172,7 @@ class MainWindow(QMainWindow):
         ctl.laws_failed.connect(lambda exc, tb: self.report_dialog("Payout law comparison failed", exc, tb))
         ctl.timelaw_failed.connect(self._on_timelaw_failed)
         ctl.nc_written.connect(self._on_nc_written)
+        ctl.nc_read.connect(self._on_nc_read)
         ctl.exported.connect(lambda p: self._status(f"Exported the mandrel to {p}"))
         ctl.io_failed.connect(self.report_dialog)
         res.status.connect(self._status)
@@ -514,6 +517,23 @@ class MainWindow(QMainWindow):
                 return False
         self.ctl.write_nc(p, bool(force))
         return True
+
+    def open_nc(self, path: str | Path) -> None:
+        """Read an NC program back on the job's machine (worker) and draw its eye path and laid fibre."""
+        self._status(f"Reading {Path(path).name} back on {self.job.machine.template}…")
+        self.ctl.read_nc(Path(path))
+
+    def _on_nc_read(self, out: Any) -> None:
+        self.nc_readback = out
+        self.view3d.set_paths(out.paths)
+        r = out.report
+        viol = r.get("violations", [])
+        fibre = f", laid fibre {r['fibre_length_mm'] / 1000:.2f} m" if "fibre_length_mm" in r else ""
+        msg = (f"{out.path.name} on {r['machine']} ({r['controller']}): {r['moves']} moves, program time "
+               f"{r['program_time_s']:.2f} s (with the limits {r['time_with_limits_s']:.2f} s){fibre}; "
+               + (f"{len(viol)} kind(s) of limit violation: {viol[0]['message']}" if viol else "within every limit"))
+        self._status(msg, error=bool(viol))
+        self.nc_read.emit(out)
 
     def _on_nc_written(self, path: Path) -> None:
         self._status(f"Wrote the NC program to {path}")

@@ -71,6 +71,7 @@ class RunController(QObject):
     timelaw_done = Signal(object)
     timelaw_failed = Signal(object, str)
     nc_written = Signal(object)
+    nc_read = Signal(object)
     exported = Signal(object)
     io_failed = Signal(str, object, str)
 
@@ -105,6 +106,8 @@ class RunController(QObject):
         self.tl_runner.progress.connect(self.progress)
         self.nc_runner = self._runner(self.nc_written.emit,
                                       lambda exc, tb: self.io_failed.emit("NC program not written", exc, tb))
+        self.read_runner = self._runner(self.nc_read.emit,
+                                        lambda exc, tb: self.io_failed.emit("NC program not read", exc, tb))
         self.edit_timer = self._timer(EDIT_DEBOUNCE_MS, self.submit_pending)
         self.run_timer = self._timer(RUN_DEBOUNCE_MS, lambda: self.run_now(explicit=False))
         doc.edited.connect(self.after_edit)
@@ -125,7 +128,8 @@ class RunController(QObject):
         return t
 
     def runners(self) -> tuple[JobRunner, ...]:
-        return (self.runner, self.io_runner, self.pipe_runner, self.laws_runner, self.tl_runner, self.nc_runner)
+        return (self.runner, self.io_runner, self.pipe_runner, self.laws_runner, self.tl_runner, self.nc_runner,
+                self.read_runner)
 
     def _on_busy(self, _busy: bool = False) -> None:
         self.doc.set_running(self.pipe_runner.is_busy())
@@ -278,6 +282,12 @@ class RunController(QObject):
         from winder_gui.tasks import write_task
 
         self.nc_runner.submit(write_task, self.doc.result, path, bool(force))
+
+    def read_nc(self, path: Path) -> None:
+        """Read the NC program ``path`` back on the job's machine in the worker (File > Open NC program)."""
+        from winder_gui.tasks import readback_task
+
+        self.read_runner.submit(readback_task, Path(path), self.doc.job, self.doc.path, self.doc.result)
 
     def export_block_reason(self) -> str:
         """Why Export NC is refused now ('' when allowed): a bad field, no program, or stale results."""

@@ -50,6 +50,46 @@ def pipeline_task(job: Job, job_path: Path | None, previous: Any, upto: str, *, 
 
 
 @dataclass(frozen=True)
+class NcReadback:
+    """An NC program read back on the job's machine (File > Open NC program)."""
+
+    path: Path
+    report: dict[str, Any]
+    paths: Any
+    """:class:`winder_gui.views.geometry.PathsViewData`: the laid fibre (the winding line between the first
+    and the last contact the program reaches) and the eye path of the program (forward kinematics)."""
+
+
+def readback_task(path: Path, job: Job, job_path: Path | None, result: Any, *, state: Any) -> NcReadback:
+    """Read ``path`` back on the job's machine (the run's, when there is one) and match it to the job's
+    winding line (:func:`engine.ncread.read_back`); the 3D view's data are thinned here, in the worker."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from engine.ncread import read_back
+    from engine.pipeline import run_pipeline, setup_machine_for_job
+    from winder_gui.views.geometry import paths_view_data
+    from winder_gui.views.view3d import MAX_DISPLAY_POINTS, MAX_FRAMES
+
+    line = getattr(result, "line", None)
+    if line is None:
+        line = run_pipeline(job, job_path, upto="winding", state=state).line
+    check_cancel(state)
+    machine = setup_machine_for_job(job, job_path)
+    sim, profile = read_back(path, machine, job.post.controller, line,
+                             back_turn_tol_deg=float(job.machine.setup.back_turn_tol_deg))
+    check_cancel(state)
+    a, b = int(sim.contact_index[0]), int(sim.contact_index[-1]) + 1
+    laid = SimpleNamespace(**{k: np.asarray(getattr(line, k))[a:b] for k in ("z", "xyz", "circuit", "r", "beta",
+                                                                              "lam")})
+    eye = SimpleNamespace(eye_xyz=sim.eye_xyz, contact_xyz=np.asarray(line.xyz)[sim.contact_index],
+                          u=np.zeros(0))
+    paths = paths_view_data(laid, eye, MAX_DISPLAY_POINTS, MAX_FRAMES)
+    return NcReadback(Path(path), {**sim.report, "controller": profile}, paths)
+
+
+@dataclass(frozen=True)
 class BuildResult:
     """A job whose mandrel was built, with the data the views show."""
 

@@ -52,6 +52,7 @@ def build_menus(w: MainWindow) -> None:
     add(f, "export", "&Export mandrel…", lambda: action_export_mandrel(w), "Ctrl+E")
     add(f, "export_nc", "Export &NC program…", w.action_export_nc, "Ctrl+Shift+E")
     add(f, "export_plot", "Export current &plot…", lambda: action_export_plot(w), "Ctrl+Shift+P")
+    add(f, "open_nc", "Open NC program (read back)…", lambda: action_open_nc(w), "Ctrl+Shift+O")
     f.addSeparator()
     add(f, "quit", "&Quit", w.close, QKeySequence.StandardKey.Quit)
 
@@ -165,6 +166,13 @@ def action_open(w: MainWindow) -> None:
     path, _ = QFileDialog.getOpenFileName(w, "Open job", str(w.doc.start_dir()), JOB_FILTER)
     if path:
         w.open_job(path)
+
+
+def action_open_nc(w: MainWindow) -> None:
+    path, _ = QFileDialog.getOpenFileName(w, "Open NC program (read back on the job's machine)",
+                                          str(w.doc.start_dir()), NC_FILTER)
+    if path:
+        w.open_nc(path)
 
 
 def ask_save_path(w: MainWindow) -> str:

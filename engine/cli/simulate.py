@@ -6,8 +6,6 @@ import argparse
 import sys
 from pathlib import Path
 
-from engine.errors import InputError
-
 NAME = "simulate"
 HELP = ("Read an NC program back (ours or foreign G-code), replay it on a machine template and report time, "
         "fibre length, axis ranges and every limit violation.")
@@ -25,33 +23,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
 
 
-def _dialect_of(path: Path, text: str) -> str:
-    ext = path.suffix.lower()
-    if ext == ".csv" or text.lstrip().startswith(("# ", "block")) and "path_index" in text[:4000]:
-        return "csv"
-    if ext == ".mpf":
-        return "sinumerik"
-    if ext == ".gcode" or ";" in text[:4000] and "(" not in text[:200]:
-        return "marlin"
-    if text.lstrip().startswith("%"):
-        return "fanuc"
-    return "linuxcnc"
-
-
 def run(args: argparse.Namespace) -> int:
     from engine.cli import dump_json
-    from engine.machine_setup import controller_for
-    from engine.ncread import read_nc, simulate
+    from engine.ncread import read_back
 
     path = Path(args.file)
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", file=path) from None
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise InputError("not a text file", file=path, line=raw[: exc.start].count(b"\n") + 1) from None
     job = line = None
     tol = 0.01
     if args.job:
@@ -60,20 +36,13 @@ def run(args: argparse.Namespace) -> int:
         job = load_job(args.job)
         tol = float(job.machine.setup.back_turn_tol_deg)
     machine = _machine(args, job)
-    dialect = _dialect_of(path, text)
-    if args.controller:
-        from engine.post import load_controller
-
-        profile = load_controller(args.controller)
-    else:
-        profile = controller_for(dialect, None, machine)
-    prog = read_nc(text, machine, profile, file=path)
     if job is not None:
         from engine.pipeline import run_pipeline
 
         line = run_pipeline(job, args.job, upto="winding").line
-    sim = simulate(prog, machine, line, back_turn_tol_deg=tol)
-    rep = {**sim.report, "controller": profile.name}
+    sim, profile_name = read_back(path, machine, args.controller, line, back_turn_tol_deg=tol)
+    prog = sim.program
+    rep = {**sim.report, "controller": profile_name}
     if args.json:
         dump_json(rep, sys.stdout)
     else:
