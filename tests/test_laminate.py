@@ -362,3 +362,19 @@ def test_non_geodesic_layer_on_grown_surface_kg_over_kn_equals_lambda() -> None:
     assert keep.sum() > 500
     assert np.max(np.abs(ratio[keep] - lam[keep])) < 2e-3
     assert line.max_abs_lambda <= line.mu
+
+
+@pytest.mark.parametrize(("edit", "field", "words"), [
+    (('kind = "hoop"\npasses = 2', 'kind = "polar"'), "layer.1.kind", "two polar openings"),
+    (("overlap = 0.25", "overlap = 0.25\nz_range_mm = [100.0, 104.0]"), "layer.3.z_range_mm", "narrower than the band"),
+    (("angle_deg = 55.0", "angle_deg = 55.0\nband = {width_mm = 1000.0}"), "layer.2.band.width_mm", "wider"),
+])
+def test_layer_that_cannot_exist_exit_2_names_layer(tmp_path: Path, capsys: pytest.CaptureFixture[str], edit,
+                                                    field: str, words: str) -> None:
+    job = tmp_path / "j.toml"
+    job.write_text(PIPE.replace(*edit))
+    out = tmp_path / "o.ngc"
+    assert main(["run", str(job), "-o", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert f"field '{field}'" in err and words in err and str(job) in err, err
+    assert not out.exists()
