@@ -150,8 +150,9 @@ class PipelineResult:
                                   "limit": g.limit, "places": g.places, "count": g.points, **g.first}
                                  for g in self.violation_groups()]
         if self.line is not None:
+            keep = ("slips", "bridging", "turnarounds")
             rep["winding"] = {
-                k: v for k, v in self.line.summary().items() if not isinstance(v, list | np.ndarray) or k == "slips"
+                k: v for k, v in self.line.summary().items() if not isinstance(v, list | np.ndarray) or k in keep
             }
         if self.eye_circuit is not None:
             rep["payout"] = {

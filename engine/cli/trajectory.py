@@ -63,6 +63,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"turnarounds z = {report['z_turn'][0]:.6g} / {report['z_turn'][1]:.6g} mm ({', '.join(line.end_kinds)})")
         print(f"pattern p = {line.pattern_p}, q = {line.pattern_q} ({line.lead}), {line.circuits} circuits, "
               f"Δv = {math.degrees(line.twist_per_circuit_rad):.4f}°, coverage {line.coverage['fraction']:.4f}")
+        for t in line.turnarounds:
+            print(f"{t['side']} turnaround: {t['how']}")
         for a, b in line.slips:
             print(f"SLIPS (|λ| > μ) in z {a:.6g} .. {b:.6g} mm")
         for a, b in line.bridging:
