@@ -82,6 +82,13 @@ def check_output_path(path: str | Path, what: str = "output") -> Path:
     p = Path(path)
     if str(path) == "" or p.name in ("", ".", ".."):
         raise InputError(f"the {what} path names a folder, not a file", file=str(path))
+    try:
+        return _check_output_path(p, what)
+    except OSError as exc:  # e.g. a name longer than the file system allows
+        raise _os_error(exc, p) from None
+
+
+def _check_output_path(p: Path, what: str) -> Path:
     if p.is_dir():
         raise InputError(f"the {what} path is a folder; give a file name", file=p)
     parent = p.parent if str(p.parent) else Path(".")

@@ -218,10 +218,48 @@ def _mutate_text(text: str, rng: random.Random) -> str:
     return "\n".join(lines) + "\n"
 
 
+SIZE_ATTACKS = [("winding", "circuits", ["1e9", "1000000000000", "100000", "3000"]),
+                ("winding", "pattern_p", ["1000000000", "1e12", "50000", "997"]),
+                ("winding", "layers", ["1000000", "1e6", "5000", "40"]),
+                ("winding", "points_per_pass", ["200000", "199999", "50"]),
+                ("winding", "dwell_deg", ["[1e308, 1e308]", "[1e6, 0]", "[3600, 3600]"]),
+                ("band", "width_mm", ["1e-9", "1e-300", "0.001", "1e6"]),
+                ("mandrel", "radius_mm", ["1e6", "1e-6", "1e308", "100000"]),
+                ("mandrel", "cylinder_length_mm", ["1e6", "1e308", "0"]),
+                ("mandrel", "length_mm", ["1e6", "1e-9", "1e308"]),
+                ("payout", "grid_points", ["100000", "50"]),
+                ("payout", "clearance_mm", ["1e308", "1e6", "0"]),
+                ("timelaw", "levels", ["5000", "4096", "2000"]),
+                ("timelaw", "method", ['"tube"', '"dp"', '"toppra"']),
+                ("post", "min_block_time_s", ["1e308", "1e-300", "100"]),
+                ("post", "tolerance_mm", ["1e308", "1e-300", "1e-9"]),
+                ("band", "friction", ["1e-9", "0", "1e308"])]
+
+
+def _size_attack(text: str, rng: random.Random) -> str:
+    sec, key, vals = rng.choice(SIZE_ATTACKS)
+    lines = text.splitlines()
+    cur = ""
+    for i, ln in enumerate(lines):
+        m = re.match(r"^\[([^\]]+)\]", ln)
+        if m:
+            cur = m.group(1)
+        elif cur == sec and re.match(rf"^{re.escape(key)}\s*=", ln):
+            lines[i] = f"{key} = {rng.choice(vals)}"
+            return "\n".join(lines) + "\n"
+    for i, ln in enumerate(lines):
+        if ln.strip() == f"[{sec}]":
+            lines.insert(i + 1, f"{key} = {rng.choice(vals)}")
+            return "\n".join(lines) + "\n"
+    return text
+
+
 def mutate_job(text: str, rng: random.Random) -> str:
-    """One to three mutations of a job document (most often a field set to an extreme value)."""
+    """One to three mutations of a job document: a size attack (a count, a length or a band width
+    far out of range), a field set to an extreme value, or a textual mutation."""
     for _ in range(rng.randint(1, 3)):
-        text = _set_field(text, rng) if rng.random() < 0.65 else _mutate_text(text, rng)
+        x = rng.random()
+        text = _size_attack(text, rng) if x < 0.4 else _set_field(text, rng) if x < 0.75 else _mutate_text(text, rng)
     return text
 
 

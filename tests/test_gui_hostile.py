@@ -95,3 +95,40 @@ def test_absurd_job_is_refused_by_the_budget_and_the_setting_raises_it(window, t
     assert w.job.winding.circuits == 300  # the job stays, the user can fix it
     set_memory_budget("")
     assert apply_memory_budget() == budget.DEFAULT_MAX_MEMORY_BYTES
+
+
+def test_gui_survives_fuzzed_jobs_and_profiles(window, tmp_path) -> None:
+    """Seeded mutations of jobs and profiles through File -> Open and Import: each either loads or shows
+    a message (never a traceback) and leaves the job as it was."""
+    import random
+
+    from fuzz_cases import SMALL_PIPE, SMALL_VESSEL, mutate_job, mutate_profile
+
+    rng = random.Random(19)
+    w = window
+    outcomes = {"loaded": 0, "refused": 0}
+    for i in range(16):
+        before = w.job
+        w.last_error = ""
+        if i % 2 == 0:
+            f = tmp_path / f"job{i}.toml"
+            f.write_bytes(mutate_job(rng.choice([SMALL_PIPE, SMALL_VESSEL]), rng).encode("utf-8", "replace"))
+            w.open_job(f)
+        else:
+            src = rng.choice([EXAMPLES / "bottle_profile.csv", EXAMPLES / "vessel_profile.dxf"])
+            f = tmp_path / f"profile{i}{src.suffix}"
+            f.write_bytes(mutate_profile(src.read_bytes(), rng))
+            w.import_generatrix(f)
+        assert w.wait_idle(120000)
+        assert w.isVisible()
+        if w.last_error:
+            outcomes["refused"] += 1
+            assert "Traceback" not in w.last_error and "Internal error" not in w.last_error, w.last_error
+            assert f.name in w.last_error, w.last_error
+            assert w.job == before
+            w.error_box.close()
+        else:
+            outcomes["loaded"] += 1
+            assert w.job != before or w.job_path == f
+    print(outcomes)
+    assert outcomes["refused"] >= 4 and outcomes["loaded"] >= 1, outcomes

@@ -431,3 +431,9 @@ def test_stl_tolerance_outside_its_range_is_refused(tmp_path, capsys, tol) -> No
     out = tmp_path / "m.stl"
     rc, _, err = _cli(capsys, "mandrel", str(EXAMPLES / "pipe.toml"), "--stl", str(out), "--stl-tolerance", tol)
     assert rc == 2 and "STL tolerance must be in 0.0001" in err and not out.exists()
+
+
+def test_output_name_too_long(tmp_path, capsys) -> None:
+    out = tmp_path / ("n" * 300 + ".ngc")
+    rc, _, err = _cli(capsys, "run", str(_job(tmp_path, PIPE)), "-o", str(out), "--quiet")
+    assert rc == 2 and "the file name is too long" in err
