@@ -257,6 +257,37 @@ def _parse_number(cell: str, separator: str) -> float | None:
     return None
 
 
+_FAST_CSV_BYTES = 1_000_000
+_PLAIN_NUMBERS = re.compile(r"[0-9eE+\-.,;\t \r\n]*")
+
+
+def _fast_csv_table(text: str) -> tuple[FloatArray, FloatArray, list[int]] | None:
+    """(z, r, line numbers) of a large table that is a header ``z,r``-like line (optional) and rows of
+    exactly two plain numbers, or None (then the general reader runs and names any bad cell)."""
+    first, sep, body = text.partition("\n")
+    head = 0
+    if not _PLAIN_NUMBERS.fullmatch(first):
+        cells = [c.strip().strip("\"'") for c in re.split(r"[,;\t ]+", first.strip())]
+        roles = [_column_role(c) for c in cells]
+        if roles != ["z", "r"]:
+            return None
+        head = 1
+    else:
+        body = text
+    if not _PLAIN_NUMBERS.fullmatch(body):
+        return None
+    if ("," in body) and (";" in body or "\t" in body):
+        return None  # a decimal comma is possible: the general reader decides
+    rows = body.count("\n") + (0 if body.endswith("\n") else 1)
+    if "\n\n" in body or body.startswith("\n") or "\r\n\r\n" in body:
+        return None
+    vals = np.fromstring(body.replace(",", " ").replace(";", " ").replace("\t", " "), sep=" ")  # C parser
+    if vals.size != 2 * rows or rows < 4:
+        return None
+    tab = vals.reshape(rows, 2)
+    return tab[:, 0].copy(), tab[:, 1].copy(), list(range(head + 1, head + rows + 1))
+
+
 def load_csv(path: str | Path, smoothing_mm: float | None = None) -> Mandrel:
     """Read a generatrix table (z and r in mm) and return a C2 spline mandrel.
 
@@ -277,6 +308,12 @@ def load_csv(path: str | Path, smoothing_mm: float | None = None) -> Mandrel:
     p = Path(path)
     file = str(p)
     text = _decode_text(_read_bytes(p, "CSV"), file)
+    if len(text) > _FAST_CSV_BYTES:
+        fast = _fast_csv_table(text)
+        if fast is not None:  # a plain numeric table (a scan): parsed in C, same checks after
+            z, r, line_nos = fast
+            m = _mandrel_from_profile(z, r, path=p, source="csv", lines=line_nos)
+            return smooth_profile(m, z, r, smoothing_mm, file=file) if smoothing_mm is not None else m
     ends_with_newline = text.endswith(("\n", "\r"))
     raw_lines = text.splitlines()
     if not any(ln.split("#", 1)[0].strip() for ln in raw_lines):

@@ -353,7 +353,7 @@ def run_pipeline(
             try:
                 res = _run_stage(res, stage, sub)
             except InputError as exc:  # every message names the job file (and the field's line)
-                raise _locate(exc, jp) from None
+                raise _locate(exc, jp, stage) from None
             times[stage] = time.perf_counter() - t0
         if stage == "winding" and last >= STAGES.index("axes"):
             # cheap checks before the long stages (payout, time law): post x machine, eye radius, carriage
@@ -363,7 +363,7 @@ def run_pipeline(
             try:
                 precheck(job, setup_machine_for_job(job, jp), res.mandrel, with_post=upto == "nc")
             except InputError as exc:
-                raise exc.at(file=jp) from None
+                raise _locate(exc, jp, "nc") from None
         res = replace(res, keys={**res.keys, stage: keys[stage]})
         done += w
         if state is not None:
@@ -373,15 +373,24 @@ def run_pipeline(
     return replace(res, stage_times=times, reused=tuple(reused))
 
 
-def _locate(exc: InputError, job_path: str | None) -> InputError:
+# fields the stages' engine functions name without their job section
+_STAGE_FIELD_NAMES = {"nc": {"post": "post.post", "controller": "post.controller"}}
+
+
+def _locate(exc: InputError, job_path: str | None, stage: str | None = None) -> InputError:
     """``exc`` with the job file and the line of its field filled in (a profile file's own place wins)."""
     if job_path is None or exc.location.file not in (None, job_path):
         return exc
+    fld = exc.location.field
+    if fld and stage in _STAGE_FIELD_NAMES and fld in _STAGE_FIELD_NAMES[stage]:
+        exc = InputError(exc.message, file=exc.location.file, line=exc.location.line,
+                         field=_STAGE_FIELD_NAMES[stage][fld]) if type(exc) is InputError else exc
+        fld = exc.location.field
     line = exc.location.line
-    if line is None and exc.location.field:
+    if line is None and fld:
         from engine.budget import field_line
 
-        line = field_line(job_path, exc.location.field)
+        line = field_line(job_path, fld)
     return exc.at(file=job_path, line=line)
 
 

@@ -35,6 +35,7 @@ friction = 0.2
 [winding]
 mode = "geodesic"
 points_per_pass = 100
+dwell_deg = [180.0, 180.0]
 [[winding.angles]]
 z_mm = 100.0
 angle_deg = 55.0
@@ -78,7 +79,7 @@ def _line_of(path: Path, key: str) -> int:
     (("points_per_pass = 100", "points_per_pass = 100\npattern_p = 1000000000"), "winding.pattern_p",
      "closer than a fibre"),
     (("points_per_pass = 100", "points_per_pass = 100\nlayers = 1000000"), "winding.layers", "memory budget"),
-    (("points_per_pass = 100", "points_per_pass = 100\ndwell_deg = [1e308, 0.0]"), "winding.dwell_deg", "turns"),
+    (("dwell_deg = [180.0, 180.0]", "dwell_deg = [1e308, 0.0]"), "winding.dwell_deg", "turns"),
     (("radius_mm = 40.0", "radius_mm = 1e6"), "mandrel", "beyond any winding machine"),
     (('post = "linuxcnc"', 'post = "linuxcnc"\nmin_block_time_s = 1e308'), "post.min_block_time_s",
      "not a winding program"),
@@ -111,8 +112,9 @@ def test_estimate_bounds_the_real_line(tmp_path) -> None:
     from engine.job import load_job
     from engine.winding import winding_line_for_job
 
-    for extra in ("", "circuits = 12\n", "layers = 3\ndwell_deg = [400.0, 30.0]\n", "pattern_p = 7\n"):
-        p = _job(tmp_path, PIPE.replace("points_per_pass = 100\n", "points_per_pass = 100\n" + extra))
+    for extra in ("", "circuits = 12\n", "layers = 3\n", "pattern_p = 7\n", "dwell_deg = [400.0, 30.0]\n"):
+        text = PIPE.replace("dwell_deg = [180.0, 180.0]\n", "") if "dwell" in extra else PIPE
+        p = _job(tmp_path, text.replace("points_per_pass = 100\n", "points_per_pass = 100\n" + extra))
         job = load_job(p)
         line = winding_line_for_job(job, p)
         est = budget.check_winding_spec(job.winding, 40.0, 10.0)
@@ -437,3 +439,42 @@ def test_output_name_too_long(tmp_path, capsys) -> None:
     out = tmp_path / ("n" * 300 + ".ngc")
     rc, _, err = _cli(capsys, "run", str(_job(tmp_path, PIPE)), "-o", str(out), "--quiet")
     assert rc == 2 and "the file name is too long" in err
+
+
+@pytest.mark.parametrize(("edit", "field"), [('post = "nosuch"', "post.post"),
+                                             ('controller = "nosuch"', "post.controller"),
+                                             ('template = "nosuch"', "machine.template")])
+def test_run_errors_name_the_job_field_and_line(tmp_path, capsys, edit, field) -> None:
+    key = edit.split(" ")[0]
+    text = PIPE.replace('post = "linuxcnc"', 'post = "linuxcnc"\ncontroller = "linuxcnc"')
+    text = "\n".join(edit if ln.startswith(key + " ") else ln for ln in text.splitlines()) + "\n"
+    job = _job(tmp_path, text)
+    rc, _, err = _cli(capsys, "run", str(job), "-o", str(tmp_path / "o.ngc"), "--quiet")
+    assert rc == 2 and f"{job}, line {_line_of(job, key + ' ')}, field '{field}'" in err, err
+
+
+def test_large_csv_fast_path_agrees_with_the_general_reader(tmp_path, monkeypatch) -> None:
+    import engine.mandrel_io as mio
+
+    z = np.linspace(0.0, 300.0, 40_000)
+    r = 50.0 + 5.0 * np.sin(z / 30.0)
+    rows = [f"{a!r};{b!r}" for a, b in zip(z.tolist(), r.tolist())]
+    p = tmp_path / "scan.csv"
+    p.write_text("z_mm;r_mm\n" + "\n".join(rows) + "\n", encoding="utf-8")
+    fast = mio.load_csv(p)
+    monkeypatch.setattr(mio, "_FAST_CSV_BYTES", 10**12)  # the general reader only
+    slow = mio.load_csv(p)
+    assert fast.meta["decimated"] == slow.meta["decimated"]
+    np.testing.assert_array_equal(fast.evaluate(z)[0], slow.evaluate(z)[0])
+    # a bad cell in a large file: the general reader names its line and column
+    monkeypatch.setattr(mio, "_FAST_CSV_BYTES", 1_000_000)
+    rows[12345] = "12.5;abc"
+    p.write_text("z_mm;r_mm\n" + "\n".join(rows) + "\n", encoding="utf-8")
+    with pytest.raises(InputError) as e:
+        mio.load_csv(p)
+    assert e.value.location.line == 12347 and "r_mm (column 2)" in str(e.value)
+    rows[12345] = f"{z[12344]!r};50.0"  # z not increasing
+    p.write_text("z_mm;r_mm\n" + "\n".join(rows) + "\n", encoding="utf-8")
+    with pytest.raises(InputError) as e:
+        mio.load_csv(p)
+    assert e.value.location.line == 12347, e.value
