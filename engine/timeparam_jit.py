@@ -24,9 +24,10 @@ import numpy as np
 
 # Problems with at least this many nodes import numba if it is not loaded yet
 # (:func:`engine.timeparam.parametrize` calls :func:`kernel` with its node count): importing numba
-# and loading the cached kernels costs ~0.5 s once per process, about what the compiled passes save
-# on 5 000 nodes; smaller problems (every shipped example) use numba only when it is loaded already.
-IMPORT_THRESHOLD = 5000
+# and loading the cached kernels costs ~0.5 s once per process; a numpy tube pass on 3 000 nodes
+# (M = 100) costs ~50 ms, a compiled one ~10 ms, and a program's laws run 10-20 passes.  Smaller
+# problems (every shipped example: 332..1750 nodes) use numba only when it is loaded already.
+IMPORT_THRESHOLD = 3000
 
 _KERNEL: list[Any] = []      # [kernel] once compiled, [None] when numba is unusable here
 
@@ -80,25 +81,6 @@ _WINDOWS: list[Any] = []
 def _build_windows() -> Any:
     import numba
 
-    @numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-    def _interp_seg(q, xp, fp, a, e):  # pragma: no cover - compiled
-        # np.interp on one chain xp[..e] (non-decreasing) at xp[a] <= q <= xp[e]: the same index
-        # (the last j with xp[j] <= q, found by walking up from a: the queries increase) and the same
-        # arithmetic as numpy's arr_interp.  Returns (value, j).
-        if q >= xp[e]:
-            return fp[e], a
-        while xp[a + 1] <= q:
-            a += 1
-        if xp[a] == q:
-            return fp[a], a
-        slope = (fp[a + 1] - fp[a]) / (xp[a + 1] - xp[a])
-        r = slope * (q - xp[a]) + fp[a]
-        if r != r:
-            r = slope * (q - xp[a + 1]) + fp[a + 1]
-            if r != r and fp[a] == fp[a + 1]:
-                r = fp[a]
-        return r, a
-
     @numba.njit(cache=True, nogil=True, error_model="numpy")
     def _windows(lev, xall, xn, rq, rk, lq, lk, L, xjb, xjt, degenerate, plo, sp_p, t_lo, t_hi, nb,
                  klo, cnt, bad):  # pragma: no cover - compiled
@@ -118,8 +100,39 @@ def _build_windows() -> Any:
                 if good:
                     q = xj / xn[i]
                     q += off
-                    ub, ar = _interp_seg(q, rq, rk, ar, s0 + L - 1)
-                    lb, al = _interp_seg(q, lq, lk, al, s0 + L - 1)
+                    # np.interp on each chain (non-decreasing abscissae, xp[s0] <= q <= xp[e]): the same
+                    # index (the last j with xp[j] <= q, walking up: the queries increase with j) and
+                    # the same arithmetic as numpy's arr_interp.  Written out twice: a jitted helper
+                    # would be a closure variable, which defeats numba's on-disk cache.
+                    e = s0 + L - 1
+                    if q >= rq[e]:
+                        ub = rk[e]
+                    else:
+                        while rq[ar + 1] <= q:
+                            ar += 1
+                        if rq[ar] == q:
+                            ub = rk[ar]
+                        else:
+                            slope = (rk[ar + 1] - rk[ar]) / (rq[ar + 1] - rq[ar])
+                            ub = slope * (q - rq[ar]) + rk[ar]
+                            if ub != ub:
+                                ub = slope * (q - rq[ar + 1]) + rk[ar + 1]
+                                if ub != ub and rk[ar] == rk[ar + 1]:
+                                    ub = rk[ar]
+                    if q >= lq[e]:
+                        lb = lk[e]
+                    else:
+                        while lq[al + 1] <= q:
+                            al += 1
+                        if lq[al] == q:
+                            lb = lk[al]
+                        else:
+                            slope = (lk[al + 1] - lk[al]) / (lq[al + 1] - lq[al])
+                            lb = slope * (q - lq[al]) + lk[al]
+                            if lb != lb:
+                                lb = slope * (q - lq[al + 1]) + lk[al + 1]
+                                if lb != lb and lk[al] == lk[al + 1]:
+                                    lb = lk[al]
                     good = ub >= lb and ub >= 0
                 if not good:
                     klo[i, j] = 0
@@ -315,4 +328,20 @@ def forward_pass(levf: np.ndarray, klo: np.ndarray, cnt: np.ndarray, bad: np.nda
     return True
 
 
-__all__ = ["IMPORT_THRESHOLD", "forward_pass", "hulls", "kernel", "windows"]
+def warm() -> bool:
+    """Import numba and load (or compile) every kernel now, e.g. in a background thread at start-up of a
+    long-running process, so that no later run pays for it while holding the GIL.  Returns whether
+    the kernels are available."""
+    if kernel(1 << 62) is None:
+        return False
+    from engine.timeparam import TimeLimits, parametrize
+
+    s = np.linspace(0.0, 10.0, 21)
+    X = s[:, None] * 1.0
+    one = np.ones_like(X)
+    parametrize(s, X, one, 0.0 * one, TimeLimits(v_max=(1e3,), a_max=(100.0,), levels=20))   # windows, pass
+    hulls(np.array([[[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]]]))
+    return True
+
+
+__all__ = ["IMPORT_THRESHOLD", "forward_pass", "hulls", "kernel", "warm", "windows"]

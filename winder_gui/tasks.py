@@ -299,3 +299,9 @@ def warm_engine_imports() -> None:
             importlib.import_module(name)
         except Exception:  # noqa: BLE001 - the run that needs the module reports the problem
             pass
+    try:  # numba and the time law's compiled kernels (big programs use them; ~0.5 s, GIL held)
+        from engine import timeparam_jit
+
+        timeparam_jit.warm()
+    except Exception:  # noqa: BLE001 - without numba the numpy passes run
+        pass
