@@ -556,7 +556,8 @@ class Runner:
 
         return subprocess.Popen([self.python, "-c", "import fuzz_cases; fuzz_cases.worker_main()"],
                                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
-                                text=True, env=env, preexec_fn=pre, cwd=str(ROOT))
+                                text=True, env=env, preexec_fn=pre,
+                                cwd=self.pythonpath.split(os.pathsep)[0])  # sys.path[0] of "-c" is the cwd
 
     def close(self) -> None:
         """End the worker (if any) and close its pipes."""
