@@ -117,6 +117,8 @@ class Placement:
     lo: float
     hi: float
     z0_fit: tuple[float, float] | None
+    note: str = ""
+    """What else the set-up chose (e.g. an eye radius reduced to fit the travel)."""
 
     @property
     def fits(self) -> bool:
@@ -126,7 +128,7 @@ class Placement:
         """One sentence for the operator."""
         need = self.q_max - self.q_min
         how = "centred on the machine" if self.mode == "centre" else "machine.setup.mandrel_z0_mm"
-        where = f"mandrel z = 0 at {self.axis} {self.z0:.1f} ({how})"
+        where = f"mandrel z = 0 at {self.axis} {self.z0:.1f} ({how})" + (f", {self.note}" if self.note else "")
         if self.fits:
             return f"{where}: {self.axis} runs {self.q_min:.1f}..{self.q_max:.1f} within {self.lo:g}..{self.hi:g}"
         over = max(self.q_max - self.hi, self.lo - self.q_min)
@@ -177,6 +179,45 @@ def place_on_machine(machine: MachineTemplate, axes: AxisPath, setup: Any) -> tu
     viol += violations_from_mask("position", ax.name, q[:, k] < lo, q[:, k], lo, u, what="position")
     q.flags.writeable = False
     return machine, replace(axes, q=q, violations=tuple(viol)), placement
+
+
+def fit_eye_radius(machine: MachineTemplate, eye: Any, mandrel: Any, setup: Any) -> tuple[MachineTemplate, str]:
+    """A fixed-radius machine (no cross feed) whose eye, slid along the fibre to the template's radius,
+    would need more carriage travel than the axis has: the largest eye radius (0.1 mm steps, at least
+    the mandrel's largest radius + ``setup.clearance_mm``) whose eye path fits with 1 mm to spare.  Only when
+    ``setup.eye_radius_mm`` is not given; returns ``(machine, note)`` (note '' when unchanged).
+    ``eye``: the payout stage's path (``eye_xyz``, ``fibre_dir``, ``contact_xyz``, mandrel frame)."""
+    from engine.kinematics import _slide_to_radius
+
+    k = carriage_index(machine)
+    if (machine.kind != "cartesian" or machine.axis_index("cross") is not None or setup.eye_radius_mm is not None
+            or machine.eye_radius is None or k is None):
+        return machine, ""
+    ax = machine.axes[k]
+    if abs(ax.min) >= 1e11 or abs(ax.max) >= 1e11:
+        return machine, ""
+    travel = (ax.max - ax.min) / abs(ax.scale)
+    e, d, c = (np.asarray(getattr(eye, n), dtype=float) for n in ("eye_xyz", "fibre_dir", "contact_xyz"))
+
+    def span(radius: float) -> float:
+        pts, _shift, viol = _slide_to_radius(e, d, c, radius)
+        return float(np.ptp(pts[:, 2])) if not viol else np.inf
+
+    r0 = float(machine.eye_radius)
+    need = span(r0)
+    if need <= travel:
+        return machine, ""
+    room = travel - 1.0                      # 1 mm to spare for the 0.1 mm rounding of the placement
+    lo, hi = float(mandrel.r_max) + float(setup.clearance_mm), r0
+    if lo >= hi or span(lo) > room:
+        return machine, ""
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if span(mid) <= room else (lo, mid)
+    r = math.floor(lo * 10.0) / 10.0
+    note = (f"eye radius {r:g} mm (the template's {r0:g} mm would need {need:.1f} mm of {ax.name} travel, the axis "
+            f"has {travel:g}; set machine.setup.eye_radius_mm to choose it)")
+    return replace(machine, eye_radius=r), note
 
 
 def placement_report(machine: MachineTemplate, axes: AxisPath, placement: Placement | None) -> list[str]:
@@ -639,6 +680,6 @@ def precheck(job: Any, machine: MachineTemplate, mandrel: Any | None = None, wit
 
 
 __all__ = ["Locator", "Obstacle", "Placement", "ViolationGroup", "apply_setup", "carriage_index",
-           "clearance_violations", "compatible_posts", "controller_for", "group_violations",
-           "hold_back_turns", "nc_move_lines", "place_on_machine", "placement_report", "post_mismatch",
-           "limit_speed_steps", "precheck", "support_obstacles"]
+           "clearance_violations", "compatible_posts", "controller_for", "fit_eye_radius", "group_violations",
+           "hold_back_turns", "limit_speed_steps", "nc_move_lines", "place_on_machine", "placement_report",
+           "post_mismatch", "precheck", "support_obstacles"]

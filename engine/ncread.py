@@ -85,13 +85,18 @@ def _letters(machine: MachineTemplate, profile: Any | None) -> dict[str, int]:
 
 
 _SETUP = re.compile(r"set-up: mandrel z = 0 at (\w+) = ([-+0-9.eE]+)")
+_EYE_R = re.compile(r"set-up: eye radius = ([-+0-9.eE]+) mm")
 
 
 def placed_machine(machine: MachineTemplate, text: str) -> MachineTemplate:
-    """``machine`` with the carriage (track) offset a winder program records in its header
-    (``set-up: mandrel z = 0 at X = 600``); unchanged when the program has no such line."""
+    """``machine`` with the carriage (track) offset and the fixed eye radius a winder program records in
+    its header (``set-up: mandrel z = 0 at X = 600``, ``set-up: eye radius = 150 mm``); unchanged when
+    the program has no such lines."""
     from dataclasses import replace
 
+    r = _EYE_R.search(text[:4000])
+    if r is not None and machine.eye_radius is not None:
+        machine = replace(machine, eye_radius=float(r.group(1)))
     m = _SETUP.search(text[:4000])
     if m is None:
         return machine

@@ -248,3 +248,23 @@ def test_precheck_eye_radius_and_travel() -> None:
     precheck(job, apply_setup(m, SetupSpec(eye_radius_mm=200.0)), mandrel, with_post=False)
     with pytest.raises(InputError, match="travels 1200 mm but the mandrel is 1500 mm long"):
         precheck(job, m, Mandrel.pipe(50.0, 1500.0), with_post=False)
+
+
+def test_a_new_job_on_lathe2_fits_by_reducing_the_eye_radius() -> None:
+    """The default new job (vessel R 100) on lathe2: at the template's eye radius 160 mm the eye, slid along
+    the fibre, needs 1215 mm of X; the set-up picks the largest radius that fits the 1200 mm travel."""
+    from engine.pipeline import run_pipeline
+
+    job = default_job().replace(machine={"template": "lathe2"})
+    res = run_pipeline(job, None, upto="axes")
+    pl = res.placement
+    assert pl.fits and res.violations == []
+    r = res.machine.eye_radius
+    assert 105.0 <= r < 160.0 and "eye radius" in pl.note and "1200" in pl.note
+    assert pl.q_max - pl.q_min <= 1199.0 + 1e-6
+    # by hand: the eye sits on the fibre line at exactly that radius from the axis
+    assert np.allclose(np.hypot(res.axes.eye_xyz[:, 0], res.axes.eye_xyz[:, 1]), r, atol=1e-6)
+    # an explicit radius is kept as it is (and then the program does not fit)
+    fixed = job.replace(machine={"template": "lathe2", "setup": {"eye_radius_mm": 160.0}})
+    res2 = run_pipeline(fixed, None, upto="axes", previous=res)
+    assert res2.machine.eye_radius == 160.0 and not res2.placement.fits

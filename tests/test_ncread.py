@@ -159,3 +159,14 @@ def test_unknown_axis_letter_names_the_machine() -> None:
 def test_simulate_needs_a_readable_file(tmp_path: Path, capsys) -> None:
     assert main(["simulate", str(tmp_path / "none.ngc"), "--machine", "lathe2"]) == 2
     assert "none.ngc" in capsys.readouterr().err
+
+
+def test_header_set_up_lines_place_the_machine() -> None:
+    m = load_machine("lathe2")
+    text = ("(set-up: mandrel z = 0 at X = 412.5 mm)\n(set-up: eye radius = 150.2 mm)\n"
+            "G21 G90 G93\nG0 A0 X412.5\nG1 A10 X420 F60\nM2\n")
+    prog = read_nc(text, m)
+    assert prog.machine.axes[1].offset == 412.5 and prog.machine.eye_radius == 150.2
+    sim = simulate(prog, m)
+    # the eye at z = X - 412.5 and at radius 150.2 (forward kinematics of the placed machine)
+    assert sim.eye_xyz[-1, 2] == pytest.approx(7.5) and np.hypot(*sim.eye_xyz[-1, :2]) == pytest.approx(150.2)

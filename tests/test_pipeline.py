@@ -107,7 +107,8 @@ def test_cli_run_refuses_to_write_a_violating_program(tmp_path: Path, capsys: py
     # 1100 mm of travel holds the 1000 mm pipe (the up-front check passes) but not the eye's 1198 mm
     text = (EXAMPLES / "pipe.toml").read_text()
     text = text[: text.index("# The laminate")]  # the pipe's single line (the laminate: test_laminate.py)
-    job.write_text(text.replace("max = 1800.0", "max = 1100.0"))
+    # with the eye at the template's fixed radius (an automatic radius would fit the eye path into 1100 mm)
+    job.write_text(text.replace("max = 1800.0", "max = 1100.0") + "\n[machine.setup]\neye_radius_mm = 160.0\n")
     out = tmp_path / "p.ngc"
     rep = tmp_path / "r.json"
     assert main(["run", str(job), "-o", str(out), "--report", str(rep), "--quiet"]) == 1

@@ -217,6 +217,8 @@ class PostProcessor:
         if carriage is not None:
             # the placement of the mandrel on the machine (engine.machine_setup): the read-back needs it
             lines.append(f"set-up: mandrel z = 0 at {carriage.name} = {carriage.offset:.6g} {carriage.units}")
+        if machine.eye_radius is not None and machine.axis_index("cross") is None:
+            lines.append(f"set-up: eye radius = {machine.eye_radius:.6g} mm")
         if opts["timestamp"]:
             lines.append("created " + datetime.now(UTC).strftime("%Y-%m-%d %H:%M:%S UTC"))
         return [self.comment(profile, s) for s in lines]
