@@ -112,7 +112,8 @@ class ResultsPresenter(QObject):
             self.queue(lambda: v.view3d.set_paths(out.paths))
         warns = list(self.doc.run_warnings)
         self.queue(lambda: v.nc_panel.set_result(res, warns), lambda: self._on_stale(self.doc.is_stale()),
-                   lambda: v.machine_panel.show_placement(res.machine, getattr(res, "placement", None)))
+                   lambda: v.machine_panel.show_placement(res.machine, getattr(res, "placement", None)),
+                   lambda: v.view3d.set_supports(_supports(res)))
         took = time.monotonic() - self.ctl.run_t0
         reused = f" (re-used: {', '.join(res.reused)})" if res.reused else ""
         program = f"; program time {res.blocks.total:.2f} s" if res.blocks is not None else ""
@@ -211,3 +212,12 @@ class ResultsPresenter(QObject):
                 f"single DP {r.dp.total_time_s:.3f} s; TOPP-RA bound {r.toppra.total_time_s:.3f} s")
             self.status.emit("Time law computed", False)
         self.queue(lambda: self.timelaw_shown.emit(r))
+
+
+def _supports(res: Any) -> list[tuple[str, float, float, float]]:
+    """The run's shafts, chuck and tailstock for the 3D view (engine.machine_setup.support_obstacles)."""
+    from engine.machine_setup import support_obstacles
+
+    if res.mandrel is None:
+        return []
+    return [(o.name, o.z0, o.z1, o.radius) for o in support_obstacles(res.mandrel, res.job.machine.setup)]

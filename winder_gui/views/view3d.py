@@ -92,6 +92,8 @@ class MandrelView3D(PlaybackMixin, SceneMixin, QWidget):
         self._loader: JobRunner | None = None
         self._reset_camera = True
         self.paths: PathsViewData | None = None
+        self.supports: list[tuple[str, float, float, float]] = []
+        """The job's shafts, chuck and tailstock as drawn (:meth:`set_supports`)."""
         self.gl_widget: QWidget | None = None
         """The VTK render widget (below the animation controls), once created."""
         self.colour_by = COLOUR_BY[0]
@@ -421,6 +423,25 @@ class MandrelView3D(PlaybackMixin, SceneMixin, QWidget):
             self._add_mandrel_actor(grid)
         finally:
             self.plotter.suppress_rendering = False
+        self.plotter.render()
+
+    def set_supports(self, supports: list[tuple[str, float, float, float]]) -> None:
+        """Draw the job's shafts, chuck and tailstock: ``(name, z0, z1, radius)`` (mm, mandrel frame, the
+        axis is the view's x axis); an empty list removes them."""
+        self.supports = list(supports)
+        if self.plotter is None:
+            return
+        import pyvista as pv
+
+        for name in [n for n in self.plotter.actors if str(n).startswith("support:")]:
+            self.plotter.remove_actor(name, render=False)
+        for name, z0, z1, r in self.supports:
+            if not (z1 > z0 and r > 0):
+                continue
+            cyl = pv.Cylinder(center=(0.5 * (z0 + z1), 0.0, 0.0), direction=(1.0, 0.0, 0.0), radius=r,
+                              height=z1 - z0, resolution=48)
+            self.plotter.add_mesh(cyl, name=f"support:{name}", color="#b5b5b5", opacity=0.55,
+                                  smooth_shading=True, reset_camera=False)
         self.plotter.render()
 
     def _add_mandrel_actor(self, grid: Any) -> None:
