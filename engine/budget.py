@@ -235,6 +235,18 @@ def check_dp(n_nodes: int, levels: int, *, field: str = "timelaw.levels", file: 
                    detail=f"{n_nodes} nodes × {levels} speed levels"), file=file)
 
 
+MAX_SKETCH_POINTS = 20_000
+"""Most points of a sketched generatrix (``[mandrel] kind = "points"``): a sketch is drawn, not scanned;
+a scanned table belongs in a CSV profile, which is decimated (engine.mandrel_io)."""
+
+
+def check_sketch_points(n: int) -> None:
+    """Refuse a sketch of more than :data:`MAX_SKETCH_POINTS` points (field ``z_mm``)."""
+    if n > MAX_SKETCH_POINTS:
+        raise InputError(f"the sketch has {n} points, at most {MAX_SKETCH_POINTS}: import a scanned profile as a "
+                         "CSV table (kind = \"file\"), which is decimated to what the spline needs", field="z")
+
+
 def field_line(file: str | Path, field: str) -> int | None:
     """Line of ``field`` (dotted, e.g. ``"winding.circuits"``) in the job file ``file``, if it is one."""
     p = Path(file)

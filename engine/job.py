@@ -741,6 +741,9 @@ def build_mandrel(job: Job, job_path: str | Path | None = None) -> Any:
                 name=job.name,
             )
         if isinstance(spec, PointsSpec):
+            from engine.budget import check_sketch_points
+
+            check_sketch_points(len(spec.z_mm))
             return Mandrel.from_points(spec.z_mm, spec.r_mm, name=job.name, source="points")
         if isinstance(spec, SegmentsSpec):
             from engine.sketch import build_sketch

@@ -478,3 +478,12 @@ def test_large_csv_fast_path_agrees_with_the_general_reader(tmp_path, monkeypatc
     with pytest.raises(InputError) as e:
         mio.load_csv(p)
     assert e.value.location.line == 12347, e.value
+
+
+def test_sketch_with_too_many_points_is_refused(tmp_path, capsys) -> None:
+    z = np.linspace(0.0, 100.0, budget.MAX_SKETCH_POINTS + 1)
+    r = 50.0 + np.sin(z / 10.0)
+    job = _job(tmp_path, 'schema_version = 1\n[mandrel]\nkind = "points"\nz_mm = [' + ", ".join(map(repr, z.tolist()))
+               + "]\nr_mm = [" + ", ".join(map(repr, r.tolist())) + "]\n")
+    rc, _, err = _cli(capsys, "mandrel", str(job))
+    assert rc == 2 and "line 4, field 'mandrel.z_mm'" in err and "at most 20000" in err
