@@ -275,6 +275,43 @@ def hold_back_turns(machine: MachineTemplate, axes: AxisPath, tol_deg: float) ->
     return replace(axes, q=q, violations=tuple(keep))
 
 
+def monotone_eye_azimuth(machine: MachineTemplate, eye_xyz: np.ndarray, fibre_dir: np.ndarray,
+                         contact_xyz: np.ndarray, tol_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """Slide the eye along its free fibre where the mandrel would otherwise turn back.
+
+    On a machine that keeps the eye at one azimuth (``mandrel_phase = "eye"``) the mandrel angle follows
+    the eye's azimuth in the mandrel frame; where the payout's eye path turns that azimuth back by more
+    than ``tol_deg`` (e.g. at a dwell), the eye is moved along its own fibre line - the laid line does
+    not change - to the point whose azimuth is the largest reached so far, so the mandrel holds instead
+    of turning back.  Where no point of the free fibre has that azimuth the eye is left (the back-turn
+    is then reported).  Returns ``(eye_xyz, shift_mm)`` (shift along the fibre, 0 where unchanged).
+    """
+    e = np.array(eye_xyz, dtype=float)
+    n = e.shape[0]
+    shift = np.zeros(n)
+    if machine.mandrel_phase != "eye" or (machine.kind == "cartesian" and machine.axis_index("cross") is None):
+        return e, shift
+    d = np.asarray(fibre_dir, dtype=float)
+    c = np.asarray(contact_xyz, dtype=float)
+    phi = np.unwrap(np.arctan2(e[:, 1], e[:, 0]))
+    major = 1.0 if phi[-1] >= phi[0] else -1.0
+    target = major * np.maximum.accumulate(major * phi)
+    back = np.abs(target - phi) > math.radians(tol_deg)
+    if not back.any():
+        return e, shift
+    i = np.flatnonzero(back)
+    st, ct = np.sin(target[i]), np.cos(target[i])
+    den = d[i, 0] * st - d[i, 1] * ct
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = -(e[i, 0] * st - e[i, 1] * ct) / den
+    p = e[i] + t[:, None] * d[i]
+    free = np.einsum("ij,ij->i", p - c[i], d[i])
+    ok = np.isfinite(t) & (np.abs(den) > 1e-12) & (p[:, 0] * ct + p[:, 1] * st > 0) & (free > 0)
+    e[i[ok]] = p[ok]
+    shift[i[ok]] = t[ok]
+    return e, shift
+
+
 # --------------------------------------------------------------------------------------------------
 # Supports and clearance
 # --------------------------------------------------------------------------------------------------
@@ -681,5 +718,5 @@ def precheck(job: Any, machine: MachineTemplate, mandrel: Any | None = None, wit
 
 __all__ = ["Locator", "Obstacle", "Placement", "ViolationGroup", "apply_setup", "carriage_index",
            "clearance_violations", "compatible_posts", "controller_for", "fit_eye_radius", "group_violations",
-           "hold_back_turns", "limit_speed_steps", "nc_move_lines", "place_on_machine", "placement_report",
-           "post_mismatch", "precheck", "support_obstacles"]
+           "hold_back_turns", "limit_speed_steps", "monotone_eye_azimuth", "nc_move_lines", "place_on_machine",
+           "placement_report", "post_mismatch", "precheck", "support_obstacles"]

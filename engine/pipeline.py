@@ -432,12 +432,25 @@ def _run_stage(res: PipelineResult, stage: str, state: State | None) -> Pipeline
         return replace(res, eye_circuit=eye1, eye=extend_to_line(eye1, res.line))
     if stage == "axes":
         from engine.kinematics import inverse_kinematics
-        from engine.machine_setup import clearance_violations, fit_eye_radius, hold_back_turns, place_on_machine
+        from engine.machine_setup import (
+            clearance_violations,
+            fit_eye_radius,
+            hold_back_turns,
+            monotone_eye_azimuth,
+            place_on_machine,
+        )
 
         setup = job.machine.setup
         eye = res.eye
         machine, note = fit_eye_radius(setup_machine_for_job(job, jp), eye, res.mandrel, setup)
-        axes = inverse_kinematics(machine, eye.eye_xyz, eye.fibre_dir, eye.contact_xyz, state=state, x=eye.x)
+        # an eye-azimuth machine: where the eye path would turn the mandrel back, the eye slides along its fibre
+        e_xyz, slid = monotone_eye_azimuth(machine, eye.eye_xyz, eye.fibre_dir, eye.contact_xyz,
+                                           float(setup.back_turn_tol_deg))
+        axes = inverse_kinematics(machine, e_xyz, eye.fibre_dir, eye.contact_xyz, state=state, x=eye.x)
+        if slid.any():
+            sh = np.ascontiguousarray(np.asarray(axes.eye_shift) + slid)
+            sh.flags.writeable = False
+            axes = replace(axes, eye_shift=sh)
         axes = hold_back_turns(machine, axes, float(setup.back_turn_tol_deg))
         machine, axes, placement = place_on_machine(machine, axes, setup)
         if placement is not None and note:

@@ -268,3 +268,30 @@ def test_a_new_job_on_lathe2_fits_by_reducing_the_eye_radius() -> None:
     fixed = job.replace(machine={"template": "lathe2", "setup": {"eye_radius_mm": 160.0}})
     res2 = run_pipeline(fixed, None, upto="axes", previous=res)
     assert res2.machine.eye_radius == 160.0 and not res2.placement.fits
+
+
+def test_the_eye_slides_along_its_fibre_instead_of_turning_the_mandrel_back() -> None:
+    """Eye-azimuth machine: an eye path whose azimuth goes back by 3 deg; after the slide the azimuth never
+    goes back, every moved eye lies on its own fibre line (the laid line is unchanged), ahead of the contact."""
+    from engine.machine_setup import monotone_eye_azimuth
+
+    m = load_machine("lathe3")
+    n = 200
+    a = np.radians(np.concatenate([np.linspace(0, 40, 100), np.linspace(40, 37, 20), np.linspace(37, 80, 80)]))
+    c = np.stack([50 * np.cos(a - 0.6), 50 * np.sin(a - 0.6), np.linspace(0, 100, n)], axis=1)
+    # fibre from the contact, tangent to the cylinder, leaning forwards (+azimuth) and along z
+    tang = np.stack([-np.sin(a - 0.6), np.cos(a - 0.6), np.full(n, 0.3)], axis=1)
+    d = tang / np.linalg.norm(tang, axis=1)[:, None]
+    eye = c + 60.0 * d
+    phi0 = np.unwrap(np.arctan2(eye[:, 1], eye[:, 0]))
+    assert np.diff(phi0).min() < -np.radians(0.1)            # the input turns back
+    e2, shift = monotone_eye_azimuth(m, eye, d, c, 0.01)
+    phi = np.unwrap(np.arctan2(e2[:, 1], e2[:, 0]))
+    assert np.diff(phi).min() >= -np.radians(0.011)
+    moved = shift != 0
+    assert moved.any() and not moved[:100].any()
+    rel = e2 - c
+    assert np.allclose(np.linalg.norm(np.cross(rel, d), axis=1), 0.0, atol=1e-9)
+    assert np.all(np.einsum("ij,ij->i", rel, d) > 0)
+    # a fixed-radius machine (its eye slides to the radius in the kinematics) is left alone
+    assert not monotone_eye_azimuth(load_machine("lathe2"), eye, d, c, 0.01)[1].any()

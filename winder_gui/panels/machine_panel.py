@@ -182,8 +182,13 @@ class MachinePanel(SectionPanel):
         from engine.machine_setup import compatible_posts
         from engine.post import list_controllers, list_posts
 
-        pairs = compatible_posts(self.template) if self.template is not None else \
-            [(p, c) for p in list_posts() for c in list_controllers()]
+        if self.template is not None:
+            pairs = compatible_posts(self.template)
+        else:       # no template to check against: every dialect with its own profiles
+            from engine.post import load_controller
+
+            dialect = {c: load_controller(c).dialect for c in list_controllers()}
+            pairs = [(p, c) for p in list_posts() for c in list_controllers() if dialect[c] == p]
         posts = sorted({p for p, _c in pairs})
         self.post_combo.blockSignals(True)
         self.controller_combo.blockSignals(True)
