@@ -137,3 +137,26 @@ def test_export_equals_winder_run_byte_for_byte(pipe_run, tmp_path) -> None:
     cli_nc = tmp_path / "cli.ngc"
     assert cli_main(["run", str(saved), "-o", str(cli_nc), "--force", "--quiet"]) == 0
     assert gui_nc.read_bytes() == cli_nc.read_bytes()
+
+
+def test_report_export_describes_the_run_on_screen(pipe_run, tmp_path) -> None:
+    """File -> Export report writes the run's report (its numbers); refused once the job changed."""
+    w = pipe_run
+    assert w.actions["export_report"].isEnabled()
+    out = tmp_path / "report.html"
+    assert w.export_report(out)
+    assert w.wait_idle() and w.last_error == ""
+    text = out.read_text("utf-8")
+    rep = w.result.report()
+    assert f"{rep['program_time_s']:.2f} s" in text and text.count("<svg") >= 5
+    assert "Wrote the job report" in w.status_msg.text()
+    # the coverage tab shows the map of the run (bands of true width), with its percentages
+    cov = w.coverage_plot.coverage
+    assert cov is not None and cov.band_width_mm == w.job.band.width_mm
+    assert f"covered {100 * cov.covered_fraction:.1f} %" in w.coverage_plot.message.text()
+    w.payout_panel.set_value("payout.clearance_mm", w.job.payout.clearance_mm + 1)
+    assert not w.actions["export_report"].isEnabled()
+    late = tmp_path / "late.pdf"
+    assert not w.export_report(late)
+    assert w.wait_idle(pipeline=False) and not late.exists()
+    assert "Export disabled" in w.status_msg.text()

@@ -438,6 +438,7 @@ class MainWindow(QMainWindow):
         why = self.export_block_reason()
         self.actions["export_nc"].setEnabled(not why)
         self.actions["export_nc"].setToolTip(texts.export_refused(why) if why else "Export the NC program")
+        self.actions["export_report"].setEnabled(not why)
         self.nc_panel.set_export_state(texts.export_refused(why) if why else "")
 
     # -- pipeline ----------------------------------------------------------------------------------
@@ -536,8 +537,31 @@ class MainWindow(QMainWindow):
         self.nc_read.emit(out)
 
     def _on_nc_written(self, path: Path) -> None:
-        self._status(f"Wrote the NC program to {path}")
+        what = "the job report" if path.suffix.lower() in (".pdf", ".html", ".htm") else "the NC program"
+        self._status(f"Wrote {what} to {path}")
         self.nc_written.emit(path)
+
+    def export_report(self, path: str | Path) -> bool:
+        """Write the job report (PDF or HTML by suffix) of the run on screen, in a worker; refused, with
+        the reason in the status bar, when there is no run or the job changed since (as NC export)."""
+        why = self.export_block_reason()
+        if why:
+            self._status(texts.export_refused(why), error=True)
+            return False
+        p = Path(path)
+        if p.suffix.lower() not in (".pdf", ".html", ".htm"):
+            p = p.with_suffix(".pdf")
+        self.ctl.write_report(p)
+        self._status(f"Writing the report {p.name}…")
+        return True
+
+    def action_export_report(self) -> None:
+        if self.export_block_reason():
+            self.export_report("")
+            return
+        path = window_menus.ask_report_path(self)
+        if path:
+            self.export_report(path)
 
     def action_export_nc(self) -> None:
         why = self.export_block_reason()

@@ -107,6 +107,8 @@ class ResultsPresenter(QObject):
         res = out.result
         v = self.v
         self.show_result(res)
+        if out.coverage is not None:
+            self.queue(lambda: v.coverage_plot.set_coverage(out.coverage))
         if out.paths is not None and (v.view3d.paths is None or self._paths_key != res.keys.get("payout")):
             self._paths_key = res.keys.get("payout")
             self.queue(lambda: v.view3d.set_paths(out.paths))

@@ -289,6 +289,12 @@ class RunController(QObject):
 
         self.read_runner.submit(readback_task, Path(path), self.doc.job, self.doc.path, self.doc.result)
 
+    def write_report(self, path: Path) -> None:
+        """Write the job report of the (current) result to ``path`` (.pdf/.html) in the worker."""
+        from winder_gui.tasks import report_task
+
+        self.nc_runner.submit(report_task, self.doc.result, path, self.doc.path)
+
     def export_block_reason(self) -> str:
         """Why Export NC is refused now ('' when allowed): a bad field, no program, or stale results."""
         reason = self.block_reason()

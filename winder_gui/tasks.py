@@ -34,6 +34,8 @@ class RunOutput:
     violations: list[Any]
     paths: Any = None
     """:class:`winder_gui.views.geometry.PathsViewData` for the 3D view (thinned in the worker)."""
+    coverage: Any = None
+    """:class:`engine.coverage.CoverageMap` of a new winding line (``None``: the line did not change)."""
 
 
 def pipeline_task(job: Job, job_path: Path | None, previous: Any, upto: str, *, state: Any) -> RunOutput:
@@ -46,7 +48,13 @@ def pipeline_task(job: Job, job_path: Path | None, previous: Any, upto: str, *, 
     check_cancel(state)
     paths = (paths_view_data(res.line, res.eye, MAX_DISPLAY_POINTS, MAX_FRAMES, blocks=res.blocks)
              if res.line is not None else None)
-    return RunOutput(res, res.warnings(), list(res.violations), paths)
+    cov = None
+    if res.line is not None and (previous is None or getattr(previous, "line", None) is not res.line):
+        from engine.coverage import coverage_map
+
+        state.progress(1.0, "coverage map")
+        cov = coverage_map(res.line, res.mandrel)
+    return RunOutput(res, res.warnings(), list(res.violations), paths, cov)
 
 
 @dataclass(frozen=True)
@@ -269,6 +277,14 @@ def timelaw_task(spec: TimeLawSpec, *, state: Any) -> TimeLawResult:
     top = parametrize(s, X, dX, ddX, lim, method="toppra", state=SubState(state, 0.55, 1.0))
     state.progress(1.0, "")
     return TimeLawResult("paper example (7 axes, N = 893)", tube, dp, top)
+
+
+def report_task(result: Any, path: Path, job_path: Path | None, *, state: Any) -> Path:
+    """:func:`engine.report.write_report` (PDF or HTML by suffix, atomic) of ``result``."""
+    from engine.report import write_report
+
+    state.progress(0.0, f"writing the report {path.name}")
+    return write_report(result, path, job_path)
 
 
 def write_task(result: Any, path: Path, force: bool, *, state: Any) -> Path:

@@ -53,6 +53,7 @@ def build_menus(w: MainWindow) -> None:
     add(f, "export_nc", "Export &NC program…", w.action_export_nc, "Ctrl+Shift+E")
     add(f, "export_plot", "Export current &plot…", lambda: action_export_plot(w), "Ctrl+Shift+P")
     add(f, "open_nc", "Open NC program (read back)…", lambda: action_open_nc(w), "Ctrl+Shift+O")
+    add(f, "export_report", "Export/print &report (PDF, HTML)…", w.action_export_report, "Ctrl+P")
     f.addSeparator()
     add(f, "quit", "&Quit", w.close, QKeySequence.StandardKey.Quit)
 
@@ -199,6 +200,12 @@ def action_export_mandrel(w: MainWindow) -> None:
 def ask_nc_path(w: MainWindow, extension: str) -> str:
     path, _ = QFileDialog.getSaveFileName(w, "Export NC program",
                                           str(w.doc.start_dir() / f"{w.doc.file_stem()}{extension}"), NC_FILTER)
+    return path
+
+
+def ask_report_path(w: MainWindow) -> str:
+    path, _ = QFileDialog.getSaveFileName(w, "Export job report",
+                                          str(w.doc.start_dir() / f"{w.doc.file_stem()}-report.pdf"), REPORT_FILTER)
     return path
 
 
