@@ -454,6 +454,10 @@ class Mandrel:
 
     def breakpoints(self) -> FloatArray:
         """Interior z (mm) of knots and r'' extrema of every segment (not the joints), increasing."""
+        return self._breakpoints.copy()
+
+    @cached_property
+    def _breakpoints(self) -> FloatArray:
         return np.unique(np.concatenate([s.breakpoints() for s in self.segments]))
 
     def r(self, z: ArrayLike) -> FloatArray:
