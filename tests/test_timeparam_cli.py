@@ -77,3 +77,19 @@ def test_cli_example_subprocess() -> None:
     out = json.loads(res.stdout)
     assert len(out["s"]) == 893 and out["s"][-1] == pytest.approx(2846.9)
     assert len(out["iterations"]) >= 3 and out["max_accel_ratio"] <= 1.0 + 1e-9
+
+
+def test_cli_npz_out_on_a_dense_path(tmp_path, capsys) -> None:
+    """A dense path runs the tube on node groups: the iterations are saved on their own nodes (iter_s),
+    the law on every node."""
+    s, X, dX, ddX = example_path(3000)
+    npz = tmp_path / "dense.npz"
+    np.savez(npz, s=s, X=X, dX=dX, ddX=ddX)
+    out_npz = tmp_path / "law.npz"
+    assert main(["timeparam", str(npz), "--limits", str(EXAMPLE_LIMITS), "--npz-out", str(out_npz)]) == 0
+    capsys.readouterr()
+    with np.load(out_npz) as z:
+        assert z["sdot"].shape == (3000,)
+        n_it = z["iter_r"].size
+        assert 1 < z["iter_s"].size < 3000 and z["iter_sdot"].shape == (n_it, z["iter_s"].size)
+        assert z["iter_s"][0] == s[0] and z["iter_s"][-1] == s[-1]

@@ -77,12 +77,14 @@ def run(args: argparse.Namespace) -> int:
     if args.npz_out:
         buf = io.BytesIO()
         its = law.iterations
-        np.savez(buf, s=law.s, sdot=law.sdot, t=law.t,
+        # the iterations' own nodes: the law's, or the node groups' ends on dense paths (node_group > 1)
+        it_s = its[0].s if its else law.s
+        np.savez(buf, s=law.s, sdot=law.sdot, t=law.t, iter_s=it_s,
                  iter_r=np.array([it.r for it in its], int),
                  iter_total_time_s=np.array([it.total_time_s for it in its]),
-                 iter_sdot=np.array([it.sdot for it in its]).reshape(len(its), law.s.size),
-                 iter_lower=np.array([it.lower for it in its]).reshape(len(its), law.s.size),
-                 iter_upper=np.array([it.upper for it in its]).reshape(len(its), law.s.size))
+                 iter_sdot=np.array([it.sdot for it in its]).reshape(len(its), it_s.size),
+                 iter_lower=np.array([it.lower for it in its]).reshape(len(its), it_s.size),
+                 iter_upper=np.array([it.upper for it in its]).reshape(len(its), it_s.size))
         atomic_write_bytes(Path(args.npz_out), buf.getvalue())
     violated = args.method != "toppra" and max(law.max_accel_ratio, law.max_speed_ratio,
                                                law.max_sddot_ratio) > 1.0 + 1e-9
