@@ -461,7 +461,8 @@ def trapezoid_move(machine: Any, q0: FloatArray, q1: FloatArray) -> tuple[FloatA
     The move follows a trapezoidal (or triangular) speed profile in the path parameter whose peak speed
     and acceleration keep every axis's ``max_speed`` and ``max_accel``; blocks last at most
     ``min(max_jump / max_accel)`` so the speed step between neighbouring blocks stays within every
-    ``max_jump``.  Returns (q (n+1, n_axes), time (n,)) .
+    ``max_jump`` and the first and last block (from and to rest) run below half a ``max_jump``.
+    Returns (q (n+1, n_axes), time (n,)).
     """
     q0 = np.asarray(q0, dtype=float)
     q1 = np.asarray(q1, dtype=float)
@@ -1045,18 +1046,26 @@ def _join(res: LaminateResult, machine: Any) -> LaminateResult:
             errs.append(np.zeros(tt.size))
             nb += tt.size
         f = lr.figures
-        sections.append((nb, f"layer {lr.index + 1} {lr.name} ({lr.kind}): {f['time_s']:.3f} s, "
-                             f"fibre {f['fibre_length_m']:.3f} m"))
         block0, t_start = nb, float(sum(float(np.sum(x)) for x in times))
-        qs.append(q if last_q is None else q[1:])
-        times.append(np.asarray(b.time, dtype=float))
-        t17.append(np.asarray(b.t17, dtype=float))
-        errs.append(np.asarray(b.max_error, dtype=float))
-        nb += b.n
+        qr, tr, added = _ramp_layer(machine, q, np.asarray(b.time, dtype=float))
+        tr = limit_from_rest(machine, qr, tr)
+        sections.append((nb, f"layer {lr.index + 1} {lr.name} ({lr.kind}): {float(tr.sum()):.3f} s, "
+                             f"fibre {f['fibre_length_m']:.3f} m"))
+        qs.append(qr if last_q is None else qr[1:])
+        times.append(tr)
+        t17_l = np.concatenate([np.full(added, np.nan), np.asarray(b.t17, dtype=float),
+                                np.full(tr.size - b.n - added, np.nan)])
+        t17.append(np.where(np.isnan(t17_l), tr, t17_l))  # the ramp pieces: their own times
+        err = np.asarray(b.max_error, dtype=float)
+        errs.append(np.concatenate([np.full(added, err[0]), err, np.full(tr.size - b.n - added, err[-1])]))
+        block0 += added
+        nb += tr.size
+        q = qr
         last_q = q[-1]
         prev_index = lr.index
         pending_skip = 0.0
-        new_layers.append(replace(lr, mandrel_shift=shift, block0=block0, t0=t_start))
+        figs = {**lr.figures, "time_s": float(tr.sum()), "ramps_s": float(tr.sum() - float(np.sum(b.time)))}
+        new_layers.append(replace(lr, mandrel_shift=shift, block0=block0, t0=t_start, figures=figs))
     if not qs:
         raise InputError("the laminate has no layer that lays fibre (only skip layers)", file=res.job_path,
                          field="layer")
@@ -1115,6 +1124,139 @@ def _common_placement(res: LaminateResult, machine: Any) -> tuple[Any, dict[int,
     axes = list(machine.axes)
     axes[k] = replace(ax, offset=z0)
     return replace(machine, axes=tuple(axes)), shifts, placement
+
+
+@dataclass(frozen=True)
+class LaidLine:
+    """Every layer's winding line in the joined program's mandrel frame, one after the other (for the NC
+    read-back): ``xyz``, ``tau`` (N,3), ``s`` (N,) laid length continued from layer to layer (mm), ``layer`` (N,)
+    the job's layer index, ``z``."""
+
+    xyz: FloatArray
+    tau: FloatArray
+    s: FloatArray
+    z: FloatArray
+    layer: NDArray[np.int64]
+
+
+def laid_line(result: LaminateResult) -> LaidLine:
+    """The layers' lines as the joined program lays them: each turned about the axis by the mandrel shift that
+    made it continue from the layer before (``p_M = Rz(−θ) p_W``, so a shift Δθ turns the line by −Δθ)."""
+    xyz, tau, s, z, lay = [], [], [], [], []
+    s0 = 0.0
+    mi = result.machine.axis_index("mandrel") if result.machine is not None else None
+    for lr in result.layers:
+        if lr.result is None:
+            continue
+        line = lr.result.line
+        ang = 0.0
+        if mi is not None and lr.mandrel_shift:
+            ang = -lr.mandrel_shift / result.machine.axes[mi].scale
+        c, sn = math.cos(ang), math.sin(ang)
+        rot = np.array([[c, -sn, 0.0], [sn, c, 0.0], [0.0, 0.0, 1.0]])
+        xyz.append(np.asarray(line.xyz) @ rot.T)
+        tau.append(np.asarray(line.tau) @ rot.T)
+        s.append(np.asarray(line.s) - float(line.s[0]) + s0)
+        s0 = float(s[-1][-1])
+        z.append(np.asarray(line.z))
+        lay.append(np.full(len(line.z), lr.index, dtype=np.int64))
+    return LaidLine(np.concatenate(xyz), np.concatenate(tau), np.concatenate(s), np.concatenate(z),
+                    np.concatenate(lay))
+
+
+def ramp_from_rest(machine: Any, q0: FloatArray, q1: FloatArray, t: float) -> tuple[FloatArray, FloatArray]:
+    """Split the straight block q0 -> q1 (duration ``t`` s) so that it starts from rest: sub-blocks whose speed
+    rises in steps that keep every axis's ``max_jump`` (the first step from rest included) and ``max_accel``,
+    then the rest of the block at its own speed.  Same path (points on the segment), a little more time.
+
+    Returns (q (k+1, n_axes) with q[0] = q0 and q[-1] = q1, times (k,)).
+    """
+    q0 = np.asarray(q0, dtype=float)
+    q1 = np.asarray(q1, dtype=float)
+    d = np.abs(q1 - q0)
+    v = d / t
+    J = machine.limits("max_jump")
+    A = machine.limits("max_accel")
+    mv = v > 0
+    if not mv.any() or np.all(v[mv] <= 0.5 * J[mv] * (1 - 1e-9)):
+        return np.stack([q0, q1]), np.array([t])
+    # speed step as a fraction of the block speed: at most half a max_jump, so that a neighbour block running
+    # the other way (a transition coming to rest) stays within max_jump of it
+    dfrac = 0.45 * float(np.min(J[mv] / v[mv]))
+    tau = float(np.max(dfrac * v[mv] / A[mv]))           # sub-block time that keeps max_accel for that step
+    tau = max(tau, machine.min_block_time)
+    fr, ts, frac = [], [], 0.0
+    sp = dfrac
+    while sp < 1.0 - 1e-12:
+        step = sp * tau / t                               # share of the block covered at speed sp·v in tau
+        if frac + step >= 1.0:
+            break
+        fr.append(frac + step)
+        ts.append(tau)
+        frac += step
+        sp += dfrac
+    rest = 1.0 - frac
+    fracs = np.array([*fr, 1.0])
+    times = np.array([*ts, rest * t / min(sp, 1.0)])
+    q = q0[None, :] + np.concatenate([[0.0], fracs])[:, None] * (q1 - q0)[None, :]
+    return q, times
+
+
+def _scale_pass(v: FloatArray, t: FloatArray, J: FloatArray, A: FloatArray) -> FloatArray:
+    """Speed factors α_i <= 1, block by block from rest, so that every axis's speed step between neighbouring
+    blocks stays within min(max_jump, max_accel × mean block time); stops once the blocks keep their speed."""
+    n = v.shape[0]
+    alpha = np.ones(n)
+    prev = np.zeros(v.shape[1])
+    t_prev = 0.0
+    for i in range(n):
+        # from rest: half a max_jump (the block before may run the other way at up to half of it)
+        lim = np.minimum(J, A * 0.5 * (t[i] + t_prev)) if t_prev > 0 else np.minimum(0.5 * J, A * t[i])
+        hi = 1.0
+        vi = v[i]
+        for k in np.flatnonzero(np.abs(vi) > 1e-12):
+            a = (prev[k] - lim[k]) / vi[k]
+            b = (prev[k] + lim[k]) / vi[k]
+            hi = min(hi, max(a, b))
+        hi = max(hi, 1e-6)
+        if hi >= 1.0 and np.all(np.abs(vi - prev) <= lim * (1 + 1e-9)):
+            if i > 0 and alpha[i - 1] >= 1.0:
+                break
+        alpha[i] = min(1.0, hi)
+        prev = alpha[i] * vi
+        t_prev = t[i] / alpha[i]
+    return alpha
+
+
+def limit_from_rest(machine: Any, q: FloatArray, t: FloatArray) -> FloatArray:
+    """Block times (s) of the program ``q`` (n+1 positions) slowed where needed so that it starts and ends at
+    rest within every axis's ``max_jump`` and ``max_accel`` (a forward pass from the start and a backward pass
+    from the end; the blocks between keep their times)."""
+    t = np.asarray(t, dtype=float).copy()
+    v = np.diff(np.asarray(q, dtype=float), axis=0) / t[:, None]
+    J, A = machine.limits("max_jump"), machine.limits("max_accel")
+    a_f = _scale_pass(v, t, J, A)
+    t = t / a_f
+    v = np.diff(np.asarray(q, dtype=float), axis=0) / t[:, None]
+    a_b = _scale_pass(v[::-1], t[::-1], J, A)[::-1]
+    return t / a_b
+
+
+def _ramp_layer(machine: Any, q: FloatArray, t: FloatArray) -> tuple[FloatArray, FloatArray, int]:
+    """A layer's blocks made to start and end at rest (its own law may start and end at cruise speed: a
+    single-line program repeats its circuits).  Returns (q, time, blocks added before the first original)."""
+    q = np.asarray(q, dtype=float)
+    t = np.asarray(t, dtype=float)
+    head_q, head_t = ramp_from_rest(machine, q[0], q[1], float(t[0]))
+    if q.shape[0] == 2:  # one block: ramp up, then ramp down its last part
+        tail_q, tail_t = ramp_from_rest(machine, head_q[-1], head_q[-2], float(head_t[-1]))
+        qq = np.concatenate([head_q[:-1], tail_q[::-1][1:]])
+        tt = np.concatenate([head_t[:-1], tail_t[::-1]])
+        return qq, tt, head_t.size - 1
+    tail_q, tail_t = ramp_from_rest(machine, q[-1], q[-2], float(t[-1]))
+    qq = np.concatenate([head_q, q[2:-1], tail_q[::-1][1:]])
+    tt = np.concatenate([head_t, t[1:-1], tail_t[::-1]])
+    return qq, tt, head_t.size - 1
 
 
 def _lead_in(machine: Any, q: FloatArray, lead_in_mm: float) -> FloatArray | None:

@@ -410,7 +410,8 @@ def simulate(prog: NcProgram, machine: MachineTemplate, line: Any | None = None,
         contact, miss = match_contacts(eye, np.asarray(line.xyz, float), np.asarray(line.tau, float))
         s_line = np.asarray(line.s, float)
         rep["fibre_length_mm"] = float(s_line[contact[-1]] - s_line[contact[0]])
-        rep["fibre_miss_mm"] = float(np.max(miss))
+        fin = np.isfinite(miss)  # a move away from the mandrel (a laminate's transition) has no contact ray
+        rep["fibre_miss_mm"] = float(np.max(miss[fin])) if fin.any() else None
     from engine.machine_setup import group_violations
 
     groups = group_violations(viol)

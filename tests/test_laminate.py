@@ -378,3 +378,43 @@ def test_layer_that_cannot_exist_exit_2_names_layer(tmp_path: Path, capsys: pyte
     err = capsys.readouterr().err
     assert f"field '{field}'" in err and words in err and str(job) in err, err
     assert not out.exists()
+
+
+def test_ramps_keep_jump_limits_and_the_path() -> None:
+    from engine.kinematics import load_machine
+    from engine.laminate import _ramp_layer, limit_from_rest
+
+    m = load_machine("lathe2")
+    J = m.limits("max_jump")
+    for q, t in ((np.array([[0.0, 600.0], [35000.0, 1590.0]]), np.array([51.0])),
+                 (np.array([[0.0, 600.0], [10.0, 601.0], [25.0, 603.0], [35000.0, 1590.0]]),
+                  np.array([0.01, 0.01, 51.0]))):
+        qq, tt, _ = _ramp_layer(m, q, t)
+        tt = limit_from_rest(m, qq, tt)
+        v = np.diff(qq, axis=0) / tt[:, None]
+        assert np.all(np.abs(v[0]) <= 0.5 * J + 1e-9) and np.all(np.abs(v[-1]) <= 0.5 * J + 1e-9)
+        assert np.all(np.abs(np.diff(v, axis=0)) <= J * (1 + 1e-9))
+        # every new boundary lies on the original polyline (same path)
+        for p in qq:
+            seg = [np.linalg.norm(np.cross(np.append(p - a, 0), np.append(b - a, 0))) / np.linalg.norm(b - a)
+                   for a, b in zip(q[:-1], q[1:])]
+            assert min(seg) < 1e-6
+
+
+@pytest.mark.parametrize("name", ["bottle"])
+def test_read_back_of_the_laminate_program_agrees_with_the_report(tmp_path: Path, name: str,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    job = EXAMPLES / f"{name}.toml"
+    out, rep = tmp_path / "p.ngc", tmp_path / "r.json"
+    assert main(["run", str(job), "-o", str(out), "--report", str(rep), "--quiet"]) == 0
+    capsys.readouterr()
+    report = json.loads(rep.read_text())
+    assert report["warnings"] == []
+    assert main(["simulate", str(out), "--job", str(job), "--json"]) == 0  # within every limit
+    sim = json.loads(capsys.readouterr().out)
+    assert sim["ok"] and sim["violations"] == []
+    assert sim["program_time_s"] == pytest.approx(report["program_time_s"], rel=1e-3)
+    assert sim["fibre_length_mm"] == pytest.approx(report["fibre_length_mm"], rel=1e-3)
+    for axis, (lo, hi) in report["axis_ranges"].items():
+        assert sim["axis_ranges"][axis][0] == pytest.approx(lo, abs=1e-3)
+        assert sim["axis_ranges"][axis][1] == pytest.approx(hi, abs=1e-3)

@@ -36,10 +36,14 @@ def run(args: argparse.Namespace) -> int:
         job = load_job(args.job)
         tol = float(job.machine.setup.back_turn_tol_deg)
     machine = _machine(args, job)
-    if job is not None:
+    if job is not None and job.is_single_line:
         from engine.pipeline import run_pipeline
 
         line = run_pipeline(job, args.job, upto="winding").line
+    elif job is not None:  # a laminate: every layer's line as the joined program lays it
+        from engine.laminate import laid_line, run_laminate
+
+        line = laid_line(run_laminate(job, args.job))
     sim, profile_name = read_back(path, machine, args.controller, line, back_turn_tol_deg=tol)
     prog = sim.program
     rep = {**sim.report, "controller": profile_name}
