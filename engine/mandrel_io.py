@@ -455,6 +455,11 @@ def _describe_entities(entities: Iterable[Any], limit: int = 8) -> str:
     return "model space holds " + ", ".join(parts) + ex
 
 
+MAX_DXF_TAGS = 250_000
+"""Most DXF tags (group code + value, two lines) read: the example profile drawing has 1 800; the DXF
+reader is pure Python (ezdxf) and needs seconds per 100 000 tags."""
+
+
 def load_dxf(path: str | Path) -> Mandrel:
     """Read a generatrix drawn in a DXF file and return a C2 spline mandrel.
 
@@ -478,6 +483,10 @@ def load_dxf(path: str | Path) -> Mandrel:
     data = _read_bytes(p, "DXF")
     if not data.strip():
         raise InputError("empty file: not a DXF drawing", file=file)
+    tags = (data.count(b"\n") + 1) // 2  # a DXF tag is two lines (cheap, in C)
+    if tags > MAX_DXF_TAGS:
+        raise InputError(f"the drawing has {tags} tags, more than {MAX_DXF_TAGS} (reading it would take minutes); "
+                         "draw the profile alone as one polyline or spline, or export it as a CSV table", file=file)
     doc = _read_dxf_doc(p, data)
     try:
         msp = doc.modelspace()

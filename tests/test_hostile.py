@@ -487,3 +487,12 @@ def test_sketch_with_too_many_points_is_refused(tmp_path, capsys) -> None:
                + "]\nr_mm = [" + ", ".join(map(repr, r.tolist())) + "]\n")
     rc, _, err = _cli(capsys, "mandrel", str(job))
     assert rc == 2 and "line 4, field 'mandrel.z_mm'" in err and "at most 20000" in err
+
+
+def test_huge_dxf_is_refused_before_parsing(tmp_path, capsys) -> None:
+    from engine.mandrel_io import MAX_DXF_TAGS
+
+    p = tmp_path / "many.dxf"
+    p.write_bytes(b"  0\nSECTION\n  2\nENTITIES\n" + b"  0\nLINE\n 10\n1.0\n 20\n50.0\n" * (MAX_DXF_TAGS // 5))
+    rc, _, err = _cli(capsys, "mandrel", str(p))
+    assert rc == 2 and str(p) in err and f"more than {MAX_DXF_TAGS}" in err
