@@ -493,6 +493,6 @@ def test_huge_dxf_is_refused_before_parsing(tmp_path, capsys) -> None:
     from engine.mandrel_io import MAX_DXF_TAGS
 
     p = tmp_path / "many.dxf"
-    p.write_bytes(b"  0\nSECTION\n  2\nENTITIES\n" + b"  0\nLINE\n 10\n1.0\n 20\n50.0\n" * (MAX_DXF_TAGS // 5))
+    p.write_bytes(b"  0\nSECTION\n  2\nENTITIES\n" + b"  0\nLINE\n 10\n1.0\n 20\n50.0\n" * (MAX_DXF_TAGS // 2))
     rc, _, err = _cli(capsys, "mandrel", str(p))
     assert rc == 2 and str(p) in err and f"more than {MAX_DXF_TAGS}" in err
