@@ -170,3 +170,31 @@ def test_header_set_up_lines_place_the_machine() -> None:
     sim = simulate(prog, m)
     # the eye at z = X - 412.5 and at radius 150.2 (forward kinematics of the placed machine)
     assert sim.eye_xyz[-1, 2] == pytest.approx(7.5) and np.hypot(*sim.eye_xyz[-1, :2]) == pytest.approx(150.2)
+
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "resources" / "examples"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("example", ["pipe", "pressure_vessel", "bottle"])
+def test_every_example_reads_back_to_its_report(example, tmp_path, capsys) -> None:
+    """`winder run` then `winder simulate --job`: time, laid fibre and axis ranges within 0.1 %."""
+    text = (EXAMPLES / f"{example}.toml").read_text()
+    job = tmp_path / f"{example}.toml"     # the example's single line (its [[layer]] stack: a laminate)
+    job.write_text(text[: text.index("# The laminate")] if "# The laminate" in text else text)
+    for extra in (EXAMPLES / "bottle_profile.csv", EXAMPLES / "vessel_profile.dxf"):
+        if extra.exists():
+            (tmp_path / extra.name).write_bytes(extra.read_bytes())
+    out, rep_path = tmp_path / "p.ngc", tmp_path / "r.json"
+    assert main(["run", str(job), "-o", str(out), "--report", str(rep_path), "--quiet"]) == 0
+    rep = json.loads(rep_path.read_text())
+    capsys.readouterr()
+    assert main(["simulate", str(out), "--job", str(job), "--json"]) == 0
+    sim = json.loads(capsys.readouterr().out)
+    assert sim["ok"] and sim["violations"] == []
+    assert sim["program_time_s"] == pytest.approx(rep["program_time_s"], rel=1e-3)
+    assert sim["fibre_length_mm"] == pytest.approx(rep["fibre_length_mm"], rel=1e-3)
+    for name, (lo, hi) in rep["axis_ranges"].items():
+        span = max(1.0, hi - lo)
+        assert sim["axis_ranges"][name][0] == pytest.approx(lo, abs=1e-3 * span)
+        assert sim["axis_ranges"][name][1] == pytest.approx(hi, abs=1e-3 * span)

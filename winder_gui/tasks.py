@@ -80,17 +80,28 @@ def readback_task(path: Path, job: Job, job_path: Path | None, result: Any, *, s
     from winder_gui.views.geometry import paths_view_data
     from winder_gui.views.view3d import MAX_DISPLAY_POINTS, MAX_FRAMES
 
-    line = getattr(result, "line", None)
-    if line is None:
-        line = run_pipeline(job, job_path, upto="winding", state=state).line
+    if job.is_single_line:
+        line = getattr(result, "line", None)
+        if line is None:
+            line = run_pipeline(job, job_path, upto="winding", state=state).line
+    else:   # a laminate: every layer's line as the joined program lays it
+        from engine.laminate import laid_line, run_laminate
+
+        lam = result if getattr(result, "layers", None) is not None else run_laminate(job, job_path, state=state)
+        line = laid_line(lam)
     check_cancel(state)
     machine = setup_machine_for_job(job, job_path)
     sim, profile = read_back(path, machine, job.post.controller, line,
                              back_turn_tol_deg=float(job.machine.setup.back_turn_tol_deg))
     check_cancel(state)
     a, b = int(sim.contact_index[0]), int(sim.contact_index[-1]) + 1
-    laid = SimpleNamespace(**{k: np.asarray(getattr(line, k))[a:b] for k in ("z", "xyz", "circuit", "r", "beta",
-                                                                              "lam")})
+    xyz = np.asarray(line.xyz)[a:b]
+    zeros = np.zeros(b - a)
+    laid = SimpleNamespace(
+        z=np.asarray(line.z)[a:b], xyz=xyz, r=np.hypot(xyz[:, 0], xyz[:, 1]),
+        circuit=np.asarray(getattr(line, "circuit", getattr(line, "layer", zeros)))[a:b],
+        beta=np.asarray(getattr(line, "beta", zeros))[a:b] if hasattr(line, "beta") else zeros,
+        lam=np.asarray(getattr(line, "lam", zeros))[a:b] if hasattr(line, "lam") else zeros)
     eye = SimpleNamespace(eye_xyz=sim.eye_xyz, contact_xyz=np.asarray(line.xyz)[sim.contact_index],
                           u=np.zeros(0))
     paths = paths_view_data(laid, eye, MAX_DISPLAY_POINTS, MAX_FRAMES)
