@@ -55,6 +55,7 @@ from winder_gui.autosave import (  # noqa: F401 - re-exported for callers of the
     process_autosave_owner,
 )
 from winder_gui.document import JobDocument
+from winder_gui.laminate_view import LaminatePresenter
 from winder_gui.panels.segments_table import apply_handles, segment_handles
 from winder_gui.results_view import ResultsPresenter
 from winder_gui.run_controller import RunController
@@ -128,6 +129,7 @@ class MainWindow(QMainWindow):
         self.ctl = RunController(self.doc, self.run_block_reason, self)
         self._build_ui()
         self.results = ResultsPresenter(self.doc, self.ctl, self)
+        self.laminate = LaminatePresenter(self.doc, self.ctl, self)
         window_menus.build_menus(self)
         window_menus.build_toolbar(self)
         self._wire()
@@ -182,6 +184,8 @@ class MainWindow(QMainWindow):
         for key, panel in self.section_panels.items():
             panel.job_edited.connect(lambda job, k=key: self.doc.edit(job, k))
             panel.validity_changed.connect(lambda _m: self._update_run_state())
+        self.layers_panel.job_edited.connect(lambda job, text: self.doc.edit(job, "layers", text))
+        self.layers_panel.validity_changed.connect(lambda _m: self._update_run_state())
         self.timelaw_panel.compute_requested.connect(self.compute_timelaw)
         self.timelaw_plot.law_selected.connect(lambda _i: self.results.show_chosen_law())
         self.nc_panel.run_requested.connect(self.run_pipeline_now)
@@ -364,6 +368,10 @@ class MainWindow(QMainWindow):
                 panel.job = self.job
             else:
                 panel.set_job(self.job)
+        if source == "layers":
+            self.layers_panel.job = self.job
+        else:
+            self.layers_panel.set_job(self.job)
         self._update_title()
 
     def _on_spec_edited(self, spec: Any) -> None:
@@ -420,7 +428,7 @@ class MainWindow(QMainWindow):
         for key, panel in self.section_panels.items():
             if panel.errors():
                 return f"{key} {panel.errors()}"
-        return ""
+        return self.layers_panel.errors()
 
     def export_block_reason(self) -> str:
         """Why Export NC is disabled ('' when allowed): invalid job, no program or out-of-date results."""
@@ -470,6 +478,8 @@ class MainWindow(QMainWindow):
             if fld.startswith("mandrel"):
                 self.mandrel_panel.show_error(fld, exc.message)
                 shown = True
+            if fld.startswith("layer"):
+                shown = self.layers_panel.show_error(fld, exc.message) or shown
         msg = exc.message if isinstance(exc, InputError) else str(exc)
         self.nc_panel.summary.setText(f"<span style='color:#c01010'>Not computed: {msg}</span>")
         if self.ctl.explicit or not shown:

@@ -84,6 +84,8 @@ class ResultsPresenter(QObject):
 
     def show_result(self, res: Any) -> None:
         """Update the views of every stage of ``res`` that changed since they were last drawn."""
+        if not hasattr(res, "keys"):  # a laminate: drawn by winder_gui.laminate_view
+            return
         keys = res.keys
         v = self.v
         todo: list[Any] = []
@@ -106,6 +108,14 @@ class ResultsPresenter(QObject):
     def _on_run_done(self, out: Any) -> None:
         res = out.result
         v = self.v
+        if not hasattr(res, "keys"):  # a laminate (LaminateOutput): winder_gui.laminate_view draws it
+            self._shown.clear()
+            self._paths_key = None
+            warns = list(self.doc.run_warnings)
+            self.queue(lambda: v.laminate.set_output(out), lambda: v.nc_panel.set_result(res, warns),
+                       lambda: self._on_stale(self.doc.is_stale()))
+            self.status.emit(v.laminate.summary(out, time.monotonic() - self.ctl.run_t0, len(warns)), False)
+            return
         self.show_result(res)
         if out.coverage is not None:
             self.queue(lambda: v.coverage_plot.set_coverage(out.coverage))

@@ -90,6 +90,8 @@ class RunController(QObject):
         self._run_job: Job | None = None
         self._partial: Any = None
         self._laws_key = ""
+        self.last_output: Any = None
+        """The worker's output of the last finished run (a layered job re-uses its layer views)."""
         self.run_t0 = 0.0
         self._closed = False
 
@@ -204,9 +206,9 @@ class RunController(QObject):
         self._partial = None
         self._superseding = True
         try:
-            from winder_gui.tasks import pipeline_task
+            from winder_gui.laminate_tasks import run_task  # single line or laminate
 
-            self.pipe_runner.submit(pipeline_task, doc.job, doc.path, doc.result, upto)
+            self.pipe_runner.submit(run_task, doc.job, doc.path, doc.result, upto, previous_views=self.last_output)
         finally:
             self._superseding = False
         self._on_busy()
@@ -227,21 +229,23 @@ class RunController(QObject):
         self.cancel()
         self._partial = None
         self._laws_key = ""
+        self.last_output = None
 
     def _on_pipe_partial(self, res: Any) -> None:
         from engine.pipeline import PipelineResult
 
-        if isinstance(res, PipelineResult):
-            self._partial = res
+        if isinstance(res, PipelineResult) and self._run_job is not None and self._run_job.is_single_line:
+            self._partial = res  # (a laminate's layers report their own partial results: not the job's)
             self.partial.emit(res)
 
     def _on_pipe_done(self, out: Any) -> None:
         res = out.result
         self._partial = None
+        self.last_output = out
         self.doc.set_running(False)
         self.doc.set_result(res, self._run_job, list(out.warnings), list(out.violations))
-        eye_key = res.keys.get("payout", "")
-        if eye_key != self._laws_key and res.eye_circuit is not None and not self._closed:
+        eye_key = getattr(res, "keys", {}).get("payout", "")  # a laminate has no single eye path to compare
+        if eye_key and eye_key != self._laws_key and res.eye_circuit is not None and not self._closed:
             self._laws_key = eye_key
             from winder_gui.tasks import laws_task
 
@@ -279,9 +283,11 @@ class RunController(QObject):
 
     def write_nc(self, path: Path, force: bool) -> None:
         """Write the NC program of the (current) result to ``path`` in the worker."""
+        from winder_gui.laminate_tasks import is_laminate, write_laminate_task
         from winder_gui.tasks import write_task
 
-        self.nc_runner.submit(write_task, self.doc.result, path, bool(force))
+        task = write_laminate_task if is_laminate(self.doc.result) else write_task
+        self.nc_runner.submit(task, self.doc.result, path, bool(force))
 
     def read_nc(self, path: Path) -> None:
         """Read the NC program ``path`` back on the job's machine in the worker (File > Open NC program)."""

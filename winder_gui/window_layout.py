@@ -13,16 +13,19 @@ from PySide6.QtWidgets import (
     QSplitter,
     QStackedWidget,
     QTabWidget,
+    QVBoxLayout,
     QWidget,
 )
 
 from winder_gui import texts
+from winder_gui.panels.layers_panel import LayersPanel
 from winder_gui.panels.machine_panel import MachinePanel
 from winder_gui.panels.mandrel_panel import MandrelPanel
 from winder_gui.panels.nc_panel import NCPanel, TimeLawPanel
 from winder_gui.panels.section_panel import SectionPanel, payout_panel, winding_panel
 from winder_gui.panels.steps import STEPS, StepBar
 from winder_gui.settings import app_settings
+from winder_gui.views.laminate_plot import LaminatePlots
 from winder_gui.views.plots import AxesPlot, CoveragePlot, EyePlot, PullSpeedPlot, TimeLawPlot, WindingPlots
 from winder_gui.views.profile_plot import ProfilePlot
 from winder_gui.views.view3d import MandrelView3D
@@ -46,13 +49,15 @@ def build_layout(w: MainWindow) -> None:
     w.axes_plot = AxesPlot()
     w.timelaw_plot = TimeLawPlot()
     w.coverage_plot = CoveragePlot()
+    w.laminate_plot = LaminatePlots()
     w.tabs: dict[str, QWidget] = {"generatrix": w.plot}
     for key, page, title in (("winding", w.winding_plots, "Winding β, C, λ (z)"),
                              ("eye", w.eye_plot, "Eye path Z–R"),
                              ("pull_speed", w.pull_plot, "Pull speed u(x)"),
                              ("axes", w.axes_plot, "Axes q(t), v(t)"),
                              ("time_law", w.timelaw_plot, "Time law ṡ"),
-                             ("coverage", w.coverage_plot, "Coverage v(z)")):
+                             ("coverage", w.coverage_plot, "Coverage v(z)"),
+                             ("laminate", w.laminate_plot, "Laminate r(z), β, t")):
         w.plot_tabs.addTab(page, title)
         w.tabs[key] = page
 
@@ -66,6 +71,7 @@ def build_layout(w: MainWindow) -> None:
 
     w.mandrel_panel = MandrelPanel()
     w.winding_panel = winding_panel()
+    w.layers_panel = LayersPanel()
     w.payout_panel = payout_panel()
     w.machine_panel = MachinePanel()
     w.timelaw_panel = TimeLawPanel()
@@ -77,8 +83,17 @@ def build_layout(w: MainWindow) -> None:
     w.properties = QStackedWidget()
     w.properties.setMinimumWidth(330)
     w.step_pages: dict[str, int] = {}
-    for key, panel in (("mandrel", w.mandrel_panel), *w.section_panels.items(), ("nc", w.nc_panel)):
-        add_step_page(w, key, panel, horizontal_scroll=key == "mandrel")
+    winding_page = QWidget()  # the layer table above the defaults every layer inherits ([band], [winding])
+    box = QVBoxLayout(winding_page)
+    box.setContentsMargins(0, 0, 0, 0)
+    box.addWidget(w.layers_panel)
+    defaults = QLabel("<b>Defaults</b> — inherited by every layer that leaves a field blank")
+    defaults.setWordWrap(True)
+    box.addWidget(defaults)
+    box.addWidget(w.winding_panel)
+    pages = {"mandrel": w.mandrel_panel, **w.section_panels, "nc": w.nc_panel, "winding": winding_page}
+    for key in ("mandrel", *w.section_panels, "nc"):
+        add_step_page(w, key, pages[key], horizontal_scroll=key == "mandrel")
 
     main = QSplitter(Qt.Orientation.Horizontal)
     main.addWidget(w.steps)

@@ -1,0 +1,375 @@
+"""The laminate in the window (issue 14, point 6): the layer table of the Winding step, a layered run in
+the worker, the selected layer in 3D and in the laminate plots, and the joined program's export.
+
+Everything goes through the real window (offscreen): the table's buttons and model (the same calls a
+click, a check box, an in-place rename or a drag-and-drop make), the run controller's worker, the export
+command.  The figures in the table are compared with :meth:`engine.laminate.LaminateResult.layup` of
+the window's own result and with an independent ``run_laminate`` of the saved job; the exported program
+with ``winder run`` of the saved job, byte for byte.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from gui_helpers import close_window, shown_window
+from PySide6.QtCore import Qt
+
+from engine.job import HelicalLayer, HoopLayer, PolarLayer, SkipLayer, load_job
+
+pytestmark = pytest.mark.usefixtures("qapp")
+
+JOB = """\
+schema_version = 2
+name = "Small pipe laminate"
+
+[mandrel]
+kind = "pipe"
+radius_mm = 40.0
+length_mm = 300.0
+
+[band]
+width_mm = 10.0
+thickness_mm = 0.4
+friction = 0.15
+
+[winding]
+mode = "geodesic"
+dwell_deg = [180.0, 180.0]
+points_per_pass = 400
+
+[[winding.angles]]
+z_mm = 150.0
+angle_deg = 55.0
+
+[payout]
+law = "parallel"
+
+[machine]
+template = "lathe2"
+
+[post]
+post = "linuxcnc"
+
+[machine.axes.X]
+max = 1800.0
+
+[[layer]]
+kind = "hoop"
+name = "inner hoop"
+
+[[layer]]
+kind = "helical"
+name = "helical 55"
+
+[[layer]]
+kind = "hoop"
+name = "outer hoop"
+terminal = true
+"""
+
+
+@pytest.fixture
+def job_file(tmp_path):
+    p = tmp_path / "lam3.toml"
+    p.write_text(JOB, encoding="utf-8")
+    return p
+
+
+@pytest.fixture
+def win(qtbot, job_file):
+    w = shown_window(qtbot, job_file)
+    w.auto_run = False
+    w.go_to_step("winding")
+    yield w
+    close_window(w)
+
+
+@pytest.fixture
+def ran(win):
+    assert win.run_pipeline_now()
+    assert win.wait_idle(180000) and win.last_error == "", win.last_error
+    return win
+
+
+def _kinds(w) -> list[str]:
+    return [lay.kind for lay in w.job.layers]
+
+
+def _names(w) -> list[str]:
+    return [lay.name for lay in w.job.layers]
+
+
+def _cell(w, row: int, key: str) -> str:
+    from winder_gui.panels.layers_panel import COL
+
+    return w.layers_panel.model.index(row, COL[key]).data()
+
+
+# --------------------------------------------------------------------------------------------------
+def test_table_shows_the_job_layers(win) -> None:
+    p = win.layers_panel
+    assert p.model.rowCount() == 3
+    assert [_cell(win, r, "name") for r in range(3)] == ["inner hoop", "helical 55", "outer hoop"]
+    assert [_cell(win, r, "kind") for r in range(3)] == ["hoop", "helical", "hoop"]
+    assert "terminal" in _cell(win, 2, "definition")
+    assert _cell(win, 0, "time_s") == ""  # not run yet
+
+
+def test_add_duplicate_delete_reorder_disable_change_the_job_and_undo(win) -> None:
+    p = win.layers_panel
+    stack = win.undo_stack
+    jobs = [win.job]
+
+    p.select_layer(0)
+    p.add_layer("polar")  # after the selected layer
+    assert _kinds(win) == ["hoop", "polar", "helical", "hoop"]
+    assert isinstance(win.job.layers[1], PolarLayer) and p.selected_layer() == 1
+    jobs.append(win.job)
+
+    p.add_layer("skip")
+    assert _kinds(win) == ["hoop", "polar", "skip", "helical", "hoop"]
+    assert isinstance(win.job.layers[2], SkipLayer)
+    jobs.append(win.job)
+
+    p.select_layer(3)
+    p.duplicate_layer()
+    assert _names(win) == ["inner hoop", "", "", "helical 55", "helical 55 copy", "outer hoop"]
+    assert win.job.layers[4].model_dump(exclude={"name"}) == win.job.layers[3].model_dump(exclude={"name"})
+    jobs.append(win.job)
+
+    p.delete_layer(2)  # the skip
+    assert _kinds(win) == ["hoop", "polar", "helical", "helical", "hoop"]
+    jobs.append(win.job)
+
+    # reorder by drag and drop: the model's mime data of row 0 dropped before row 3
+    m = p.model
+    data = m.mimeData([m.index(0, 1)])
+    m.dropMimeData(data, Qt.DropAction.MoveAction, 3, 0, m.index(-1, -1))
+    assert _names(win) == ["", "helical 55", "inner hoop", "helical 55 copy", "outer hoop"]
+    jobs.append(win.job)
+    # dropped onto a row (no row given): before that row
+    data = m.mimeData([m.index(4, 1)])
+    m.dropMimeData(data, Qt.DropAction.MoveAction, -1, -1, m.index(0, 1))
+    assert _names(win) == ["outer hoop", "", "helical 55", "inner hoop", "helical 55 copy"]
+    jobs.append(win.job)
+    p.move_layer(0, 4)  # the ▼ / ▲ buttons
+    assert _names(win) == ["", "helical 55", "inner hoop", "helical 55 copy", "outer hoop"]
+    jobs.append(win.job)
+
+    # enable/disable by the check box, rename in place
+    m.setData(m.index(2, 0), Qt.CheckState.Unchecked.value, Qt.ItemDataRole.CheckStateRole)
+    assert not win.job.layers[2].enabled and [i for i, _ in win.job.active_layers] == [0, 1, 3, 4]
+    jobs.append(win.job)
+    m.setData(m.index(0, 1), "polar 1", Qt.ItemDataRole.EditRole)
+    assert win.job.layers[0].name == "polar 1"
+    assert _cell(win, 0, "name") == "polar 1"
+    jobs.append(win.job)
+    assert win.dirty and not win.job.is_single_line
+
+    # every step is one undo entry: undo walks back through the same jobs, redo forward again
+    for expected in reversed(jobs[:-1]):
+        stack.undo()
+        assert win.wait_idle(pipeline=False)
+        assert win.job == expected
+        assert [lay.kind for lay in p.job.layers] == [lay.kind for lay in expected.layers]  # the table follows
+    for expected in jobs[1:]:
+        stack.redo()
+        assert win.job == expected
+
+
+def test_last_layer_cannot_be_deleted(qtbot, tmp_path) -> None:
+    w = shown_window(qtbot)  # the default job: one helical layer (a single line)
+    try:
+        assert w.job.is_single_line and w.layers_panel.model.rowCount() == 1
+        w.layers_panel.delete_layer(0)
+        assert len(w.job.layers) == 1 and "at least one layer" in w.layers_panel.status.text()
+        assert not w.layers_panel.del_button.isEnabled()
+    finally:
+        close_window(w)
+
+
+def test_layer_fields_edit_the_layer_and_bad_values_block_run(win) -> None:
+    p = win.layers_panel
+    p.select_layer(0)
+    assert "overlap" in p.editors and "passes" in p.editors and "z_range_mm.0" in p.editors
+    p.set_value("overlap", "0.25")
+    p.set_value("passes", "3")
+    lay = win.job.layers[0]
+    assert isinstance(lay, HoopLayer) and lay.overlap == 0.25 and lay.passes == 3
+    p.set_value("z_range_mm.0", "20")  # one end only: not applied, shown at the field, Run disabled
+    assert win.job.layers[0].z_range_mm is None
+    assert "both ends" in p.error_labels["z_range_mm.1"].text()
+    assert not win.actions["run"].isEnabled() and "layer 1" in win.run_block_reason()
+    p.set_value("z_range_mm.1", "280")
+    assert win.job.layers[0].z_range_mm == (20.0, 280.0) and win.actions["run"].isEnabled()
+    p.set_value("overlap", "1.5")  # out of range: the model's message
+    assert win.job.layers[0].overlap == 0.25 and p.errors()
+    p.set_value("overlap", "0.25")
+    assert not p.errors()
+    p.set_value("band.width_mm", "12")
+    assert win.job.layers[0].band.width_mm == 12.0
+    p.set_value("band.width_mm", "")
+    assert win.job.layers[0].band.width_mm is None  # blank: inherited from [band]
+
+    p.select_layer(1)
+    assert "angle_deg" in p.editors and "pattern_p" in p.editors and "mode" in p.editors
+    p.set_value("angle_deg", "45")
+    p.set_value("mode", "geodesic")
+    p.set_value("pattern_p", "7")
+    lay = win.job.layers[1]
+    assert isinstance(lay, HelicalLayer) and lay.angle_deg == 45.0 and lay.mode == "geodesic" and lay.pattern_p == 7
+    p.set_value("angle_deg", "95")
+    assert win.job.layers[1].angle_deg == 45.0 and p.errors()
+    p.set_value("angle_deg", "45")
+
+    # the kind: helical -> polar keeps the line's fields, -> skip keeps the name
+    p.kind_combo.setCurrentText("polar")
+    p._on_kind()
+    assert isinstance(win.job.layers[1], PolarLayer) and win.job.layers[1].angle_deg == 45.0
+    p.kind_combo.setCurrentText("skip")
+    p._on_kind()
+    assert isinstance(win.job.layers[1], SkipLayer) and win.job.layers[1].name == "helical 55"
+    p.set_value("angle_deg", "30")
+    assert win.job.layers[1].angle_deg == 30.0
+
+
+def test_run_fills_the_table_with_the_layup(ran) -> None:
+    from engine.laminate import LaminateResult, run_laminate
+
+    w = ran
+    res = w.result
+    assert isinstance(res, LaminateResult) and len(res.layers) == 3
+    layup = res.layup()
+    for row, f in enumerate(layup["layers"]):
+        assert w.layers_panel.model.figures_of(row)["time_s"] == f["time_s"]
+        assert w.layers_panel.model.figures_of(row)["fibre_length_m"] == f["fibre_length_m"]
+        assert _cell(w, row, "time_s") == f"{f['time_s']:.2f}"
+        assert _cell(w, row, "fibre_length_m") == f"{f['fibre_length_m']:.2f}"
+        assert _cell(w, row, "thickness_cyl_mm") == f"{f['thickness_cyl_mm']:.3f}"
+    assert f"{layup['total']['program_time_s']:.1f} s" in w.layers_panel.totals.text()
+    # independent: the engine run outside the window on the same job gives the same figures
+    ref = run_laminate(load_job(w.job_path), w.job_path).layup()
+    for a, b in zip(ref["layers"], layup["layers"], strict=True):
+        for key in ("time_s", "fibre_length_m", "fibre_mass_kg", "thickness_cyl_mm"):
+            assert a[key] == pytest.approx(b[key], rel=1e-12)
+    # the NC page shows the joined program
+    assert res.nc_text and "layer 2 helical 55" in res.nc_text
+    assert f"{res.blocks.total:.2f} s" in w.nc_panel.summary.text()
+
+
+def test_selecting_a_layer_shows_its_surface_line_and_plots(ran) -> None:
+    w = ran
+    res = w.result
+    p = w.layers_panel
+    seen = {}
+    for i in (0, 1, 2):
+        p.select_layer(i)
+        lr = res.layer(i)
+        assert w.laminate.shown_layer == i
+        d = w.view3d.data  # the layer's own grown mandrel
+        z, r = lr.surface.sample(600)
+        assert np.allclose(d.z, z) and np.allclose(d.r, r)
+        assert w.view3d.paths.n_line == lr.result.line.z.size  # its line
+        line = lr.result.line  # its single-line plots: β(z) of its first circuit
+        bz, bb = w.winding_plots.curve_data("beta")
+        sl = line.circuit_slice(0)
+        assert np.array_equal(bz, line.z[sl]) and np.allclose(bb, np.degrees(line.beta[sl]))
+        lp = w.laminate_plot
+        assert lp.selected == i
+        assert lp.selected_pen_width(f"boundary {i + 1}") > max(lp.selected_pen_width(f"boundary {k + 1}")
+                                                                for k in range(3) if k != i)
+        seen[i] = float(np.max(d.r))
+    # each layer is wound on the surface the previous ones grew: the radius on the cylinder grows by the
+    # thickness of the layers below
+    t = [res.layer(i).figures["thickness_cyl_mm"] for i in range(3)]
+    assert seen[1] == pytest.approx(seen[0] + t[0], abs=2e-3)
+    assert seen[2] == pytest.approx(seen[1] + t[1], abs=2e-3)
+    # the cross-section: bare mandrel + each layer's outer boundary, the engine's arrays (thinned)
+    lp = w.laminate_plot
+    for i in range(3):
+        th = res.layer(i).thickness
+        x, y = lp.curve_data(f"boundary {i + 1}")
+        assert np.allclose(np.interp(x, th.z_out, th.r_out), y, atol=1e-9)
+        x, y = lp.curve_data(f"thickness {i + 1}")
+        assert np.allclose(np.interp(x, th.z, th.t), y, atol=1e-9)
+    x, y = lp.curve_data("angle 2")
+    assert 50.0 < float(np.median(y)) < 60.0  # the ±55° layer
+    x, y = lp.curve_data("angle 1")
+    assert float(np.median(y)) > 85.0  # a hoop
+    lp.buildup.setChecked(True)  # build-up: height above the mandrel
+    x, y = lp.curve_data("boundary 3")
+    assert float(np.max(y)) == pytest.approx(sum(t), abs=0.02)
+
+
+def test_edit_of_the_last_layer_reuses_the_others(ran) -> None:
+    w = ran
+    first = w.result
+    p = w.layers_panel
+    p.select_layer(2)
+    p.set_value("terminal", False)
+    p.set_value("passes", "2")
+    # the figures of the edited layer are blanked at once, the others still describe their layers
+    assert _cell(w, 2, "time_s") == "" and _cell(w, 0, "time_s") != "" and _cell(w, 1, "time_s") != ""
+    assert w.doc.is_stale() and not w.actions["export_nc"].isEnabled()
+    assert w.run_pipeline_now() and w.wait_idle(180000) and w.last_error == ""
+    res = w.result
+    assert res.reused == (0, 1)
+    assert res.layer(0).result is first.layer(0).result and res.layer(1).result is first.layer(1).result
+    assert res.layer(2).figures["thickness_cyl_mm"] == pytest.approx(2 * first.layer(2).figures["thickness_cyl_mm"],
+                                                                     rel=1e-3)
+    assert _cell(w, 2, "time_s") == f"{res.layer(2).figures['time_s']:.2f}"
+    assert "re-used layers: 1, 2" in w.status_msg.text()
+
+
+def test_disabled_layer_is_not_wound(ran) -> None:
+    w = ran
+    w.layers_panel.set_enabled(1, False)
+    assert w.run_pipeline_now() and w.wait_idle(180000) and w.last_error == ""
+    assert [lr.index for lr in w.result.layers] == [0, 2]
+    assert _cell(w, 1, "time_s") == "off" and _cell(w, 2, "time_s") != ""
+    assert "layer 2 " not in w.result.nc_text
+    w.layers_panel.select_layer(1)  # nothing to show in 3D for it: the view keeps the last layer shown
+    assert w.laminate.shown_layer in (0, 2)
+
+
+def test_cancel_keeps_no_partial_layer_as_the_job_result(win) -> None:
+    assert win.run_pipeline_now()
+    win.cancel_run()
+    assert win.wait_idle(180000)
+    assert win.result is None  # a layer's partial single-line result is never taken for the job's
+    assert not win.actions["export_nc"].isEnabled()
+
+
+def test_layer_error_from_the_engine_is_shown_at_the_layer(win) -> None:
+    p = win.layers_panel
+    p.select_layer(0)
+    p.set_value("z_range_mm.0", "-50")
+    p.set_value("z_range_mm.1", "100")  # outside the mandrel (0..300): the engine says so
+    assert win.job.layers[0].z_range_mm == (-50.0, 100.0)
+    p.select_layer(2)
+    win.run_pipeline_now()
+    assert win.wait_idle(60000)
+    assert "z range" in win.last_error and "layer 1" in win.last_error
+    assert p.selected_layer() == 0 and "outside" in p.error_labels["z_range_mm.0"].text()
+
+
+def test_export_equals_winder_run_byte_for_byte(ran, tmp_path) -> None:
+    from engine.cli import main as cli_main
+
+    w = ran
+    p = w.layers_panel
+    p.select_layer(1)
+    p.duplicate_layer()  # an edit of the laminate, then run
+    assert w.run_pipeline_now() and w.wait_idle(180000) and w.last_error == ""
+    assert len(w.result.layers) == 4
+    saved = tmp_path / "edited.toml"
+    assert w.save_job(saved)
+    assert [lay.name for lay in load_job(saved).layers] == _names(w)
+    gui_nc = tmp_path / "gui.ngc"
+    assert w.export_nc(gui_nc, force=True)
+    assert w.wait_idle()
+    cli_nc = tmp_path / "cli.ngc"
+    assert cli_main(["run", str(saved), "-o", str(cli_nc), "--force", "--quiet"]) == 0
+    assert gui_nc.read_bytes() == cli_nc.read_bytes()
+    assert "(layer 3 helical 55 copy [helical]" in gui_nc.read_text()

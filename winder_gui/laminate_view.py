@@ -1,0 +1,107 @@
+"""The laminate in the window: the layer table, the laminate plot tab and the selected layer in 3D.
+
+:class:`LaminatePresenter` observes the :class:`~winder_gui.document.JobDocument` and the
+:class:`~winder_gui.run_controller.RunController`.  After a run of a layered job
+(:class:`~winder_gui.laminate_tasks.LaminateOutput`) it fills the table's figures and totals, the
+cross-section / angle / thickness plots, and shows the selected layer: the surface it was wound on
+(its own grown mandrel) and its line in the 3D view, its single-line results (winding β, C, λ and
+coverage) in the plot tabs.  Selecting another row switches all of that at once (the data were
+prepared in the worker).  A single-line result clears the laminate views.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from PySide6.QtCore import QObject, Signal
+
+from winder_gui.laminate_tasks import LaminateOutput, is_laminate
+
+
+class LaminatePresenter(QObject):
+    """Draws the laminate of the latest run (``views``: the window, for its widgets).
+
+    Signals: ``layer_shown(int)`` — job layer ``index`` is shown in the 3D view and the plots.
+    """
+
+    layer_shown = Signal(int)
+
+    def __init__(self, doc: Any, ctl: Any, views: Any) -> None:
+        super().__init__(views)
+        self.doc, self.ctl, self.v = doc, ctl, views
+        self.output: LaminateOutput | None = None
+        self.shown_layer = -1
+        v = views
+        v.layers_panel.layer_selected.connect(self.show_layer)
+        doc.results_changed.connect(self._on_results)
+        doc.stale_changed.connect(self._on_stale)
+
+    def _on_results(self, result: Any) -> None:
+        if not is_laminate(result):
+            self.clear()
+
+    def clear(self) -> None:
+        """No laminate results (a single-line job, a new document)."""
+        self.output = None
+        self.shown_layer = -1
+        self.v.layers_panel.set_layup(None, None)
+        self.v.laminate_plot.set_output(None)
+
+    def set_output(self, out: LaminateOutput) -> None:
+        """Show the laminate of a finished run (GUI thread; the data were prepared in the worker)."""
+        self.output = out
+        panel = self.v.layers_panel
+        panel.set_layup(out.layup, out.figures_by_key())
+        sel = panel.selected_layer()
+        if out.view(sel) is None and out.views:
+            sel = out.views[-1].index
+        self.v.laminate_plot.set_output(out, sel)
+        self.shown_layer = -1
+        self.show_layer(sel)
+
+    @staticmethod
+    def summary(out: LaminateOutput, took_s: float, n_warnings: int) -> str:
+        """The status line after a run of a layered job."""
+        res = out.result
+        reused = f" (re-used layers: {', '.join(str(i + 1) for i in res.reused)})" if res.reused else ""
+        warn = f"; {n_warnings} warning{'s' if n_warnings != 1 else ''} (NC step)" if n_warnings else ""
+        prog = f"; program time {res.blocks.total:.2f} s" if res.blocks is not None else ""
+        return f"Laminate of {len(res.layers)} layers done in {took_s:.1f} s{reused}{prog}{warn}"
+
+    def show_layer(self, index: int) -> None:
+        """Show job layer ``index`` (0-based): its grown surface and line in 3D, its single-line plots."""
+        out = self.output
+        v = self.v
+        v.laminate_plot.select_layer(index)
+        if out is None:
+            return
+        lv = out.view(index)
+        if lv is None or index == self.shown_layer:
+            return
+        self.shown_layer = index
+        v.view3d.set_data(lv.surface)
+        v.view3d.set_paths(lv.paths)
+        lr = self._layer_result(index)
+        if lr is not None and lr.result is not None and lr.result.line is not None:
+            line = lr.result.line
+            v.winding_plots.set_line(line)
+            v.coverage_plot.set_line(line)
+            if lr.result.eye_circuit is not None:
+                v.eye_plot.set_eye(lr.result.eye_circuit, lr.surface)
+        if v.plot_tabs.currentWidget() is not v.laminate_plot and v.steps.current_step() == "winding":
+            v.plot_tabs.setCurrentWidget(v.laminate_plot)
+        self.layer_shown.emit(index)
+
+    def _layer_result(self, index: int) -> Any:
+        out = self.output
+        if out is None:
+            return None
+        try:
+            return out.result.layer(index)
+        except KeyError:
+            return None
+
+    def _on_stale(self, stale: bool) -> None:
+        from winder_gui import texts
+
+        self.v.laminate_plot.setToolTip(texts.STALE_RESULTS if stale else "")

@@ -1,0 +1,111 @@
+"""The laminate plot tab: cross-section r(z) of every layer boundary, winding angle β(z) and thickness t(z).
+
+Fed by :class:`winder_gui.laminate_tasks.LaminateOutput` (the engine's arrays, thinned in the worker).
+The cross-section shows the bare mandrel and the outer boundary of every wound layer, the band between
+two boundaries filled in the layer's colour (the colours of the layer table); the angle and thickness
+plots show each layer's β (deg) on its first pass and the thickness it adds (mm), with the total.  The
+selected layer is drawn bold, the others thin.  ``Build-up`` plots the boundaries as height above the
+bare mandrel (mm) instead of radius, where layers of a few tenths of a millimetre become visible.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6.QtGui import QColor
+from PySide6.QtWidgets import QCheckBox, QWidget
+
+from winder_gui.panels.layers_panel import layer_colour
+from winder_gui.views.plots import PlotPage
+
+
+class LaminatePlots(PlotPage):
+    """Cross-section, angle and thickness of the laminate along z (see the module docstring).
+
+    Curves (``curves``): ``bare``, ``boundary <n>``, ``angle <n>``, ``thickness <n>`` (n: job layer,
+    1-based) and ``total thickness``.
+    """
+
+    title = "laminate"
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.add_plot("section", 0, 0, "r [mm]", "z [mm]", title="Cross-section: layer boundaries")
+        self.add_plot("angle", 1, 0, "β [deg]", "z [mm]", title="Winding angle (first pass)")
+        self.add_plot("thickness", 2, 0, "t [mm]", "z [mm]", title="Thickness added by each layer")
+        self.plots["angle"].setXLink(self.plots["section"])
+        self.plots["thickness"].setXLink(self.plots["section"])
+        self.glw.ci.layout.setRowStretchFactor(0, 3)
+        self.plots["section"].addLegend(offset=(-10, 10))
+        self.output: Any = None
+        self.selected = -1
+        self.fills: dict[str, Any] = {}
+        self.buildup = QCheckBox("Build-up (height above the mandrel)")
+        self.buildup.setToolTip("plot the boundaries as r − r_mandrel(z) (mm): thin layers become visible")
+        self.buildup.toggled.connect(lambda _on: self._draw())
+        self.layout().itemAt(0).layout().insertWidget(1, self.buildup)
+        self.set_message("No laminate yet: run a layered job (F5).")
+
+    def set_output(self, out: Any, selected: int | None = None) -> None:
+        """Show a :class:`~winder_gui.laminate_tasks.LaminateOutput` (``None``: clear)."""
+        self.output = out
+        if selected is not None:
+            self.selected = selected
+        self._draw()
+
+    def select_layer(self, index: int) -> None:
+        """Draw job layer ``index`` (0-based) bold."""
+        if index == self.selected:
+            return
+        self.selected = index
+        self._draw()
+
+    def _draw(self) -> None:
+        out = self.output
+        for item in self.fills.values():
+            self.plots["section"].removeItem(item)
+        self.fills.clear()
+        if out is None or not out.views:
+            self.clear_data("No laminate yet: run a layered job (F5).")
+            return
+        self.clear_data("")
+        rel = self.buildup.isChecked()
+        bz, br = np.asarray(out.bare_z), np.asarray(out.bare_r)
+
+        def y_of(z: np.ndarray, r: np.ndarray) -> np.ndarray:
+            return r - np.interp(z, bz, br) if rel else r
+
+        inner = self.set_curve("section", "bare", bz, y_of(bz, br), colour="#000000", width=1.5, legend="mandrel")
+        total_z = bz
+        total_t = np.zeros_like(bz)
+        for v in out.views:
+            if v.outer_z.size == 0:
+                continue
+            n = v.index + 1
+            col = layer_colour(v.index)
+            sel = v.index == self.selected
+            w = 3.0 if sel else 1.2
+            outer = self.set_curve("section", f"boundary {n}", v.outer_z, y_of(v.outer_z, v.outer_r), colour=col,
+                                   width=w, legend=f"{n} {v.name}" if v.name != f"{n} {v.kind}" else f"{n} {v.kind}")
+            c = QColor(col)
+            c.setAlpha(150 if sel else 70)
+            fill = pg.FillBetweenItem(inner, outer, brush=pg.mkBrush(c))
+            self.plots["section"].addItem(fill)
+            self.fills[f"fill {n}"] = fill
+            inner = outer
+            if v.angle_z.size:
+                self.set_curve("angle", f"angle {n}", v.angle_z, v.angle_deg, colour=col, width=w)
+            self.set_curve("thickness", f"thickness {n}", v.thick_z, v.thick_t, colour=col, width=w)
+            total_t = total_t + np.interp(total_z, v.thick_z, v.thick_t, left=0.0, right=0.0)
+        self.set_curve("thickness", "total thickness", total_z, total_t, colour="#000000", width=1.0, dash=True)
+        names = [v.name for v in out.views if v.index == self.selected]
+        self.set_message(f"{len(out.views)} layers wound" + (f"; selected: {names[0]}" if names else ""))
+        self.export_button.setEnabled(True)
+        for p in self.plots.values():
+            p.enableAutoRange()
+
+    def selected_pen_width(self, name: str) -> float:
+        """The pen width of curve ``name`` (the selected layer's are bold)."""
+        return float(self.curves[name].opts["pen"].widthF())
