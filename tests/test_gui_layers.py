@@ -215,10 +215,13 @@ def test_layer_fields_edit_the_layer_and_bad_values_block_run(win) -> None:
     p.select_layer(1)
     assert "angle_deg" in p.editors and "pattern_p" in p.editors and "mode" in p.editors
     p.set_value("angle_deg", "45")
+    assert p.editor("mode").currentText() == "(inherited)"
     p.set_value("mode", "geodesic")
     p.set_value("pattern_p", "7")
     lay = win.job.layers[1]
     assert isinstance(lay, HelicalLayer) and lay.angle_deg == 45.0 and lay.mode == "geodesic" and lay.pattern_p == 7
+    p.set_value("mode", "(inherited)")
+    assert win.job.layers[1].mode is None
     p.set_value("angle_deg", "95")
     assert win.job.layers[1].angle_deg == 45.0 and p.errors()
     p.set_value("angle_deg", "45")
@@ -297,6 +300,7 @@ def test_selecting_a_layer_shows_its_surface_line_and_plots(ran) -> None:
     assert 50.0 < float(np.median(y)) < 60.0  # the ±55° layer
     x, y = lp.curve_data("angle 1")
     assert float(np.median(y)) > 85.0  # a hoop
+    assert w.plot_tabs.currentWidget() is lp  # the Winding step of a layered job shows the laminate
     lp.buildup.setChecked(True)  # build-up: height above the mandrel
     x, y = lp.curve_data("boundary 3")
     assert float(np.max(y)) == pytest.approx(sum(t), abs=0.02)

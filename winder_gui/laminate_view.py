@@ -35,6 +35,14 @@ class LaminatePresenter(QObject):
         v.layers_panel.layer_selected.connect(self.show_layer)
         doc.results_changed.connect(self._on_results)
         doc.stale_changed.connect(self._on_stale)
+        v.steps.step_selected.connect(self._on_step)
+
+    def _on_step(self, key: str) -> None:
+        # the Winding step of a layered job shows the laminate tab (queued: after the window's own choice)
+        if key == "winding" and self.output is not None:
+            from PySide6.QtCore import QTimer
+
+            QTimer.singleShot(0, lambda: self.v.plot_tabs.setCurrentWidget(self.v.laminate_plot))
 
     def _on_results(self, result: Any) -> None:
         if not is_laminate(result):
@@ -88,7 +96,7 @@ class LaminatePresenter(QObject):
             v.coverage_plot.set_line(line)
             if lr.result.eye_circuit is not None:
                 v.eye_plot.set_eye(lr.result.eye_circuit, lr.surface)
-        if v.plot_tabs.currentWidget() is not v.laminate_plot and v.steps.current_step() == "winding":
+        if v.steps.current_step() == "winding":
             v.plot_tabs.setCurrentWidget(v.laminate_plot)
         self.layer_shown.emit(index)
 

@@ -50,8 +50,8 @@ LAYER_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b
 """Colour of job layer i: ``LAYER_COLOURS[i % len]`` (table swatch, plots)."""
 MIME = "application/x-winder-layer-rows"
 COLUMNS: tuple[tuple[str, str], ...] = (
-    ("on", ""), ("name", "Name"), ("kind", "Kind"), ("definition", "Definition"), ("time_s", "Time [s]"),
-    ("fibre_length_m", "Fibre [m]"), ("thickness_cyl_mm", "t cyl [mm]"),
+    ("on", ""), ("name", "Name"), ("kind", "Kind"), ("time_s", "Time [s]"), ("fibre_length_m", "Fibre [m]"),
+    ("thickness_cyl_mm", "t cyl [mm]"), ("definition", "Definition"),
 )
 COL = {key: i for i, (key, _t) in enumerate(COLUMNS)}
 
@@ -118,7 +118,7 @@ class LayerTableModel(QAbstractTableModel):
         """Per-layer figures by layer key (an empty dict: none)."""
         self.figures = dict(figures)
         if self.layers:
-            self.dataChanged.emit(self.index(0, COL["time_s"]), self.index(len(self.layers) - 1, len(COLUMNS) - 1))
+            self.dataChanged.emit(self.index(0, 0), self.index(len(self.layers) - 1, len(COLUMNS) - 1))
 
     def figures_of(self, row: int) -> dict[str, Any] | None:
         """The figures shown for ``row`` (None when it has none that describe it)."""
@@ -274,7 +274,9 @@ _COMMON = (
     LayerField("lead_in_mm", "Lead-in [mm]", tip="carriage move before the first point of the layer"),
     LayerField("lead_out_deg", "Lead-out [deg]", tip="extra mandrel rotation after the last point (tie-off)"),
 )
-_MODES = ("", "auto", "geodesic", "constant-lambda", "piecewise-lambda", "minimax")
+INHERITED = "(inherited)"
+"""The choice that leaves a layer's value to ``[winding]``."""
+_MODES = (INHERITED, "auto", "geodesic", "constant-lambda", "piecewise-lambda", "minimax")
 _HELICAL = (
     LayerField("angle_deg", "Angle β [deg]", optional=True,
                tip="winding angle on the middle of the cylindrical part; blank: pole C or [winding] angles"),
@@ -618,7 +620,7 @@ class LayersPanel(QWidget):
                 elif f.kind == "choice":
                     ed = QComboBox()
                     ed.addItems(list(f.choices))
-                    ed.setCurrentText("" if v is None else str(v))
+                    ed.setCurrentText(INHERITED if v is None else str(v))
                     ed.activated.connect(lambda _i: self._on_field_edited())
                 else:
                     ed = QLineEdit()
@@ -654,7 +656,7 @@ class LayersPanel(QWidget):
             if isinstance(ed, QCheckBox):
                 val: Any = ed.isChecked()
             elif isinstance(ed, QComboBox):
-                val = ed.currentText() or None
+                val = None if ed.currentText() in ("", INHERITED) else ed.currentText()
             else:
                 text = ed.text().strip()
                 if f.kind == "str":

@@ -32,12 +32,13 @@ class LaminatePlots(PlotPage):
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
-        self.add_plot("section", 0, 0, "r [mm]", "z [mm]", title="Cross-section: layer boundaries")
+        self.add_plot("section", 0, 0, "r [mm]", "z [mm]", title="Cross-section: layer boundaries", colspan=2)
         self.add_plot("angle", 1, 0, "β [deg]", "z [mm]", title="Winding angle (first pass)")
-        self.add_plot("thickness", 2, 0, "t [mm]", "z [mm]", title="Thickness added by each layer")
+        self.add_plot("thickness", 1, 1, "t [mm]", "z [mm]", title="Thickness added by each layer")
         self.plots["angle"].setXLink(self.plots["section"])
         self.plots["thickness"].setXLink(self.plots["section"])
         self.glw.ci.layout.setRowStretchFactor(0, 3)
+        self.glw.ci.layout.setRowStretchFactor(1, 2)
         self.plots["section"].addLegend(offset=(-10, 10))
         self.output: Any = None
         self.selected = -1
