@@ -337,6 +337,22 @@ def test_disabled_layer_is_not_wound(ran) -> None:
     assert w.laminate.shown_layer in (0, 2)
 
 
+def test_back_to_a_single_line_clears_the_laminate(ran) -> None:
+    w = ran
+    p = w.layers_panel
+    for i in (2, 0):
+        p.delete_layer(i)
+    assert [lay.kind for lay in w.job.layers] == ["helical"]
+    p.select_layer(0)
+    p.set_value("name", "")
+    assert w.job.is_single_line
+    assert w.run_pipeline_now() and w.wait_idle(180000) and w.last_error == ""
+    assert not hasattr(w.result, "layup")  # the single-line pipeline's result
+    assert w.laminate.output is None and not w.laminate_plot.has_data() and p.totals.text() == ""
+    assert np.allclose(w.view3d.data.r, w.view_data.r)  # the bare mandrel again
+    assert w.view3d.paths.n_line == w.result.line.z.size
+
+
 def test_cancel_keeps_no_partial_layer_as_the_job_result(win) -> None:
     assert win.run_pipeline_now()
     win.cancel_run()

@@ -49,7 +49,9 @@ class LaminatePresenter(QObject):
             self.clear()
 
     def clear(self) -> None:
-        """No laminate results (a single-line job, a new document)."""
+        """No laminate results (a single-line job, a new document): the 3D view shows the job's mandrel."""
+        if self.output is not None and self.doc.view_data is not None:
+            self.v.view3d.set_data(self.doc.view_data)
         self.output = None
         self.shown_layer = -1
         self.v.layers_panel.set_layup(None, None)

@@ -35,11 +35,10 @@ class LaminatePlots(PlotPage):
         self.add_plot("section", 0, 0, "r [mm]", "z [mm]", title="Cross-section: layer boundaries", colspan=2)
         self.add_plot("angle", 1, 0, "β [deg]", "z [mm]", title="Winding angle (first pass)")
         self.add_plot("thickness", 1, 1, "t [mm]", "z [mm]", title="Thickness added by each layer")
-        self.plots["angle"].setXLink(self.plots["section"])
-        self.plots["thickness"].setXLink(self.plots["section"])
         self.glw.ci.layout.setRowStretchFactor(0, 3)
         self.glw.ci.layout.setRowStretchFactor(1, 2)
-        self.plots["section"].addLegend(offset=(-10, 10))
+        self.plots["section"].addLegend(offset=(-10, 10), brush=pg.mkBrush(255, 255, 255, 200),
+                                        labelTextColor="#202020")
         self.output: Any = None
         self.selected = -1
         self.fills: dict[str, Any] = {}
