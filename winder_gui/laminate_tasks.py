@@ -124,7 +124,7 @@ def laminate_task(job: Job, job_path: Path | None, previous: Any, upto: str = "n
 
     ``previous_views``: the output of the previous run, whose layer views are re-used by key.
     """
-    from engine.laminate import meridian_grid, run_laminate
+    from engine.laminate import laminate_refusals, meridian_grid, run_laminate
     from winder_gui.views.geometry import mandrel_view_data
 
     prev = previous if is_laminate(previous) else None
@@ -146,7 +146,9 @@ def laminate_task(job: Job, job_path: Path | None, previous: Any, upto: str = "n
     _m, bz, br, _dr = meridian_grid(res.mandrel, 1201)
     bz, br = _thin(bz, br)
     state.progress(1.0, "")
-    return LaminateOutput(res, res.warnings(), list(res.violations), None, res.layup(), tuple(views), bz, br)
+    # the violations the window asks about before writing: what write_laminate refuses (limits, slips; per layer)
+    refusals = laminate_refusals(res) if res.nc_text is not None else []
+    return LaminateOutput(res, res.warnings(), refusals, None, res.layup(), tuple(views), bz, br)
 
 
 def run_task(job: Job, job_path: Path | None, previous: Any, upto: str = "nc", *, state: Any,
