@@ -10,6 +10,8 @@ with ``winder run`` of the saved job, byte for byte.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from gui_helpers import close_window, shown_window
@@ -393,3 +395,46 @@ def test_export_equals_winder_run_byte_for_byte(ran, tmp_path) -> None:
     assert cli_main(["run", str(saved), "-o", str(cli_nc), "--force", "--quiet"]) == 0
     assert gui_nc.read_bytes() == cli_nc.read_bytes()
     assert "(layer 3 helical 55 copy [helical]" in gui_nc.read_text()
+
+
+EXAMPLE_JOBS = sorted(p for p in (Path(__file__).resolve().parents[1] / "resources" / "examples").glob("*.toml")
+                      if "[[layer]]" in p.read_text("utf-8"))
+
+
+@pytest.mark.parametrize("example", EXAMPLE_JOBS, ids=lambda p: p.stem)
+def test_every_layered_example_in_the_window(qtbot, tmp_path, example) -> None:
+    """Each shipped laminate: run in the worker, every layer shown on its own surface with its own
+    single-line plots and payout-law comparison, the joined program's axes, export = the program."""
+    w = shown_window(qtbot, example)
+    try:
+        job = load_job(example)
+        assert w.job == job and not job.is_single_line
+        assert w.run_pipeline_now() and w.wait_idle(180000) and w.last_error == "", w.last_error
+        res = w.result
+        assert [lr.index for lr in res.layers] == [i for i, _ in job.active_layers]
+        for lr in res.layers:
+            if lr.result is None:
+                continue
+            w.layers_panel.select_layer(lr.index)
+            assert w.wait_idle(180000)
+            assert w.laminate.shown_result() is lr.result
+            assert w.view3d.paths.n_line == lr.result.line.z.size
+            z, r = lr.surface.sample(600)
+            assert np.allclose(w.view3d.data.r, r)
+            x, y = w.eye_plot.curve_data("eye")
+            np.testing.assert_array_equal(x, lr.result.eye_circuit.Z)
+            assert w.laws is not None and w.laws[lr.result.eye_circuit.law] is lr.result.eye_circuit
+            assert w.pull_plot.has_data()
+        # the axes plot shows the joined program (layers and transitions)
+        b = res.blocks
+        k = 0
+        ax = res.machine.axes[k]
+        x, y = w.axes_plot.curve_data(f"{ax.name} position")
+        np.testing.assert_array_equal(y, b.q[:, k])
+        assert x[-1] == pytest.approx(b.total)
+        assert f"{b.total:.2f} s" in w.nc_panel.summary.text()
+        out = tmp_path / f"{example.stem}{res.extension}"
+        assert w.export_nc(out, force=True) and w.wait_idle()
+        assert out.read_bytes() == res.nc_text.encode()
+    finally:
+        close_window(w, 120000)

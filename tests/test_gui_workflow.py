@@ -4,15 +4,22 @@ Open → edit the mandrel → run → cancel → re-run → every plot → expor
 pipe example (fast) in detail and once on every example.  Assertions are on the data shown: each
 plot item holds the engine result's arrays, and independent checks (closed forms, the job file)
 say that those arrays are the right ones.
+
+This is the single-line workflow: the examples are laminates (schema 2), so each is used here as its
+first helical layer folded into ``[winding]`` and ``[band]`` (:func:`single_line`); the laminate in the
+window is tested in test_gui_layers.py.
 """
 
 from __future__ import annotations
 
+import atexit
 import csv
 import os
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import textwrap
 import tomllib
 from pathlib import Path
@@ -22,7 +29,7 @@ import pytest
 from gui_helpers import close_window, shown_window
 from PySide6.QtWidgets import QMessageBox
 
-from engine.job import load_job
+from engine.job import build_mandrel, effective_band, effective_winding, load_job, save_job
 from winder_gui.main_window import AUTOSAVE_HEADER, MainWindow, autosave_origin
 from winder_gui.views.geometry import to_view
 from winder_gui.views.view3d import MAX_FRAMES, TRAIL_FRAMES
@@ -30,8 +37,29 @@ from winder_gui.views.view3d_playback import SLIDER_STEPS_PER_S
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "resources" / "examples"
-PIPE = EXAMPLES / "pipe.toml"
 JOBS = sorted(p for p in EXAMPLES.glob("*.toml") if "mandrel" in tomllib.loads(p.read_text("utf-8")))
+
+
+def single_line(example: Path, folder: Path) -> Path:
+    """``example`` as a single-line job in ``folder``: its first helical (else polar) layer, with the
+    values it inherits or overrides, as the job's ``[winding]`` and ``[band]`` and its only layer."""
+    job = load_job(example)
+    if not job.is_single_line:
+        layers = [lay for _, lay in job.active_layers]
+        lay = next((x for x in layers if x.kind == "helical"), None) or next(x for x in layers if x.kind == "polar")
+        win = effective_winding(job, lay, build_mandrel(job, example))
+        job = job.replace(winding=win.model_dump(), band=effective_band(job, lay).model_dump(),
+                          layers=[{"kind": "helical"}])
+        assert job.is_single_line
+    out = folder / example.name
+    folder.mkdir(parents=True, exist_ok=True)
+    save_job(job, out)
+    return out
+
+
+_SINGLE = Path(tempfile.mkdtemp(prefix="winder-single-line-"))
+atexit.register(shutil.rmtree, _SINGLE, True)
+PIPE = single_line(EXAMPLES / "pipe.toml", _SINGLE)
 
 
 def _window(qtbot, path: Path | None = PIPE) -> MainWindow:
@@ -579,8 +607,9 @@ def test_pipeline_error_is_a_readable_dialog(pipe_window) -> None:
     assert not w.busy()
 
 
-@pytest.mark.parametrize("example", [p for p in JOBS if p != PIPE], ids=lambda p: p.stem)
+@pytest.mark.parametrize("example", [p for p in JOBS if p.name != PIPE.name], ids=lambda p: p.stem)
 def test_every_example_end_to_end(qtbot, tmp_path, example: Path) -> None:
+    example = single_line(example, tmp_path / "single")
     w = _window(qtbot, example)
     try:
         job0 = load_job(example)

@@ -31,6 +31,7 @@ class LaminatePresenter(QObject):
         self.doc, self.ctl, self.v = doc, ctl, views
         self.output: LaminateOutput | None = None
         self.shown_layer = -1
+        self._laws_key: tuple[str, Any] | None = None
         v = views
         v.layers_panel.layer_selected.connect(self.show_layer)
         doc.results_changed.connect(self._on_results)
@@ -54,6 +55,7 @@ class LaminatePresenter(QObject):
             self.v.view3d.set_data(self.doc.view_data)
         self.output = None
         self.shown_layer = -1
+        self._laws_key = None
         self.v.layers_panel.set_layup(None, None)
         self.v.laminate_plot.set_output(None)
 
@@ -98,9 +100,20 @@ class LaminatePresenter(QObject):
             v.coverage_plot.set_line(line)
             if lr.result.eye_circuit is not None:
                 v.eye_plot.set_eye(lr.result.eye_circuit, lr.surface)
+                key = (lr.key, lr.result.keys.get("payout"))
+                if key != self._laws_key:  # the payout laws compared on this layer's first circuit (worker)
+                    from winder_gui.tasks import laws_task
+
+                    self._laws_key = key
+                    self.ctl.laws_runner.submit(laws_task, lr.result)
         if v.steps.current_step() == "winding":
             v.plot_tabs.setCurrentWidget(v.laminate_plot)
         self.layer_shown.emit(index)
+
+    def shown_result(self) -> Any:
+        """The single-line :class:`~engine.pipeline.PipelineResult` of the layer shown (``None``: none)."""
+        lr = self._layer_result(self.shown_layer)
+        return lr.result if lr is not None else None
 
     def _layer_result(self, index: int) -> Any:
         out = self.output

@@ -113,6 +113,7 @@ class ResultsPresenter(QObject):
             self._paths_key = None
             warns = list(self.doc.run_warnings)
             self.queue(lambda: v.laminate.set_output(out), lambda: v.nc_panel.set_result(res, warns),
+                       *v.axes_plot.updates(res.blocks, res.machine),  # the joined program's axes
                        lambda: self._on_stale(self.doc.is_stale()))
             self.status.emit(v.laminate.summary(out, time.monotonic() - self.ctl.run_t0, len(warns)), False)
             return
@@ -152,6 +153,8 @@ class ResultsPresenter(QObject):
         self.laws = laws
         res = self.doc.result
         v = self.v
+        if res is not None and not hasattr(res, "keys"):  # a laminate: the laws of the layer shown
+            res = v.laminate.shown_result()
         job_law = res.eye_circuit.law if res is not None and res.eye_circuit is not None else ""
         param = res.job.payout.parameter if res is not None else "s"
         self.queue(*v.pull_plot.plan(list(laws)), *v.pull_plot.updates(laws, job_law, param),
