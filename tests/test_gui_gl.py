@@ -116,7 +116,10 @@ def test_workflow_3d_paths_and_step_screenshots(qtbot) -> None:
         v = w.view3d
         p = v.paths
         np.testing.assert_allclose(v.actor_points("paths"), p.line_xyz, rtol=1e-5, atol=1e-3)  # float32 in VTK
-        eye = w.result.eye
+        # the example is a laminate: the 3D view shows the selected layer's own single-line result
+        shown = w.laminate.shown_result() if hasattr(w.result, "layup") else w.result
+        assert shown is not None and p.n_line == shown.line.z.size
+        eye = shown.eye
         v.set_frame(100)
         e, c = v.eye_at_frame()
         np.testing.assert_array_equal(e, to_view(eye.eye_xyz[p.frame_index[100:101]])[0])
@@ -127,7 +130,7 @@ def test_workflow_3d_paths_and_step_screenshots(qtbot) -> None:
         np.testing.assert_allclose(sphere.mean(axis=0), e, atol=1e-2 * max(1.0, float(np.abs(e).max())))
         v.set_colour_by("winding angle β [deg]")
         sc = np.asarray(v.plotter.actors["paths"].mapper.dataset.point_data["c"])
-        np.testing.assert_allclose(sc, np.degrees(w.result.line.beta[p.line_index]), rtol=1e-6)
+        np.testing.assert_allclose(sc, np.degrees(shown.line.beta[p.line_index]), rtol=1e-6)
         v.set_frame(p.frame_index.size // 3)
         STEP_SHOTS.mkdir(parents=True, exist_ok=True)
         for i, key in enumerate(("mandrel", "winding", "payout", "machine", "timelaw", "nc")):
@@ -143,6 +146,48 @@ def test_workflow_3d_paths_and_step_screenshots(qtbot) -> None:
         w.plot_tabs.setCurrentWidget(w.eye_plot)
         qtbot.wait(300)
         assert w.screenshot().save(str(STEP_SHOTS / "eye_path.png"))
+    finally:
+        w.wait_idle(60000)
+        w.close()
+
+
+def test_each_layer_on_its_own_grown_surface(qtbot) -> None:
+    """The laminate: selecting a layer draws the surface it was wound on (the mandrel grown by the layers
+    before it) and its line lying on that surface; screenshot of the laminate tab."""
+    from PySide6.QtGui import QGuiApplication
+
+    if QGuiApplication.platformName() in ("offscreen", "minimal"):
+        pytest.skip("needs a real display (xvfb-run with QT_QPA_PLATFORM=xcb)")
+    from winder_gui.main_window import MainWindow
+
+    w = MainWindow(ROOT / "resources/examples/pipe.toml")
+    w.confirm_discard = False
+    qtbot.addWidget(w)
+    w.resize(1500, 940)
+    w.show()
+    try:
+        assert w.wait_idle()
+        qtbot.waitUntil(lambda: w.view3d.backend != "pending", timeout=30000)
+        assert w.view3d.backend == "vtk"
+        assert w.run_pipeline_now() and w.wait_idle(300000) and w.last_error == ""
+        res = w.result
+        w.go_to_step("winding")
+        radii = []
+        for lr in res.layers:
+            w.layers_panel.select_layer(lr.index)
+            qtbot.wait(100)
+            x, rad = _radius_and_axis(w.view3d.mesh_points())
+            np.testing.assert_allclose(rad, lr.surface.r(x), atol=2e-3)  # its own grown mandrel (float32)
+            pts = w.view3d.actor_points("paths")
+            lx, lrad = _radius_and_axis(pts)
+            p = w.view3d.paths
+            np.testing.assert_allclose(lrad, lr.surface.r(lx) + p.lift, atol=2e-3)  # its line on it
+            radii.append(float(rad.max()))
+        assert radii == sorted(radii) and radii[-1] > radii[0]  # the surface grows layer by layer
+        assert w.plot_tabs.currentWidget() is w.laminate_plot
+        qtbot.wait(300)
+        STEP_SHOTS.mkdir(parents=True, exist_ok=True)
+        assert w.screenshot().save(str(STEP_SHOTS / "laminate.png"))
     finally:
         w.wait_idle(60000)
         w.close()
