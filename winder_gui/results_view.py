@@ -114,7 +114,9 @@ class ResultsPresenter(QObject):
             warns = list(self.doc.run_warnings)
             self.queue(lambda: v.laminate.set_output(out), lambda: v.nc_panel.set_result(res, warns),
                        *v.axes_plot.updates(res.blocks, res.machine),  # the joined program's axes
-                       lambda: self._on_stale(self.doc.is_stale()))
+                       lambda: self._on_stale(self.doc.is_stale()),
+                       lambda: v.machine_panel.show_placement(res.machine, getattr(res, "placement", None)),
+                       lambda: v.view3d.set_supports(_supports(res)))  # the one placement of every layer
             self.status.emit(v.laminate.summary(out, time.monotonic() - self.ctl.run_t0, len(warns)), False)
             return
         self.show_result(res)
