@@ -52,6 +52,8 @@ class LayerView:
     outer_z: FloatArray
     outer_r: FloatArray
     figures: dict[str, Any] = field(default_factory=dict)
+    coverage: Any = None
+    """:class:`engine.coverage.CoverageMap` of the layer's line on its surface (``None`` for a skip)."""
 
 
 @dataclass(frozen=True)
@@ -98,11 +100,14 @@ def layer_view(lr: Any, surface_data: Any = None) -> LayerView:
     from winder_gui.views.view3d import MAX_DISPLAY_POINTS, MAX_FRAMES
 
     surf = surface_data if surface_data is not None else mandrel_view_data(lr.surface)
-    paths = None
+    paths = cov = None
     az = ad = np.zeros(0)
     res = lr.result
     if res is not None and res.line is not None:
+        from engine.coverage import coverage_map
+
         line = res.line
+        cov = coverage_map(line, lr.surface)
         paths = paths_view_data(line, res.eye, MAX_DISPLAY_POINTS, MAX_FRAMES, blocks=res.blocks)  # layer time
         sel = (line.pass_id == line.pass_id[0]) & ~line.dwell
         if int(sel.sum()) < 2:
@@ -114,7 +119,8 @@ def layer_view(lr: Any, surface_data: Any = None) -> LayerView:
         oz, orr = _thin(th.z_out, th.r_out)
     else:  # a skip layer: no fibre
         tz = tt = oz = orr = np.zeros(0)
-    return LayerView(lr.index, lr.name, lr.kind, lr.key, surf, paths, az, ad, tz, tt, oz, orr, dict(lr.figures))
+    return LayerView(lr.index, lr.name, lr.kind, lr.key, surf, paths, az, ad, tz, tt, oz, orr, dict(lr.figures),
+                     cov)
 
 
 def laminate_task(job: Job, job_path: Path | None, previous: Any, upto: str = "nc", *, state: Any,
@@ -148,7 +154,8 @@ def laminate_task(job: Job, job_path: Path | None, previous: Any, upto: str = "n
     state.progress(1.0, "")
     # the violations the window asks about before writing: what write_laminate refuses (limits, slips; per layer)
     refusals = laminate_refusals(res) if res.nc_text is not None else []
-    return LaminateOutput(res, res.warnings(), refusals, None, res.layup(), tuple(views), bz, br)
+    return LaminateOutput(result=res, warnings=res.warnings(), violations=refusals, layup=res.layup(),
+                          views=tuple(views), bare_z=bz, bare_r=br)
 
 
 def run_task(job: Job, job_path: Path | None, previous: Any, upto: str = "nc", *, state: Any,

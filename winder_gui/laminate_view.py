@@ -98,6 +98,8 @@ class LaminatePresenter(QObject):
             line = lr.result.line
             v.winding_plots.set_line(line)
             v.coverage_plot.set_line(line)
+            if lv.coverage is not None:
+                v.coverage_plot.set_coverage(lv.coverage)
             if lr.result.eye_circuit is not None:
                 v.eye_plot.set_eye(lr.result.eye_circuit, lr.surface)
                 key = (lr.key, lr.result.keys.get("payout"))
