@@ -262,6 +262,69 @@ def field_line(file: str | Path, field: str) -> int | None:
     return _find_line(text, loc)
 
 
+def check_laminate(job: Any, mandrel: Any, *, file: str | Path | None = None) -> Estimate:
+    """Physical sanity and size of every enabled layer of a schema-2 job, and of all of them together.
+
+    Helical and polar layers: :func:`check_winding_spec` of the layer's effective winding and band;
+    hoop layers: ``passes × turns × points_per_turn`` points, ``turns = length / (band width × (1 −
+    overlap))``.  The fields named are the layer's own (``layer.N.circuits``) where it overrides the
+    default, else the default's (``winding.circuits``).  The layers' results are kept together, so the
+    sum must fit the budget too.  Returns the total estimate.
+    """
+    from engine.job import HoopLayer, SkipLayer, effective_band, effective_winding
+
+    r_max = float(mandrel.r_max)
+    length = float(mandrel.z_max - mandrel.z_min)
+    total = 0.0
+    worst: tuple[float, str | None] = (-1.0, None)
+    for i, layer in job.active_layers:
+        if isinstance(layer, SkipLayer):
+            continue
+        pre = f"layer.{i + 1}"
+        band = effective_band(job, layer)
+        own_band = {k for k, v in layer.band.model_dump().items() if v is not None}
+        b = float(band.width_mm)
+
+        def where(fld: str, pre: str = pre, own_band: set[str] = own_band, layer: Any = layer) -> str:
+            sec, _, key = fld.partition(".")
+            if sec == "band" and key in own_band:
+                return f"{pre}.band.{key}"
+            if sec == "winding" and (getattr(layer, key, None) is not None or key == "layers"
+                                     and getattr(layer, "repeat", None) is not None):
+                return f"{pre}.{'repeat' if key == 'layers' else key}"
+            return fld
+
+        if isinstance(layer, HoopLayer):
+            if not b >= FIBRE_DIAMETER_MM:
+                raise InputError(f"band width {b:g} mm is narrower than a single fibre ({FIBRE_DIAMETER_MM:g} mm); "
+                                 "check the units", file=file, field=where("band.width_mm"))
+            span = (float(layer.z_range_mm[1]) - float(layer.z_range_mm[0]) if layer.z_range_mm is not None
+                    else length)
+            pitch = b * (1.0 - float(layer.overlap))
+            passes = 1 if layer.terminal else int(layer.passes)
+            count = passes * (abs(span) / pitch + 1.0) * int(layer.points_per_turn) * int(layer.repeat)
+            est = Estimate("hoop-layer points", count, BYTES_PER_LINE_POINT, field=f"{pre}.overlap",
+                           detail=f"layer {i + 1}: {passes} pass(es) × {abs(span) / pitch:.4g} turns × "
+                                  f"{layer.points_per_turn} points a turn")
+            check(est, file=file)
+        else:
+            spec = effective_winding(job, layer, mandrel)
+            try:
+                est = check_winding_spec(spec, r_max, b, float(band.thickness_mm), ctx={"file": file})
+            except InputError as exc:
+                f = exc.location.field
+                raise InputError(f"layer {i + 1}: {exc.message}", file=file,
+                                 field=where(f) if f else None) from None
+            est = Estimate(est.what, est.count, est.bytes_each, field=where(est.field or ""), detail=est.detail)
+        total += est.count
+        if est.count > worst[0]:
+            worst = (est.count, est.field)
+    est = Estimate("points in all layers", total, BYTES_PER_LINE_POINT, field=worst[1] or "layer",
+                   detail="the layers' results are kept together")
+    check(est, file=file)
+    return est
+
+
 def check_post(min_block_time_s: float, *, file: str | Path | None = None) -> None:
     """A minimal block time beyond :data:`MAX_MIN_BLOCK_TIME_S` is an input error."""
     if not float(min_block_time_s) <= MAX_MIN_BLOCK_TIME_S:

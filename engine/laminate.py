@@ -815,6 +815,9 @@ def run_laminate(
     jp = str(job_path) if job_path is not None else None
     t0 = time.perf_counter()
     bare = build_mandrel(job, jp)
+    from engine.budget import check_laminate
+
+    check_laminate(job, bare, file=jp)  # every layer's size and physics, and the sum, before any work
     keys = layer_keys(job)
     prev_by_key = {lr.key: lr for lr in previous.layers} if previous is not None else {}
     active = job.active_layers

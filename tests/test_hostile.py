@@ -496,3 +496,32 @@ def test_huge_dxf_is_refused_before_parsing(tmp_path, capsys) -> None:
     p.write_bytes(b"  0\nSECTION\n  2\nENTITIES\n" + b"  0\nLINE\n 10\n1.0\n 20\n50.0\n" * (MAX_DXF_TAGS // 2))
     rc, _, err = _cli(capsys, "mandrel", str(p))
     assert rc == 2 and str(p) in err and f"more than {MAX_DXF_TAGS}" in err
+
+
+@pytest.mark.parametrize(("extra", "field", "words"), [
+    ("overlap = 0.9999999", "layer.2.overlap", "hoop-layer points"),
+    ("band = { width_mm = 1e-9 }", "layer.2.band.width_mm", "narrower than a single fibre"),
+])
+def test_laminate_layers_are_budgeted(tmp_path, capsys, extra, field, words) -> None:
+    text = (EXAMPLES / "bottle.toml").read_text().replace("terminal = true", "terminal = true\n" + extra)
+    job = _job(tmp_path, text)
+    rc, _, err = _cli(capsys, "run", str(job), "-o", str(tmp_path / "o.ngc"), "--quiet")
+    assert rc == 2 and f"field '{field}'" in err and words in err and str(job) in err, err
+
+
+def test_laminate_sum_of_layers_is_budgeted(tmp_path) -> None:
+    """Each layer fits the budget, all of them together do not (their results are kept together)."""
+    from engine.job import build_mandrel, load_job
+    from engine.laminate import run_laminate
+
+    text = (EXAMPLES / "bottle.toml").read_text() + "".join('\n[[layer]]\nkind = "helical"\n' for _ in range(5))
+    job_path = _job(tmp_path, text)
+    job = load_job(job_path)
+    one = budget.check_winding_spec(job.winding, build_mandrel(job).r_max, job.band.width_mm)
+    budget.set_max_memory(int(one.bytes * 3))
+    try:
+        with pytest.raises(InputError, match="points in all layers") as e:
+            run_laminate(job, job_path, upto="winding")
+        assert str(job_path) in str(e.value)
+    finally:
+        budget.set_max_memory(None)
