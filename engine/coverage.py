@@ -42,6 +42,15 @@ class CoverageMap:
     backward: NDArray[np.int32]
     band_width_mm: float
     meridian: bool
+    z_samples: FloatArray | None = None
+    m_samples: FloatArray | None = None
+    """m(z) sampled (mm), to place z-based drawings (the centre lines) on the map's horizontal axis."""
+
+    def to_map(self, z: FloatArray) -> FloatArray:
+        """The map's horizontal coordinate (meridian length, or z) of axial positions ``z`` (mm)."""
+        if not self.meridian or self.z_samples is None or self.m_samples is None:
+            return np.asarray(z, dtype=float)
+        return np.interp(z, self.z_samples, self.m_samples)
 
     @property
     def count(self) -> NDArray[np.int32]:
@@ -131,7 +140,9 @@ def coverage_map(line: Any, mandrel: Any = None, nz: int = 240, nv: int = 360,
         covered = np.cumsum(cover[:, :nv], axis=1) > 0
         tgt = fwd if int(np.median(direction[a:e])) >= 0 else bwd
         tgt += covered.astype(np.int32)
-    return CoverageMap(z_edges, v_edges, fwd, bwd, b, mandrel is not None)
+    zs = np.linspace(float(z.min()), float(z.max()), 2001)
+    ms = meridian_length(mandrel, zs) if mandrel is not None else zs
+    return CoverageMap(z_edges, v_edges, fwd, bwd, b, mandrel is not None, zs, ms)
 
 
 def _mark(diff: NDArray[np.int32], rows: NDArray, v0: FloatArray, v1: FloatArray, nv: int) -> None:

@@ -6,8 +6,7 @@ widgets, clipped by their scroll areas), the machine schematic's labels do not o
 data area is at least :data:`winder_gui.views.plots.MIN_PLOT_PX` high, and the eye trajectory and the
 mandrel lie inside the 3D viewport.  Needs a real display: run under xvfb-run with QT_QPA_PLATFORM=xcb.
 
-Screenshots go to $WINDER_SCREENSHOTS (``WINDER_SCREENSHOTS=docs/screenshots`` refreshes the
-README's pictures), else to a temporary folder.
+Screenshots go to $WINDER_SCREENSHOTS/screens (else a temporary folder): one per template, size and step.
 """
 
 from __future__ import annotations
@@ -22,7 +21,7 @@ import pytest
 pytestmark = pytest.mark.gl
 
 ROOT = Path(__file__).resolve().parents[1]
-SHOTS_DIR = Path(os.environ.get("WINDER_SCREENSHOTS") or tempfile.mkdtemp(prefix="winder-screens-"))
+SHOTS_DIR = Path(os.environ.get("WINDER_SCREENSHOTS") or tempfile.mkdtemp(prefix="winder-screens-")) / "screens"
 TEMPLATES = ("lathe2", "lathe3", "lathe4", "gantry6", "robot_cell")
 SIZES = ((1280, 800), (1920, 1080))
 STEPS = ("mandrel", "winding", "payout", "machine", "timelaw", "nc")
@@ -228,6 +227,7 @@ def test_scrubbing_shows_the_band_laid_up_to_that_time(qt_display, qtbot) -> Non
         assert v.points_in_view(v.scene_points()[::50]).all()
         v.set_camera("side")
         assert v.points_in_view(v.scene_points()[::50]).all()
+        SHOTS_DIR.mkdir(parents=True, exist_ok=True)
         w.screenshot().save(str(SHOTS_DIR / "band_scrubbed.png"))
     finally:
         w.close()

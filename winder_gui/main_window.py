@@ -46,7 +46,7 @@ from PySide6.QtWidgets import (
 from engine import __version__
 from engine.errors import InputError
 from engine.job import FileSpec, PointsSpec, SegmentsSpec, default_job
-from winder_gui import texts, window_layout, window_menus
+from winder_gui import texts, window_builds, window_exports, window_layout, window_menus
 from winder_gui.autosave import (  # noqa: F401 - re-exported for callers of the old module
     AUTOSAVE_HEADER,
     AUTOSAVE_MS,
@@ -56,7 +56,7 @@ from winder_gui.autosave import (  # noqa: F401 - re-exported for callers of the
 )
 from winder_gui.document import JobDocument
 from winder_gui.laminate_view import LaminatePresenter
-from winder_gui.panels.segments_table import apply_handles, segment_handles
+from winder_gui.panels.segments_table import apply_handles
 from winder_gui.results_view import ResultsPresenter
 from winder_gui.run_controller import RunController
 from winder_gui.settings import prompts_enabled, recent_files
@@ -73,10 +73,6 @@ from winder_gui.tasks import (  # noqa: F401 - JobTimeLawResult re-exported
 STEP_TABS = {"mandrel": "generatrix", "winding": "winding", "payout": "pull_speed", "machine": "axes",
              "timelaw": "time_law", "nc": "axes"}
 """The plot tab shown with each step."""
-BUILD_ERROR_TITLES = {"open": "Could not open the job", "import": "Could not import the generatrix",
-                      "new": "Could not create a job", "restore": "Could not restore the autosaved job",
-                      "undo": "Could not undo"}
-
 
 def _delegate(owner: str, name: str, doc: str = "") -> property:
     """A read/write attribute of the window kept in ``self.<owner>.<name>``."""
@@ -291,62 +287,10 @@ class MainWindow(QMainWindow):
 
     # -- builds ----------------------------------------------------------------------------------
     def _on_built(self, purpose: str, res: Any) -> None:
-        old_kind = self.job.mandrel.kind
-        fresh = self.doc.commit_build(res, purpose)
-        if fresh:
-            self.ctl.clear()
-            self.results.clear()
-            if purpose == "open":
-                window_menus.rebuild_recent_menu(self)
-        if purpose != "edit":  # the panel already shows what the user typed
-            self.mandrel_panel.set_spec(res.job.mandrel)
-        else:
-            self.mandrel_panel.clear_errors()
-        self.mandrel_panel.spec = res.job.mandrel
-        self.mandrel_panel.hint = (res.mandrel.r_max, res.mandrel.length)
-        reset = purpose in ("open", "new", "import", "restore")
-        self.plot.set_data(res.data, sketch=isinstance(res.job.mandrel, PointsSpec), reset_view=reset)
-        if isinstance(res.job.mandrel, SegmentsSpec):
-            hz, hr, _ = segment_handles(res.job.mandrel)
-            self.plot.set_segment_handles(hz, hr)
-        self.plot.show_message("")
-        self.view3d.set_data(res.data, reset_camera=reset)
-        m = res.mandrel
-        zones = len(res.data.concave)
-        self.summary_label.setText(
-            f"L {m.length:.1f} mm · r {m.r_min:.1f}…{m.r_max:.1f} mm · poles {m.pole_radii[0]:.1f}/"
-            f"{m.pole_radii[1]:.1f} mm · {zones} concave zone{'s' if zones != 1 else ''}")
-        spec = res.job.mandrel
-        self._status({"open": f"Opened {res.path}", "new": "New job",
-                      "import": f"Imported the generatrix from {getattr(spec, 'path', '')}",
-                      "restore": f"Restored the autosaved copy of {res.job.name} (not saved yet)"}.get(
-            purpose,
-            f"The mandrel is now a sketched generatrix (kind \"points\", {len(getattr(spec, 'z_mm', []))} points); "
-            f"it was a \"{old_kind}\" template" if purpose == "points" and old_kind != "points" else "Mandrel updated"))
-        if fresh:
-            self.job_loaded.emit()
-        self.mandrel_updated.emit(res.data)
-        self._update_run_state()
-        if not fresh:
-            self.ctl.after_edit()
+        window_builds.on_built(self, purpose, res)
 
     def _on_build_failed(self, purpose: str, exc: BaseException, tb: str) -> None:
-        if not isinstance(exc, InputError):
-            print(tb, file=sys.stderr)
-        self._update_run_state()
-        if purpose in ("edit", "points") and isinstance(exc, InputError):
-            if purpose == "edit":
-                self.mandrel_panel.show_error(exc.location.field, exc.message)
-                self._update_run_state()
-            else:
-                self.plot.revert_points()
-                self.plot.show_message(f"Not applied: {exc.message}")
-            self._status(f"Not applied: {exc.message}", error=True)
-            self.error_reported.emit(exc.message)
-            return
-        self.report_dialog(BUILD_ERROR_TITLES.get(purpose, "Error"), exc)
-        if self.mandrel is not None:
-            self.mandrel_panel.set_spec(self.job.mandrel)
+        window_builds.on_build_failed(self, purpose, exc, tb)
 
     def _on_busy(self) -> None:
         ctl = self.ctl
@@ -499,35 +443,8 @@ class MainWindow(QMainWindow):
 
     # -- NC export -----------------------------------------------------------------------------------
     def export_nc(self, path: str | Path, force: bool | None = None) -> bool:
-        """Write the NC program of the last run to ``path`` (in a worker, atomically).
-
-        Refused, with the reason in the status bar, while the job is invalid or the program is out of
-        date (an edit since the run).  When the program violates a limit, ``force=None`` asks "write
-        anyway?"; ``True`` writes, ``False`` does not.  Returns True when the write was started.
-        """
-        why = self.export_block_reason()
-        if why:
-            self._status(texts.export_refused(why), error=True)
-            if self.result is None or self.result.nc_text is None:
-                self.report_dialog("Export NC program", InputError(why))
-            return False
-        res = self.result
-        p = Path(path)
-        if not p.suffix:
-            p = p.with_suffix(res.extension)
-        viol = self.doc.violations()
-        if viol and force is None:
-            ans = QMessageBox.question(
-                self, "Write anyway?",
-                f"The program violates {len(viol)} limit(s), e.g.\n{getattr(viol[0], 'message', viol[0])}\n\n"
-                "Write it anyway?",
-                QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.No, QMessageBox.StandardButton.No)
-            force = ans == QMessageBox.StandardButton.Yes
-            if not force:
-                self._status("NC program not written (it violates limits)")
-                return False
-        self.ctl.write_nc(p, bool(force))
-        return True
+        """Write the NC program of the run on screen to ``path`` (see :func:`window_exports.export_nc`)."""
+        return window_exports.export_nc(self, path, force)
 
     def open_nc(self, path: str | Path) -> None:
         """Read an NC program back on the job's machine (worker) and draw its eye path and laid fibre."""
@@ -552,35 +469,14 @@ class MainWindow(QMainWindow):
         self.nc_written.emit(path)
 
     def export_report(self, path: str | Path) -> bool:
-        """Write the job report (PDF or HTML by suffix) of the run on screen, in a worker; refused, with
-        the reason in the status bar, when there is no run or the job changed since (as NC export)."""
-        why = self.export_block_reason()
-        if why:
-            self._status(texts.export_refused(why), error=True)
-            return False
-        p = Path(path)
-        if p.suffix.lower() not in (".pdf", ".html", ".htm"):
-            p = p.with_suffix(".pdf")
-        self.ctl.write_report(p)
-        self._status(f"Writing the report {p.name}…")
-        return True
+        """Write the job report of the run on screen (see :func:`window_exports.export_report`)."""
+        return window_exports.export_report(self, path)
 
     def action_export_report(self) -> None:
-        if self.export_block_reason():
-            self.export_report("")
-            return
-        path = window_menus.ask_report_path(self)
-        if path:
-            self.export_report(path)
+        window_exports.action_export_report(self)
 
     def action_export_nc(self) -> None:
-        why = self.export_block_reason()
-        if why:
-            self.export_nc("")
-            return
-        path = window_menus.ask_nc_path(self, self.result.extension)
-        if path:
-            self.export_nc(path)
+        window_exports.action_export_nc(self)
 
     # -- steps, view -------------------------------------------------------------------------------
     def go_to_step(self, key: str) -> None:

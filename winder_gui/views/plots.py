@@ -751,6 +751,7 @@ class CoveragePlot(PlotPage):
         vs = np.insert(v, wrap, np.nan)
         self.stride = step
         self.set_curve("map", "coverage", zs, vs, "#30303080", 0.6, connect="finite")
+        self._z_lines = None
         self._line_note = (f"{line.circuits} circuits · {line.z.size} points"
                            + (f" (every {step}th centre line point shown)" if step > 1 else ""))
         self._done(self._line_note)
@@ -766,6 +767,10 @@ class CoveragePlot(PlotPage):
         z0, z1 = float(cov.z_edges[0]), float(cov.z_edges[-1])
         self.image.setRect(QRectF(z0, 0.0, z1 - z0, 360.0))
         self.plots["map"].setLabel("bottom", "meridian length m [mm]" if cov.meridian else "z [mm]")
+        c = self.curves.get("coverage")
+        if c is not None and cov.meridian:  # the centre lines on the map's axis (m, not z)
+            self._z_lines = getattr(self, "_z_lines", None) or (np.asarray(c.xData), np.asarray(c.yData))
+            c.setData(cov.to_map(self._z_lines[0]), self._z_lines[1], connect="finite")
         f, b = cov.direction_fraction
         note = getattr(self, "_line_note", "")
         self._done(f"covered {100 * cov.covered_fraction:.1f} % (gaps red {100 * cov.gap_fraction:.1f} %) · "

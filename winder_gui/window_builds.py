@@ -1,0 +1,78 @@
+"""What the main window shows when a mandrel build (open, new, import, edit, undo, restore) ends."""
+
+from __future__ import annotations
+
+import sys
+from typing import TYPE_CHECKING, Any
+
+from engine.errors import InputError
+from engine.job import PointsSpec, SegmentsSpec
+from winder_gui import window_menus
+from winder_gui.panels.segments_table import segment_handles
+
+if TYPE_CHECKING:
+    from winder_gui.main_window import MainWindow
+
+BUILD_ERROR_TITLES = {"open": "Could not open the job", "import": "Could not import the generatrix",
+                      "new": "Could not create a job", "restore": "Could not restore the autosaved job",
+                      "undo": "Could not undo"}
+
+
+def on_built(w: MainWindow, purpose: str, res: Any) -> None:
+    old_kind = w.job.mandrel.kind
+    fresh = w.doc.commit_build(res, purpose)
+    if fresh:
+        w.ctl.clear()
+        w.results.clear()
+        if purpose == "open":
+            window_menus.rebuild_recent_menu(w)
+    if purpose != "edit":  # the panel already shows what the user typed
+        w.mandrel_panel.set_spec(res.job.mandrel)
+    else:
+        w.mandrel_panel.clear_errors()
+    w.mandrel_panel.spec = res.job.mandrel
+    w.mandrel_panel.hint = (res.mandrel.r_max, res.mandrel.length)
+    reset = purpose in ("open", "new", "import", "restore")
+    w.plot.set_data(res.data, sketch=isinstance(res.job.mandrel, PointsSpec), reset_view=reset)
+    if isinstance(res.job.mandrel, SegmentsSpec):
+        hz, hr, _ = segment_handles(res.job.mandrel)
+        w.plot.set_segment_handles(hz, hr)
+    w.plot.show_message("")
+    w.view3d.set_data(res.data, reset_camera=reset)
+    m = res.mandrel
+    zones = len(res.data.concave)
+    w.summary_label.setText(
+        f"L {m.length:.1f} mm · r {m.r_min:.1f}…{m.r_max:.1f} mm · poles {m.pole_radii[0]:.1f}/"
+        f"{m.pole_radii[1]:.1f} mm · {zones} concave zone{'s' if zones != 1 else ''}")
+    spec = res.job.mandrel
+    w._status({"open": f"Opened {res.path}", "new": "New job",
+                  "import": f"Imported the generatrix from {getattr(spec, 'path', '')}",
+                  "restore": f"Restored the autosaved copy of {res.job.name} (not saved yet)"}.get(
+        purpose,
+        f"The mandrel is now a sketched generatrix (kind \"points\", {len(getattr(spec, 'z_mm', []))} points); "
+        f"it was a \"{old_kind}\" template" if purpose == "points" and old_kind != "points" else "Mandrel updated"))
+    if fresh:
+        w.job_loaded.emit()
+    w.mandrel_updated.emit(res.data)
+    w._update_run_state()
+    if not fresh:
+        w.ctl.after_edit()
+
+
+def on_build_failed(w: MainWindow, purpose: str, exc: BaseException, tb: str) -> None:
+    if not isinstance(exc, InputError):
+        print(tb, file=sys.stderr)
+    w._update_run_state()
+    if purpose in ("edit", "points") and isinstance(exc, InputError):
+        if purpose == "edit":
+            w.mandrel_panel.show_error(exc.location.field, exc.message)
+            w._update_run_state()
+        else:
+            w.plot.revert_points()
+            w.plot.show_message(f"Not applied: {exc.message}")
+        w._status(f"Not applied: {exc.message}", error=True)
+        w.error_reported.emit(exc.message)
+        return
+    w.report_dialog(BUILD_ERROR_TITLES.get(purpose, "Error"), exc)
+    if w.mandrel is not None:
+        w.mandrel_panel.set_spec(w.job.mandrel)
