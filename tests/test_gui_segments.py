@@ -10,6 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 from gui_helpers import close_window, shown_window
 
 from engine.job import SegmentsSpec, build_mandrel
@@ -127,5 +128,35 @@ def test_plot_drags_the_joints_of_a_sketch_with_snap(qtbot, tmp_path) -> None:
         # z must increase
         assert ed.move_point(1, 1200.0, 70.0) is not None
         assert w.wait_idle() and w.job == before
+    finally:
+        close_window(w)
+
+
+def test_csv_import_offers_smoothing_and_shows_the_deviation(qtbot, tmp_path) -> None:
+    from engine.job import FileSpec, load_job
+
+    rng = np.random.default_rng(5)
+    z = np.linspace(0.0, 600.0, 61)
+    r = 75.0 + rng.normal(0.0, 0.02, z.size)
+    (tmp_path / "measured.csv").write_text("z,r\n" + "\n".join(f"{float(a)!r},{float(b)!r}" for a, b in zip(z, r)))
+    job = load_job(ROOT / "resources/examples/pipe.toml").replace(mandrel=FileSpec(path="measured.csv"))
+    p = tmp_path / "csvjob.toml"
+    p.write_text(job.to_toml(), "utf-8")
+    w = shown_window(qtbot, p)
+    try:
+        panel = w.mandrel_panel
+        assert panel.current_kind() == "file" and panel.file_info.text() == ""
+        panel.set_value("smoothing_mm", 0.05)
+        assert w.wait_idle()
+        assert w.job.mandrel.smoothing_mm == 0.05
+        info = panel.file_info.text()
+        assert "smoothed within 0.05 mm" in info and "max deviation" in info
+        dev = w.mandrel.meta["smoothing"]["max_deviation_mm"]
+        assert dev <= 0.05 and np.abs(w.mandrel.r(z) - r).max() == pytest.approx(dev)
+        panel.set_value("smoothing_mm", "")  # back to the interpolating spline
+        assert w.wait_idle()
+        assert w.job.mandrel.smoothing_mm is None and panel.file_info.text() == ""
+        panel.set_value("smoothing_mm", "-1")
+        assert w.wait_idle() and "must be" in panel.error_text("smoothing_mm")
     finally:
         close_window(w)

@@ -32,6 +32,7 @@ def on_built(w: MainWindow, purpose: str, res: Any) -> None:
         w.mandrel_panel.clear_errors()
     w.mandrel_panel.spec = res.job.mandrel
     w.mandrel_panel.hint = (res.mandrel.r_max, res.mandrel.length)
+    w.mandrel_panel.show_built(res.mandrel)
     reset = purpose in ("open", "new", "import", "restore")
     w.plot.set_data(res.data, sketch=isinstance(res.job.mandrel, PointsSpec), reset_view=reset)
     if isinstance(res.job.mandrel, SegmentsSpec):

@@ -90,8 +90,10 @@ FIELDS: dict[str, tuple[tuple[str, str], ...]] = {
     ),
     "points": (),
     "segments": (),
-    "file": (("path", "Profile file"),),
+    "file": (("path", "Profile file"), ("smoothing_mm", "Smoothing tolerance [mm]")),
 }
+OPTIONAL = {"smoothing_mm"}
+"""Fields that may stay empty (then left out of the spec)."""
 
 
 def fmt(v: float) -> str:
@@ -190,10 +192,16 @@ class MandrelPanel(QWidget):
                 self.segments_table = SegmentsTable()
                 form.addRow(self.segments_table)
             if kind == "file":
-                note = QLabel("The profile is read from the file each time the job is opened.")
+                note = QLabel("The profile is read from the file each time the job is opened. Smoothing (CSV "
+                              "tables only): the smoothest spline within this distance of the measured points; "
+                              "empty = through the points.")
                 note.setWordWrap(True)
                 note.setStyleSheet("color: #666;")
                 form.addRow(note)
+                self.file_info = QLabel("")
+                self.file_info.setObjectName("fileInfo")
+                self.file_info.setWordWrap(True)
+                form.addRow(self.file_info)
             self.page_index[kind] = self.pages.addWidget(box)
         lay.addWidget(self.pages)
         self.convert_button = QPushButton("Convert to sketch (exact segments)")
@@ -298,6 +306,23 @@ class MandrelPanel(QWidget):
             row.error.hide()
             row.error.setText("")
         self._set_status(self._table_problem())
+
+    def show_built(self, mandrel: Any) -> None:
+        """Say how an imported profile was read: exact DXF segments or a spline fit (and why), and for a
+        smoothed CSV table the deviation reached."""
+        meta = getattr(mandrel, "meta", {}) or {}
+        parts = []
+        if meta.get("dxf_exact") is True:
+            parts.append(f"DXF: {meta.get('segments', len(mandrel.segments))} exact line/arc segments")
+        elif meta.get("dxf_exact") is False:
+            parts.append(f"DXF: fitted by a spline ({meta.get('dxf_spline_reason', '')})")
+        sm = meta.get("smoothing")
+        if sm and sm.get("applied"):
+            parts.append(f"smoothed within {sm['tolerance_mm']:g} mm: max deviation {sm['max_deviation_mm']:.4g} mm "
+                         f"at z = {sm['at_z_mm']:.6g} mm, rms {sm['rms_deviation_mm']:.4g} mm")
+        elif sm:
+            parts.append(f"smoothing: {sm.get('note', '')}")
+        self.file_info.setText("; ".join(parts))
 
     def convert_to_sketch(self) -> None:
         """Ask the window to replace the template by the sketch of its exact segments."""
@@ -432,6 +457,8 @@ class MandrelPanel(QWidget):
                 continue
             if text == row.shown and row.value is not None:
                 vals[key] = row.value
+                continue
+            if key in OPTIONAL and not text:
                 continue
             try:
                 v = float(text.replace(",", "."))
