@@ -119,6 +119,13 @@ def test_plot_drags_the_joints_of_a_sketch_with_snap(qtbot, tmp_path) -> None:
         segs = w.job.mandrel.segments
         assert segs[0].to_mm == (700.0, 80.0) and segs[1].corner and segs[1].fillet_mm == 50.0  # snapped, kept
         assert w.mandrel_panel.segments_table.table.item(0, 1).text() == "700"  # the table follows
+        # the same snap grid rounds what is typed into the table
+        w.mandrel_panel.segments_table.set_cell(0, C_Z, "650.3")
+        assert w.wait_idle()
+        assert w.job.mandrel.segments[0].to_mm == (650.5, 80.0)
+        w.plot.set_snap(False)
+        w.mandrel_panel.segments_table.set_cell(0, C_Z, "700")
+        assert w.wait_idle()
         assert [s.kind for s in w.mandrel.segments] == ["line", "arc", "line"]
         # adding or removing a joint on the plot is refused (segments are added in the table)
         before = w.job

@@ -342,6 +342,12 @@ class MandrelPanel(QWidget):
             self.points_table.set_concave(plot.data.concave)
         plot.point_selected.connect(self.points_table.select_row)
         self.points_table.row_selected.connect(plot.select_point)
+        # the plot's snap grid also rounds the coordinates typed into the segment table
+        plot.snap_changed.connect(self._on_snap_changed)
+        self._on_snap_changed(plot.snap_check.isChecked(), float(plot.snap_spin.value()))
+
+    def _on_snap_changed(self, on: bool, step: float) -> None:
+        self.segments_table.snap_mm = float(step) if on else 0.0
 
     def show_error(self, field: str | None, message: str) -> None:
         """Show an error of the built mandrel at its field (``mandrel.<name>``) or under the fields."""
