@@ -558,6 +558,7 @@ class ViolationGroup:
     message: str
 
 
+_UNIT = re.compile(r"exceeds the limit -?[0-9.eE+-]+( [^ ]+)? by")
 _WHAT = re.compile(r"^(?:axis \S+|machine): (.*?) -?[0-9.eE+-]+(?: ?\S+)? exceeds")
 
 
@@ -601,7 +602,9 @@ def group_violations(violations: list[Violation], locator: Locator | None = None
                     f"; {w.message.split(': ', 1)[1] if ': ' in w.message else ''}")
         else:
             rel = "below" if w.value < w.limit else "above"
-            text = (f"{label}: {what} {w.value:.6g} is {rel} the limit {w.limit:.6g} by {abs(w.amount):.4g} "
+            m_u = _UNIT.search(w.message or "")
+            u = m_u.group(1) if m_u else ""
+            text = (f"{label}: {what} {w.value:.6g}{u} is {rel} the limit {w.limit:.6g}{u} by {abs(w.amount):.4g}{u} "
                     f"(worst) at {len(vs)} place(s), {pts} {'block' if first.block is not None else 'point'}(s)")
         where = _where(loc)
         msg = f"{text}; first at {where}" if where else text
