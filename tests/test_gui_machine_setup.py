@@ -22,7 +22,12 @@ def panel(qtbot):
     p = MachinePanel()
     qtbot.addWidget(p)
     p.resize(460, 900)
-    p.set_job(load_job(ROOT / "resources" / "examples" / "pipe.toml"))
+    job = load_job(ROOT / "resources" / "examples" / "pipe.toml")
+    p.set_job(job)
+    from engine.job import build_mandrel
+
+    assert p.schematic.schematic.supports == ()          # no mandrel built yet: the nominal one
+    p.set_mandrel(build_mandrel(job))                     # as the window does when the build worker is done
     return p
 
 

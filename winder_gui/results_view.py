@@ -127,7 +127,8 @@ class ResultsPresenter(QObject):
             self.queue(lambda: v.view3d.set_paths(out.paths))
         warns = list(self.doc.run_warnings)
         self.queue(lambda: v.nc_panel.set_result(res, warns), lambda: self._on_stale(self.doc.is_stale()),
-                   lambda: v.machine_panel.show_placement(res.machine, getattr(res, "placement", None)),
+                   lambda: v.machine_panel.show_placement(res.machine, getattr(res, "placement", None),
+                                                          getattr(res, "mandrel", None)),
                    lambda: v.view3d.set_supports(_supports(res)))
         took = time.monotonic() - self.ctl.run_t0
         reused = f" (re-used: {', '.join(res.reused)})" if res.reused else ""

@@ -40,6 +40,7 @@ def on_built(w: MainWindow, purpose: str, res: Any) -> None:
         w.plot.set_segment_handles(hz, hr)
     w.plot.show_message("")
     w.view3d.set_data(res.data, reset_camera=reset)
+    w.machine_panel.set_mandrel(res.mandrel)   # the Machine step's schematic draws the part and its supports
     m = res.mandrel
     zones = len(res.data.concave)
     w.summary_label.setText(

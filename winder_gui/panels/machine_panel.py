@@ -215,25 +215,38 @@ class MachinePanel(SectionPanel):
             self.post_combo.blockSignals(False)
             self.controller_combo.blockSignals(False)
 
-    def show_placement(self, machine: Any, placement: Any) -> None:
+    def set_mandrel(self, mandrel: Any) -> None:
+        """The job's built mandrel (from the build worker): the schematic draws it and its supports."""
+        self._mandrel = mandrel
+        if self.template is not None and getattr(self, "job_for_part", None) is not None:
+            from engine.errors import InputError
+            from engine.pipeline import load_machine_for_job
+
+            try:
+                self._show_part(load_machine_for_job(self.job_for_part))
+            except InputError:
+                pass
+
+    def show_placement(self, machine: Any, placement: Any, mandrel: Any = None) -> None:
         """After a run: the template as placed (carriage offset) and the placement sentence."""
         self.placement_label.setText(placement.message() if placement is not None else "")
         self._placed = machine
+        if mandrel is not None:
+            self._mandrel = mandrel
         if machine is not None and self.template is not None and machine.name == self.template.name:
             self._show_part(machine)
 
     def _show_part(self, machine: Any) -> None:
-        """The schematic of ``machine`` with the job's mandrel and supports (analytic mandrels only: an
-        imported profile is not read on the GUI thread; the nominal mandrel is drawn then)."""
+        """The schematic of ``machine`` with the job's mandrel and supports (the mandrel the build worker
+        made, :meth:`set_mandrel`; nothing is computed here - the nominal mandrel until one is built)."""
         from engine.errors import InputError
-        from engine.job import build_mandrel
         from engine.machine_setup import apply_setup, support_obstacles
 
         job = getattr(self, "job_for_part", None)
+        mandrel = getattr(self, "_mandrel", None)
         part = None
-        if job is not None and job.mandrel.kind != "file":
+        if job is not None and mandrel is not None:
             try:
-                mandrel = build_mandrel(job)
                 obs = support_obstacles(mandrel, job.machine.setup)
                 part = (mandrel.z_min, mandrel.z_max, float(mandrel.r_max), [(o.name, o.z0, o.z1, o.radius)
                                                                             for o in obs])
