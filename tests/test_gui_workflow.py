@@ -355,7 +355,7 @@ def test_any_text_in_any_field_never_crashes(pipe_window, text: str) -> None:
 
 def test_machine_template_axes_and_post(pipe_window) -> None:
     from engine.kinematics import load_machine
-    from engine.post import list_controllers, list_posts
+    from engine.post import list_posts
 
     w = pipe_window
     mp = w.machine_panel
@@ -374,10 +374,18 @@ def test_machine_template_axes_and_post(pipe_window) -> None:
     assert w.job.machine.axes[name].max_accel == 123.0
     mp.set_cell(name, "max_accel", "")
     assert name not in w.job.machine.axes
-    assert sorted(mp.post_combo.itemText(i) for i in range(mp.post_combo.count())) == list_posts()
-    assert [mp.controller_combo.itemText(i) for i in range(1, mp.controller_combo.count())] == list_controllers()
+    # only the dialects and profiles that can address lathe4's axes (engine.machine_setup.compatible_posts)
+    from engine.machine_setup import compatible_posts
+
+    pairs = compatible_posts(lathe4)
+    assert sorted(mp.post_combo.itemText(i) for i in range(mp.post_combo.count())) == sorted({p for p, _ in pairs})
+    assert set(list_posts()) == {p for p, _ in pairs}           # every dialect can write lathe4
+    post = mp.post_combo.currentText()
+    assert [mp.controller_combo.itemText(i) for i in range(1, mp.controller_combo.count())] == [
+        c for p, c in pairs if p == post]
+    assert "linuxcnc_robot" not in [mp.controller_combo.itemText(i) for i in range(mp.controller_combo.count())]
     mp.post_combo.setCurrentText("fanuc")
-    mp._on_edited()
+    mp._on_post()                      # as when the user picks it: the controller list follows the dialect
     assert w.job.post.post == "fanuc"
     mp.controller_combo.setCurrentText("fanuc")
     mp._on_edited()
