@@ -280,8 +280,9 @@ def test_selecting_a_layer_shows_its_surface_line_and_plots(ran) -> None:
         bz, bb = w.winding_plots.curve_data("beta")
         sl = line.circuit_slice(0)
         assert np.array_equal(bz, line.z[sl]) and np.allclose(bb, np.degrees(line.beta[sl]))
-        cov = w.coverage_plot.coverage  # its coverage map, of its own line and band
-        assert cov is w.laminate.output.view(i).coverage and cov.band_width_mm == line.band_width_mm
+        assert w.wait_idle()  # its coverage map (computed on first show), of its own line and band
+        cov = w.coverage_plot.coverage
+        assert cov is w.laminate.coverage_of(i) and cov.band_width_mm == line.band_width_mm
         lp = w.laminate_plot
         assert lp.selected == i
         assert lp.selected_pen_width(f"boundary {i + 1}") > max(lp.selected_pen_width(f"boundary {k + 1}")

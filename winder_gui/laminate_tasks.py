@@ -52,8 +52,6 @@ class LayerView:
     outer_z: FloatArray
     outer_r: FloatArray
     figures: dict[str, Any] = field(default_factory=dict)
-    coverage: Any = None
-    """:class:`engine.coverage.CoverageMap` of the layer's line on its surface (``None`` for a skip)."""
 
 
 @dataclass(frozen=True)
@@ -100,14 +98,11 @@ def layer_view(lr: Any, surface_data: Any = None) -> LayerView:
     from winder_gui.views.view3d import MAX_DISPLAY_POINTS, MAX_FRAMES
 
     surf = surface_data if surface_data is not None else mandrel_view_data(lr.surface)
-    paths = cov = None
+    paths = None
     az = ad = np.zeros(0)
     res = lr.result
     if res is not None and res.line is not None:
-        from engine.coverage import coverage_map
-
         line = res.line
-        cov = coverage_map(line, lr.surface)
         paths = paths_view_data(line, res.eye, MAX_DISPLAY_POINTS, MAX_FRAMES, blocks=res.blocks)  # layer time
         sel = (line.pass_id == line.pass_id[0]) & ~line.dwell
         if int(sel.sum()) < 2:
@@ -119,8 +114,7 @@ def layer_view(lr: Any, surface_data: Any = None) -> LayerView:
         oz, orr = _thin(th.z_out, th.r_out)
     else:  # a skip layer: no fibre
         tz = tt = oz = orr = np.zeros(0)
-    return LayerView(lr.index, lr.name, lr.kind, lr.key, surf, paths, az, ad, tz, tt, oz, orr, dict(lr.figures),
-                     cov)
+    return LayerView(lr.index, lr.name, lr.kind, lr.key, surf, paths, az, ad, tz, tt, oz, orr, dict(lr.figures))
 
 
 def laminate_task(job: Job, job_path: Path | None, previous: Any, upto: str = "nc", *, state: Any,
@@ -156,6 +150,15 @@ def laminate_task(job: Job, job_path: Path | None, previous: Any, upto: str = "n
     refusals = laminate_refusals(res) if res.nc_text is not None else []
     return LaminateOutput(result=res, warnings=res.warnings(), violations=refusals, layup=res.layup(),
                           views=tuple(views), bare_z=bz, bare_r=br)
+
+
+def coverage_task(key: str, line: Any, surface: Any, *, state: Any) -> tuple[str, Any]:
+    """(``key``, :func:`engine.coverage.coverage_map` of a layer's ``line`` on its ``surface``): computed when
+    the layer is first shown (a few seconds on a vessel's helical layer, so not part of every run)."""
+    from engine.coverage import coverage_map
+
+    state.progress(0.0, "coverage map of the layer")
+    return key, coverage_map(line, surface)
 
 
 def run_task(job: Job, job_path: Path | None, previous: Any, upto: str = "nc", *, state: Any,

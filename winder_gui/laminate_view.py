@@ -32,7 +32,10 @@ class LaminatePresenter(QObject):
         self.output: LaminateOutput | None = None
         self.shown_layer = -1
         self._laws_key: tuple[str, Any] | None = None
+        self.coverage: dict[str, Any] = {}
+        """Coverage maps of the layers shown so far, by layer key (computed on demand in a worker)."""
         v = views
+        ctl.layer_data_done.connect(self._on_coverage)
         v.layers_panel.layer_selected.connect(self.show_layer)
         doc.results_changed.connect(self._on_results)
         doc.stale_changed.connect(self._on_stale)
@@ -98,8 +101,12 @@ class LaminatePresenter(QObject):
             line = lr.result.line
             v.winding_plots.set_line(line)
             v.coverage_plot.set_line(line)
-            if lv.coverage is not None:
-                v.coverage_plot.set_coverage(lv.coverage)
+            if lv.key in self.coverage:
+                v.coverage_plot.set_coverage(self.coverage[lv.key])
+            else:
+                from winder_gui.laminate_tasks import coverage_task
+
+                self.ctl.layer_runner.submit(coverage_task, lv.key, line, lr.surface)
             if lr.result.eye_circuit is not None:
                 v.eye_plot.set_eye(lr.result.eye_circuit, lr.surface)
                 key = (lr.key, lr.result.keys.get("payout"))
@@ -111,6 +118,20 @@ class LaminatePresenter(QObject):
         if v.steps.current_step() == "winding":
             v.plot_tabs.setCurrentWidget(v.laminate_plot)
         self.layer_shown.emit(index)
+
+    def _on_coverage(self, out: tuple[str, Any]) -> None:
+        key, cov = out
+        self.coverage[key] = cov
+        if len(self.coverage) > 32:  # layers of old runs
+            self.coverage.pop(next(iter(self.coverage)))
+        lv = self.output.view(self.shown_layer) if self.output is not None else None
+        if lv is not None and lv.key == key:
+            self.v.coverage_plot.set_coverage(cov)
+
+    def coverage_of(self, index: int) -> Any:
+        """The coverage map of job layer ``index`` when computed (``None`` before)."""
+        lv = self.output.view(index) if self.output is not None else None
+        return self.coverage.get(lv.key) if lv is not None else None
 
     def shown_result(self) -> Any:
         """The single-line :class:`~engine.pipeline.PipelineResult` of the layer shown (``None``: none)."""

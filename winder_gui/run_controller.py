@@ -71,6 +71,7 @@ class RunController(QObject):
     timelaw_done = Signal(object)
     timelaw_failed = Signal(object, str)
     nc_written = Signal(object)
+    layer_data_done = Signal(object)
     nc_read = Signal(object)
     exported = Signal(object)
     io_failed = Signal(str, object, str)
@@ -105,6 +106,9 @@ class RunController(QObject):
         self.pipe_runner.progress.connect(self.progress)
         self.laws_runner = self._runner(self.laws_done.emit, self.laws_failed.emit)
         self.tl_runner = self._runner(self.timelaw_done.emit, self.timelaw_failed.emit)
+        self.layer_runner = self._runner(self.layer_data_done.emit,
+                                         lambda exc, tb: self.io_failed.emit("Layer view not computed", exc, tb))
+        """Views of one laminate layer computed on demand (its coverage map) -- winder_gui.laminate_view."""
         self.tl_runner.progress.connect(self.progress)
         self.nc_runner = self._runner(self.nc_written.emit,
                                       lambda exc, tb: self.io_failed.emit("NC program not written", exc, tb))
@@ -131,7 +135,7 @@ class RunController(QObject):
 
     def runners(self) -> tuple[JobRunner, ...]:
         return (self.runner, self.io_runner, self.pipe_runner, self.laws_runner, self.tl_runner, self.nc_runner,
-                self.read_runner)
+                self.read_runner, self.layer_runner)
 
     def _on_busy(self, _busy: bool = False) -> None:
         self.doc.set_running(self.pipe_runner.is_busy())
@@ -219,7 +223,7 @@ class RunController(QObject):
         """Stop every computation in flight (pipeline, law comparison, time law); results are dropped."""
         self.run_timer.stop()
         self._run_after_build = False
-        for r in (self.pipe_runner, self.laws_runner, self.tl_runner):
+        for r in (self.pipe_runner, self.laws_runner, self.tl_runner, self.layer_runner):
             if r.is_busy():
                 r.cancel()
         self._on_busy()
@@ -343,10 +347,10 @@ class RunController(QObject):
         self.edit_timer.stop()
         self.run_timer.stop()
         self.runner.cancel()
-        for r in (self.pipe_runner, self.laws_runner, self.tl_runner):
+        for r in (self.pipe_runner, self.laws_runner, self.tl_runner, self.layer_runner):
             r.cancel()
         self.io_runner.wait(30000)  # never leave a half-written export behind
         self.nc_runner.wait(30000)
         self.runner.wait(5000)
-        for r in (self.pipe_runner, self.laws_runner, self.tl_runner):
+        for r in (self.pipe_runner, self.laws_runner, self.tl_runner, self.layer_runner):
             r.wait(30000)
