@@ -280,7 +280,7 @@ def test_selecting_a_layer_shows_its_surface_line_and_plots(ran) -> None:
         bz, bb = w.winding_plots.curve_data("beta")
         sl = line.circuit_slice(0)
         assert np.array_equal(bz, line.z[sl]) and np.allclose(bb, np.degrees(line.beta[sl]))
-        assert w.wait_idle()  # its coverage map (computed on first show), of its own line and band
+        assert w.wait_idle(180000)  # its coverage map (computed on first show), of its own line and band
         cov = w.coverage_plot.coverage
         assert cov is w.laminate.coverage_of(i) and cov.band_width_mm == line.band_width_mm
         lp = w.laminate_plot
@@ -393,7 +393,7 @@ def test_export_equals_winder_run_byte_for_byte(ran, tmp_path) -> None:
     assert [lay.name for lay in load_job(saved).layers] == _names(w)
     gui_nc = tmp_path / "gui.ngc"
     assert w.export_nc(gui_nc, force=True)
-    assert w.wait_idle()
+    assert w.wait_idle(180000)
     cli_nc = tmp_path / "cli.ngc"
     assert cli_main(["run", str(saved), "-o", str(cli_nc), "--force", "--quiet"]) == 0
     assert gui_nc.read_bytes() == cli_nc.read_bytes()
@@ -437,7 +437,7 @@ def test_every_layered_example_in_the_window(qtbot, tmp_path, example) -> None:
         assert x[-1] == pytest.approx(b.total)
         assert f"{b.total:.2f} s" in w.nc_panel.summary.text()
         out = tmp_path / f"{example.stem}{res.extension}"
-        assert w.export_nc(out, force=True) and w.wait_idle()
+        assert w.export_nc(out, force=True) and w.wait_idle(180000)
         assert out.read_bytes() == res.nc_text.encode()
     finally:
         close_window(w, 120000)
