@@ -325,6 +325,22 @@ def check_laminate(job: Any, mandrel: Any, *, file: str | Path | None = None) ->
     return est
 
 
+MAX_LENGTH_MM = 1e7
+"""Largest length or coordinate of a mandrel (mm): 10 km; anything larger is a unit mistake (the same
+limit as the profile importers', engine.mandrel_io.MAX_COORD_MM)."""
+
+
+def check_mandrel_spec(spec: Any) -> None:
+    """Refuse a template mandrel (``[mandrel]``) with a length, radius or coordinate beyond
+    :data:`MAX_LENGTH_MM` (field: the spec's key), before the spline is built."""
+    for key, value in spec.model_dump().items():
+        vals = value if isinstance(value, list | tuple) else [value]
+        for v in vals:
+            if isinstance(v, float | int) and not isinstance(v, bool) and not abs(v) <= MAX_LENGTH_MM:
+                raise InputError(f"{key} = {v:g} is beyond any mandrel (at most {MAX_LENGTH_MM:g} mm); check the "
+                                 "units", field=key)
+
+
 def check_post(min_block_time_s: float, *, file: str | Path | None = None) -> None:
     """A minimal block time beyond :data:`MAX_MIN_BLOCK_TIME_S` is an input error."""
     if not float(min_block_time_s) <= MAX_MIN_BLOCK_TIME_S:

@@ -716,6 +716,9 @@ def build_mandrel(job: Job, job_path: str | Path | None = None) -> Any:
 
     spec = job.mandrel
     try:
+        from engine.budget import check_mandrel_spec
+
+        check_mandrel_spec(spec)
         if isinstance(spec, VesselSpec):
             return Mandrel.vessel(
                 spec.radius_mm,
