@@ -252,7 +252,7 @@ def node_geometry(grid: PassGrid) -> tuple[FloatArray, FloatArray, FloatArray]:
     return (np.append(rl, rr[-1]), np.append(drl, drr[-1]), np.append(d2l, d2rr[-1]))
 
 
-def lower_bound(grid: PassGrid, margin: float = 1e-4) -> FloatArray:
+def lower_bound(grid: PassGrid, margin: float = 1e-5) -> FloatArray:
     """Smallest admissible C at each node: the no-bridging bound of (6) where r'' > 0, else 0.
 
     Each node takes the largest bound over its own parallel and the Gauss and mid points of the

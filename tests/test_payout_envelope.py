@@ -20,7 +20,15 @@ GEOMETRIC = ("parallel", "equidistant", "equal-tangent")
 
 
 def _compare(line: ContactLine, mandrel: Mandrel, spec: PayoutSpec) -> list[tuple[str, float, float]]:
-    mr = min_range_law(line, mandrel, spec)
+    try:
+        mr = min_range_law(line, mandrel, spec)
+    except InfeasibleError:  # then no geometric law may pass the same checks either
+        for law in GEOMETRIC:
+            try:
+                assert not geometric_law(line, mandrel, law, spec).feasible, law
+            except InfeasibleError:
+                pass
+        return []
     assert mr.feasible, mr.report["constraints"]
     out = []
     for law in GEOMETRIC:
@@ -81,10 +89,7 @@ def test_random_pipes(radius: float, length: float, angle: float, clearance: flo
 def test_random_vessels(radius: float, cyl: float, pole: float, dome: str) -> None:
     m = Mandrel.vessel(radius, cyl, dome, pole * radius)
     wl = winding_line(m, 8.0, 0.3, WindingSpec(points_per_pass=300))
-    try:
-        _compare(ContactLine.from_line(wl.one_circuit), m, PayoutSpec(grid_points=200))
-    except InfeasibleError as exc:  # an envelope too tight for this shape is a legitimate answer
-        assert "envelope" in str(exc) or "clearance" in str(exc)
+    _compare(ContactLine.from_line(wl.one_circuit), m, PayoutSpec(grid_points=200))
 
 
 def test_clearance_counts_the_end_faces() -> None:
