@@ -109,6 +109,7 @@ class RunController(QObject):
         self.layer_runner = self._runner(self.layer_data_done.emit,
                                          lambda exc, tb: self.io_failed.emit("Layer view not computed", exc, tb))
         """Views of one laminate layer computed on demand (its coverage map) -- winder_gui.laminate_view."""
+        self.layer_runner.progress.connect(self.progress)
         self.tl_runner.progress.connect(self.progress)
         self.nc_runner = self._runner(self.nc_written.emit,
                                       lambda exc, tb: self.io_failed.emit("NC program not written", exc, tb))

@@ -37,8 +37,10 @@ class LaminatePlots(PlotPage):
         self.add_plot("thickness", 1, 1, "t [mm]", "z [mm]", title="Thickness added by each layer")
         self.glw.ci.layout.setRowStretchFactor(0, 3)
         self.glw.ci.layout.setRowStretchFactor(1, 2)
-        self.plots["section"].addLegend(offset=(-10, 10), brush=pg.mkBrush(255, 255, 255, 200),
-                                        labelTextColor="#202020")
+        leg = self.plots["section"].addLegend(brush=pg.mkBrush(255, 255, 255, 200), labelTextColor="#202020",
+                                              colCount=3)
+        # bottom centre: clear of the domes at both ends and of the cylinder's boundaries at the top
+        leg.anchor(itemPos=(0.5, 1.0), parentPos=(0.5, 1.0), offset=(0, -8))
         self.output: Any = None
         self.selected = -1
         self.fills: dict[str, Any] = {}
