@@ -81,7 +81,7 @@ def check_output_path(path: str | Path, what: str = "output") -> Path:
     """
     p = Path(path)
     if str(path) == "" or p.name in ("", ".", ".."):
-        raise InputError(f"the {what} path names a folder, not a file", file=str(path))
+        raise InputError(f"cannot write the {what} file: the path names a folder, not a file", file=str(path))
     try:
         return _check_output_path(p, what)
     except OSError as exc:  # e.g. a name longer than the file system allows
@@ -89,17 +89,18 @@ def check_output_path(path: str | Path, what: str = "output") -> Path:
 
 
 def _check_output_path(p: Path, what: str) -> Path:
+    why = f"cannot write the {what} file"
     if p.is_dir():
-        raise InputError(f"the {what} path is a folder; give a file name", file=p)
+        raise InputError(f"{why}: the path is a folder; give a file name", file=p)
     parent = p.parent if str(p.parent) else Path(".")
     if not parent.exists():
-        raise InputError(f"the {what} folder {str(parent)!r} does not exist", file=p)
+        raise InputError(f"{why}: the folder {str(parent)!r} does not exist", file=p)
     if not parent.is_dir():
-        raise InputError(f"the {what} folder {str(parent)!r} is not a folder", file=p)
+        raise InputError(f"{why}: {str(parent)!r} is not a folder", file=p)
     if not os.access(parent, os.W_OK | os.X_OK):
-        raise InputError(f"no permission to write in the folder {str(parent)!r}", file=p)
+        raise InputError(f"{why}: no permission to write in the folder {str(parent)!r}", file=p)
     if p.exists() and not os.access(p, os.W_OK) and not os.access(parent, os.W_OK):
-        raise InputError("no permission to replace this file", file=p)
+        raise InputError(f"{why}: no permission to replace it", file=p)
     return p
 
 

@@ -206,12 +206,12 @@ def test_limits_file_reader_is_guarded(tmp_path, capsys) -> None:
 # ------------------------------------------------------------------------------------------------
 def test_output_path_checks(tmp_path, capsys) -> None:
     job = _job(tmp_path, PIPE)
-    for target, words in ((tmp_path, "is a folder"), (tmp_path / "no" / "x.ngc", "does not exist"),
+    for target, words in ((tmp_path, "the path is a folder"), (tmp_path / "no" / "x.ngc", "does not exist"),
                           (job / "x.ngc", "is not a folder")):
         rc, _, err = _cli(capsys, "run", str(job), "-o", str(target), "--quiet")
         assert rc == 2 and words in err and str(target) in err, err
     rc, _, err = _cli(capsys, "trajectory", str(job), "--csv", str(tmp_path))
-    assert rc == 2 and "is a folder" in err
+    assert rc == 2 and "cannot write the CSV file: the path is a folder" in err
     rc, _, err = _cli(capsys, "run", str(job), "-o", str(tmp_path / "o.ngc"), "--report", str(tmp_path / "no/r.json"))
     assert rc == 2 and not (tmp_path / "o.ngc").exists()  # refused before any work
 
