@@ -230,7 +230,12 @@ class TurningDialog(QDialog):
         scroll = QScrollArea()
         scroll.setWidget(left)
         scroll.setWidgetResizable(True)
-        scroll.setMinimumWidth(380)
+        scroll.setMinimumWidth(400)
+        for combo in left.findChildren(QComboBox):  # long catalogue names: elide, the full text as tooltip
+            combo.setSizeAdjustPolicy(QComboBox.SizeAdjustPolicy.AdjustToMinimumContentsLengthWithIcon)
+            combo.setMinimumContentsLength(14)
+            combo.setToolTip(combo.currentText())
+            combo.currentTextChanged.connect(combo.setToolTip)
 
         # ---- report and constraint table --------------------------------------------------------
         mid = QWidget()
@@ -267,7 +272,10 @@ class TurningDialog(QDialog):
         # ---- plot --------------------------------------------------------------------------------
         self.plot_view = pg.GraphicsLayoutWidget()
         self.plot_view.setBackground("w")
-        self.plot_widget = self.plot_view.addPlot(row=0, col=0)  # a PlotItem
+        from winder_gui.views.plots import LogTickAxis
+
+        self.plot_widget = self.plot_view.addPlot(  # a PlotItem; decade ticks labelled 1, 2, 5 only
+            row=0, col=0, axisItems={"bottom": LogTickAxis("bottom"), "left": LogTickAxis("left")})
         self.plot_widget.setLogMode(True, True)
         self.plot_widget.showGrid(x=True, y=True, alpha=0.25)
         self.plot_widget.setLabel("bottom", "spindle speed n, rpm")
@@ -294,7 +302,7 @@ class TurningDialog(QDialog):
         split.addWidget(scroll)
         split.addWidget(mid)
         split.addWidget(self.plot_view)
-        split.setSizes([380, 470, 650])
+        split.setSizes([410, 450, 640])
         outer = QVBoxLayout(self)
         outer.addWidget(split)
 

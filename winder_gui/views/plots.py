@@ -57,7 +57,8 @@ class TickAxis(pg.AxisItem):
         if not values:
             return []
         step = abs(spacing * scale) or 1.0
-        places = int(min(max(0, -math.floor(math.log10(step)) + (1 if str(step)[0] in "25" else 0)), 9))
+        # the fewest decimals that write the tick spacing exactly (0.25 -> 2, 0.1 -> 1, 500 -> 0)
+        places = next((p for p in range(10) if abs(step * 10**p - round(step * 10**p)) <= 1e-6 * step * 10**p), 9)
         big = max(abs(v * scale) for v in values)
         if big >= 1e7 or (big < 1e-4 and big > 0):
             return [f"{v * scale:.3g}" for v in values]
@@ -65,6 +66,22 @@ class TickAxis(pg.AxisItem):
         for v in values:
             t = f"{v * scale:.{places}f}"
             out.append("0" if t.strip("-0.") == "" else t)
+        return out
+
+
+class LogTickAxis(TickAxis):
+    """A log-scale axis that labels only the 1, 2 and 5 of each decade (the minor ticks 3, 4, 6…9 keep
+    their grid lines but no text, so labels never run into each other)."""
+
+    def tickStrings(self, values: list[float], scale: float, spacing: float) -> list[str]:  # noqa: N802 - Qt API
+        if not self.logMode:
+            return super().tickStrings(values, scale, spacing)
+        out = []
+        for v in values:
+            x = 10.0 ** float(v)
+            mant = x / 10.0 ** math.floor(math.log10(x)) if x > 0 else 0.0
+            keep = any(abs(mant - k) < 1e-6 * k for k in (1.0, 2.0, 5.0))
+            out.append(f"{x:.6g}" if keep else "")
         return out
 
 
