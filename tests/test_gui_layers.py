@@ -441,3 +441,19 @@ def test_every_layered_example_in_the_window(qtbot, tmp_path, example) -> None:
         assert out.read_bytes() == res.nc_text.encode()
     finally:
         close_window(w, 120000)
+
+
+def test_layered_run_reports_progress_per_layer(job_file) -> None:
+    """The worker task's progress names the layer it works on, in winding order, and ends at 1."""
+    from engine.state import RecordingState
+    from winder_gui.laminate_tasks import laminate_task
+
+    st = RecordingState()
+    out = laminate_task(load_job(job_file), job_file, None, state=st)
+    msgs = [m for _, m in st.progress_calls if m.startswith("layer ")]
+    firsts = [m.split(":")[0] for m in msgs]
+    seen = list(dict.fromkeys(firsts))
+    assert seen == ["layer 1/3 inner hoop", "layer 2/3 helical 55", "layer 3/3 outer hoop"]
+    assert all(0.0 <= f <= 1.0 for f in st.fractions) and st.fractions[-1] == 1.0
+    assert st.partials == []  # a layer's own single-line result is never published as the job's
+    assert [v.index for v in out.views] == [0, 1, 2]

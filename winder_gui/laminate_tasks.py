@@ -117,6 +117,30 @@ def layer_view(lr: Any, surface_data: Any = None) -> LayerView:
     return LayerView(lr.index, lr.name, lr.kind, lr.key, surf, paths, az, ad, tz, tt, oz, orr, dict(lr.figures))
 
 
+class LayerProgress:
+    """The state :func:`engine.laminate.run_laminate` reports to: each message is prefixed with the layer it
+    concerns (``layer 2/4 helical 40: …``).  run_laminate gives layer j of n the share [j/n, (j+1)/n) of the
+    progress, so the layer follows from the fraction; partial results of single layers are not passed on
+    (they are not the job's result)."""
+
+    def __init__(self, parent: Any, names: list[str]) -> None:
+        self._parent = parent
+        self._names = names
+
+    def progress(self, fraction: float, message: str = "") -> None:
+        n = len(self._names)
+        if message and n:
+            j = min(max(int(fraction * n + 1e-9), 0), n - 1)
+            message = f"layer {j + 1}/{n} {self._names[j]}: {message}"
+        self._parent.progress(fraction, message)
+
+    def cancelled(self) -> bool:
+        return bool(self._parent.cancelled())
+
+    def partial(self, result: Any) -> None:
+        return None
+
+
 def laminate_task(job: Job, job_path: Path | None, previous: Any, upto: str = "nc", *, state: Any,
                   previous_views: LaminateOutput | None = None) -> LaminateOutput:
     """:func:`engine.laminate.run_laminate` of ``job`` (re-using the unchanged layers of ``previous``, a
@@ -124,11 +148,14 @@ def laminate_task(job: Job, job_path: Path | None, previous: Any, upto: str = "n
 
     ``previous_views``: the output of the previous run, whose layer views are re-used by key.
     """
+    from engine.job import layer_name
     from engine.laminate import laminate_refusals, meridian_grid, run_laminate
     from winder_gui.views.geometry import mandrel_view_data
 
     prev = previous if is_laminate(previous) else None
-    res = run_laminate(job, job_path, previous=prev, state=SubState(state, 0.0, 0.9), upto=upto)
+    names = [layer_name(lay, i) for i, lay in job.active_layers]
+    res = run_laminate(job, job_path, previous=prev, state=LayerProgress(SubState(state, 0.0, 0.9), names),
+                       upto=upto)
     check_cancel(state)
     state.progress(0.9, "laminate: views of the layers")
     old = {v.key: v for v in previous_views.views} if previous_views is not None else {}
