@@ -1085,6 +1085,33 @@ def _solve_range_stage(prob: _Problem, u_floor: float, mu0: FloatArray, state: S
     return _Stage("range", mu, float(x[-1] - x[-2]), it, time.perf_counter() - t0), float(x[-2]), float(x[-1])
 
 
+def _polish_cuts(prob: _Problem, mu: FloatArray, val: float,
+                 run: Callable[[FloatArray], tuple[FloatArray, int, bool]],
+                 objective: Callable[[FloatArray], float], tol: float) -> tuple[FloatArray, float, int]:
+    """Second pass of a (15) cutting-plane loop that converged at ``mu`` with jerk ``val``.
+
+    Rows that joined early (near-active at an intermediate point) are linearised where the nonconvex
+    no-sag / no-reverse-rotation set is narrower than at the optimum and can cut off a sliver of it (a
+    jerk ~1e-4 relative too high, and a different sliver for each solver).  Only the rows active at the
+    solution are kept and the loop re-run from it (``run``); its answer is taken when it is exactly
+    feasible and lower.  Returns (μ, jerk, extra iterations)."""
+    kept = {name: set(rows) for name, rows in prob.rows.items()}
+    for name, v in prob.nonlinear_values(mu).items():
+        if name == "no_sag" and prob.k == 0:
+            continue  # exactly linear in μ: no sliver to recover
+        prob.rows[name] = {int(i) for i in np.flatnonzero(v <= 10 * tol)}
+    if prob.rows == kept:
+        return mu, val, 0
+    try:
+        mu2, it2, ok = run(mu)
+    except (_FastFail, InfeasibleError):
+        ok = False
+    if ok and (v2 := objective(mu2)) < val:
+        return mu2, v2, it2
+    prob.rows = kept
+    return mu, val, 0
+
+
 def _solve_qp_stage(prob: _Problem, u_lo: float, u_hi: float, mu0: FloatArray, state: State | None,
                     tol: float, max_iter: int = 40) -> tuple[_Stage, str]:
     """(15): min Σ (u_i − U)²·Δx_i, u_lo <= u <= u_hi, with the same cutting-plane loop."""
@@ -1103,34 +1130,43 @@ def _solve_qp_stage(prob: _Problem, u_lo: float, u_hi: float, mu0: FloatArray, s
     if u_hi - u_lo <= 1e-6 * max(1.0, abs(u_hi)):  # the band pins u: the (14) answer is the jerk optimum
         val = float(0.5 * mu @ (Q @ mu) + c @ mu) + const
         return _Stage("jerk", mu, val, 0, time.perf_counter() - t0), "none (band of zero width)"
-    for it in range(1, max_iter + 1):  # noqa: B007 - reported below
-        check_cancel(state)
-        G, h = prob.cut_rows(mu)
-        cyc, e = prob.cyclic_row(mu)
-        A = sp.vstack([D, G, sp.csr_matrix(cyc[None, :])], format="csc")
-        row_lo = np.concatenate([u_lo * prob.dx - prob.ds, h, [e]])
-        row_hi = np.concatenate([u_hi * prob.dx - prob.ds, np.full(h.size, np.inf), [e]])
-        sol, status, backend = _qp_highs(Q, c, A, row_lo, row_hi, prob.mu_lo, prob.mu_hi)
-        check_cancel(state)
-        if sol is None:
-            if status == "unavailable":
-                sol = _qp_trust_constr(Q, c, A, row_lo, row_hi, prob.mu_lo, prob.mu_hi, mu)
-                backend = "trust-constr"
-            elif "nfeasible" in status:
-                raise _diagnose_infeasible(prob)
-            else:  # time limit / numerical trouble: keep the (14) answer (it satisfies every constraint)
-                backend += f" ({status}: jerk not minimised, (14) answer kept)"
+    def objective(m: FloatArray) -> float:
+        return float(0.5 * m @ (Q @ m) + c @ m) + const
+
+    def cutting_planes(mu: FloatArray) -> tuple[FloatArray, int, bool, str]:
+        backend, it, worst = "", 0, np.inf
+        for it in range(1, max_iter + 1):  # noqa: B007 - returned below
+            check_cancel(state)
+            G, h = prob.cut_rows(mu)
+            cyc, e = prob.cyclic_row(mu)
+            A = sp.vstack([D, G, sp.csr_matrix(cyc[None, :])], format="csc")
+            row_lo = np.concatenate([u_lo * prob.dx - prob.ds, h, [e]])
+            row_hi = np.concatenate([u_hi * prob.dx - prob.ds, np.full(h.size, np.inf), [e]])
+            sol, status, backend = _qp_highs(Q, c, A, row_lo, row_hi, prob.mu_lo, prob.mu_hi)
+            check_cancel(state)
+            if sol is None:
+                if status == "unavailable":
+                    sol = _qp_trust_constr(Q, c, A, row_lo, row_hi, prob.mu_lo, prob.mu_hi, mu)
+                    backend = "trust-constr"
+                elif "nfeasible" in status:
+                    raise _diagnose_infeasible(prob)
+                else:  # time limit / numerical trouble: keep the (14) answer (it satisfies every constraint)
+                    return mu, it, False, backend + f" ({status}: jerk not minimised, (14) answer kept)"
+            if not np.isfinite(sol).all() or (sol < prob.mu_lo - 1e-6).any() or (sol > prob.mu_hi + 1e-6).any():
+                return mu, it, False, backend + " (returned an invalid point: jerk not minimised, (14) answer kept)"
+            worst = prob.update_rows(sol, margin=10 * tol)
+            if _QP_LOG:
+                print(f"QP round {it}: worst exact violation {worst:.3g}")
+            mu = sol
+            if worst <= tol:
                 break
-        if not np.isfinite(sol).all() or (sol < prob.mu_lo - 1e-6).any() or (sol > prob.mu_hi + 1e-6).any():
-            backend += " (returned an invalid point: jerk not minimised, (14) answer kept)"
-            break
-        worst = prob.update_rows(sol, margin=10 * tol)
-        if _QP_LOG:
-            print(f"QP round {it}: worst exact violation {worst:.3g}")
-        mu = sol
-        if worst <= tol:
-            break
-    val = float(0.5 * mu @ (Q @ mu) + c @ mu) + const
+        return mu, it, worst <= tol, backend
+
+    mu, it, ok, backend = cutting_planes(mu)
+    val = objective(mu)
+    if ok:
+        mu, val, it2 = _polish_cuts(prob, mu, val, lambda m: cutting_planes(m)[:3], objective, tol)
+        it += it2
     return _Stage("jerk", mu, val, it, time.perf_counter() - t0), backend
 
 
@@ -1656,26 +1692,35 @@ def _fast_qp_stage(prob: _Problem, u_lo: float, u_hi: float, mu0: FloatArray, st
     lo[0], hi[0] = max(lo[0], prob.mu_lo[-1]), min(hi[0], prob.mu_hi[-1])
     I = sp.identity(n - 1, format="csr")
     DP = (D @ P).tocsr()
-    it = 0
-    for it in range(1, max_iter + 1):  # noqa: B007 - reported below
-        check_cancel(state)
-        G, h = prob.cut_rows(mu)
-        A = sp.vstack([I, -I, DP, -DP, (G @ P).tocsr()], format="csr")
-        b = np.concatenate([lo, -hi, u_lo * prob.dx - prob.ds, prob.ds - u_hi * prob.dx, h])
-        try:
-            kkt: _CyclicKKT | None = _CyclicKKT(Q, A)
-        except _FastFail:
-            kkt = None
-        y = _ipm_qp(Q, c, A, b, mu[:-1], kkt=kkt, state=state)
-        if y is None:
-            raise _FastFail("interior-point QP did not converge")
-        y = np.clip(y, lo, hi)
-        sol = P @ y
-        worst = prob.update_rows(sol, margin=10 * tol)
-        mu = sol
-        if worst <= tol:
-            break
-    val = float(0.5 * mu @ (Qf @ mu) + cf @ mu) + const
+
+    def objective(m: FloatArray) -> float:
+        return float(0.5 * m @ (Qf @ m) + cf @ m) + const
+
+    def cutting_planes(mu: FloatArray, iters: int) -> tuple[FloatArray, int, bool]:
+        it, worst = 0, np.inf
+        for it in range(1, iters + 1):  # noqa: B007 - returned below
+            check_cancel(state)
+            G, h = prob.cut_rows(mu)
+            A = sp.vstack([I, -I, DP, -DP, (G @ P).tocsr()], format="csr")
+            b = np.concatenate([lo, -hi, u_lo * prob.dx - prob.ds, prob.ds - u_hi * prob.dx, h])
+            try:
+                kkt: _CyclicKKT | None = _CyclicKKT(Q, A)
+            except _FastFail:
+                kkt = None
+            y = _ipm_qp(Q, c, A, b, mu[:-1], kkt=kkt, state=state)
+            if y is None:
+                raise _FastFail("interior-point QP did not converge")
+            mu = P @ np.clip(y, lo, hi)
+            worst = prob.update_rows(mu, margin=10 * tol)
+            if worst <= tol:
+                break
+        return mu, it, worst <= tol
+
+    mu, it, ok = cutting_planes(mu, max_iter)
+    val = objective(mu)
+    if ok:
+        mu, val, it2 = _polish_cuts(prob, mu, val, lambda m: cutting_planes(m, max_iter), objective, tol)
+        it += it2
     return _Stage("jerk", mu, val, it, time.perf_counter() - t0), "interior point (cyclic tridiagonal KKT)"
 
 

@@ -1,10 +1,11 @@
 """The Time law step shows the job's own time laws (issue 9 item 6), pytest-qt, offscreen.
 
-The pipe example runs with ``[timelaw].method = "tube"``; the Law chooser then offers the laws of the
-blocks stage.  The plotted iteration curves, tube bounds, W/O touches and the final ṡ(t) must be the
-arrays of the pipeline's :class:`engine.timeparam.TimeLaw`; the comparison laws (classical DP and
-TOPP-RA, computed in the worker on the same path and limits) bound it independently: TOPP-RA is the
-time-optimal law, so the tube law cannot be faster.
+The pipe example runs with ``[timelaw].method = "tube"``; it is a laminate, so the Law chooser offers
+the laws of the blocks stage of the layer shown (its helical layer is selected here).  The plotted
+iteration curves, tube bounds, W/O touches and the final ṡ(t) must be the arrays of the pipeline's
+:class:`engine.timeparam.TimeLaw`; the comparison laws (classical DP and TOPP-RA, computed in the
+worker on the same path and limits) bound it independently: TOPP-RA is the time-optimal law, so the
+tube law cannot be faster.
 """
 
 from __future__ import annotations
@@ -32,7 +33,11 @@ def ran(qtbot):
         assert w.wait_idle()
     assert w.run_pipeline_now()
     assert w.wait_idle(180000) and w.last_error == "", w.last_error
-    assert w.result.timelaw_laws
+    helical = next(i for i, lay in enumerate(w.job.layers) if lay.kind == "helical")
+    w.layers_panel.select_layer(helical)
+    assert w.wait_idle(120000)
+    res = w.results.law_result()
+    assert res is w.result.layer(helical).result and res.timelaw_laws
     yield w
     w.wait_idle(120000)
     w.close()
@@ -44,14 +49,14 @@ def _labels(w: MainWindow) -> list[str]:
 
 
 def test_chooser_offers_the_job_laws_with_the_main_law_by_default(ran) -> None:
-    w, res = ran, ran.result
+    w, res = ran, ran.results.law_result()
     assert _labels(w) == ["paper example", *[f"job: {lab}" for lab in res.timelaw_labels]]
     assert w.timelaw_plot.selected_law() == res.timelaw_main >= 0
     assert res.timelaw_labels[res.timelaw_main] == "circuit (repeated)"   # the pipe repeats its circuits
 
 
 def test_job_law_iterations_and_comparison(ran, qtbot) -> None:
-    w, res = ran, ran.result
+    w, res = ran, ran.results.law_result()
     with qtbot.waitSignal(w.timelaw_done, timeout=120000) as sig:
         w.go_to_step("timelaw")                 # the chosen job law is computed on entering the step
     assert w.wait_idle(120000) and w.last_error == ""
@@ -92,7 +97,7 @@ def test_job_law_iterations_and_comparison(ran, qtbot) -> None:
 
 
 def test_switch_to_paper_example_and_another_job_law(ran, qtbot) -> None:
-    w, res = ran, ran.result
+    w, res = ran, ran.results.law_result()
     w.go_to_step("timelaw")
     assert w.wait_idle(120000)
     w.timelaw_plot.select_law(-1)                   # the paper example: computed on demand (Compute button)

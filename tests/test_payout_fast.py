@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from engine import payout
@@ -38,12 +38,17 @@ def _check_all_constraints(eye: EyePath, tol: float = 1e-6) -> None:
 
 
 def _agree(fast: EyePath, ref: EyePath, tol: float = 1e-6) -> None:
-    """Same (13), (14), (15) optima.  Where the fast (14) value is *lower* than HiGHS' it must still pass
-    the exact check (the HiGHS cutting planes, re-linearised at their own solution, can cut off a sliver
-    of the nonconvex no-sag set); the jerk is then compared by :func:`_same_band_jerk`."""
+    """Same (13), (14), (15) optima, or better ones that pass the exact check.  Where the fast (14)
+    value is *lower* than HiGHS' it must still pass the exact check (the HiGHS cutting planes,
+    re-linearised at their own solution, can cut off a sliver of the nonconvex no-sag set); the jerk
+    is then compared by :func:`_same_band_jerk`."""
     a, b = fast.report["solver"], ref.report["solver"]
     scale = max(1.0, abs(b["u_max_14"]))
-    assert abs(a["u_min_13"] - b["u_min_13"]) <= tol * scale, (a["u_min_13"], b["u_min_13"])
+    assert a["u_min_13"] >= b["u_min_13"] - tol * scale, (a["u_min_13"], b["u_min_13"])
+    if a["u_min_13"] > b["u_min_13"] + 1e-7 * scale:
+        # a higher (13) floor than HiGHS' (its cuts cut off a sliver of the nonconvex set on coarse
+        # grids): the callers check it exactly; (14) is then taken over a narrower set, not comparable
+        return
     assert a["u_max_14"] <= b["u_max_14"] + tol * scale, (a["u_max_14"], b["u_max_14"])
     if abs(a["u_max_14"] - b["u_max_14"]) > 1e-7 * scale:
         return
@@ -125,6 +130,7 @@ def test_unknown_solver_is_input_error() -> None:
 @given(radius=st.floats(60.0, 150.0), length=st.floats(50.0, 400.0), c_frac=st.floats(0.35, 0.8),
        clearance=st.floats(5.0, 40.0), l_cap=st.floats(250.0, 600.0), points=st.integers(30, 110),
        k=st.sampled_from([0, 1]), u_floor=st.sampled_from([0.0, 0.05]))
+@example(radius=122.0, length=152.0, c_frac=0.375, clearance=12.0, l_cap=304.0, points=101, k=1, u_floor=0.0)
 def test_fast_path_matches_highs_random(radius: float, length: float, c_frac: float, clearance: float,
                                         l_cap: float, points: int, k: int, u_floor: float) -> None:
     pole = 0.25 * radius

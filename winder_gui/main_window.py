@@ -126,6 +126,7 @@ class MainWindow(QMainWindow):
         self._build_ui()
         self.results = ResultsPresenter(self.doc, self.ctl, self)
         self.laminate = LaminatePresenter(self.doc, self.ctl, self)
+        self.laminate.layer_shown.connect(self.results.offer_shown_layer_laws)
         window_menus.build_menus(self)
         window_menus.build_toolbar(self)
         self._wire()

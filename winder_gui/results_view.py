@@ -164,6 +164,20 @@ class ResultsPresenter(QObject):
                    lambda: self.laws_shown.emit(laws))
 
     # -- time law ------------------------------------------------------------------------------------
+    def law_result(self) -> Any:
+        """The single-line result whose time laws the Time law step offers: the run's own, or for a
+        laminate the :class:`~engine.pipeline.PipelineResult` of the layer shown (``None``: none)."""
+        res = self.doc.result
+        if res is not None and not hasattr(res, "keys"):
+            res = self.v.laminate.shown_result()
+        return res
+
+    def offer_shown_layer_laws(self, _index: int = -1) -> None:
+        """A laminate's layer was shown: offer its time laws in the Law chooser."""
+        res = self.law_result()
+        if res is not None:
+            self.offer_job_laws(res)
+
     def offer_job_laws(self, res: Any) -> None:
         """Offer the job's time laws of ``res`` in the Law chooser (default: the main law); the chosen
         law is shown at once when the Time law step is open."""
@@ -183,7 +197,7 @@ class ResultsPresenter(QObject):
                 self._on_timelaw_done(self.timelaw)
             return
         jt = self.job_timelaw
-        res = self.doc.result
+        res = self.law_result()
         if jt is not None and jt.index == i and res is not None and i < len(res.timelaw_laws) \
                 and jt.law is res.timelaw_laws[i]:
             self._on_timelaw_done(jt)
@@ -192,18 +206,18 @@ class ResultsPresenter(QObject):
 
     def law_shown(self) -> bool:
         """True when the chosen job law of the current result is the one shown."""
-        jt, res = self.job_timelaw, self.doc.result
+        jt, res = self.job_timelaw, self.law_result()
         return jt is not None and res is not None and any(jt.law is x for x in res.timelaw_laws)
 
     def compute_timelaw(self) -> None:
         """Run the time parametrization (tube, DP, TOPP-RA) of the chosen law in the worker: the paper
         example, or the job's law with the classical DP and TOPP-RA on its path and limits."""
         i = self.v.timelaw_plot.selected_law()
-        res = self.doc.result
+        res = self.law_result()
         panel = self.v.timelaw_panel
         if i >= 0 and res is not None and i < len(getattr(res, "timelaw_laws", ())):
             panel.summary.setText("computing…")
-            self.ctl.compute_job_timelaw(i)
+            self.ctl.compute_job_timelaw(i, res)
             self.status.emit("Computing DP and TOPP-RA on the job's time-law path…", False)
             return
         if panel.errors():

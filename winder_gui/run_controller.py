@@ -276,9 +276,10 @@ class RunController(QObject):
         self._on_busy()
 
     # -- time law, NC --------------------------------------------------------------------------------
-    def compute_job_timelaw(self, index: int) -> None:
-        """DP and TOPP-RA on the job's time law ``index`` of the current result (worker)."""
-        self.tl_runner.submit(job_timelaw_task, self.doc.result, index)
+    def compute_job_timelaw(self, index: int, result: Any = None) -> None:
+        """DP and TOPP-RA on the time law ``index`` of ``result`` (default: the current single-line
+        result; for a laminate, the shown layer's) in the worker."""
+        self.tl_runner.submit(job_timelaw_task, self.doc.result if result is None else result, index)
 
     def compute_paper_timelaw(self) -> None:
         """The tube, DP and TOPP-RA laws of the paper's example with the job's settings (worker)."""
