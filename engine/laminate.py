@@ -77,6 +77,14 @@ class Material:
         vf = self.fibre_volume_fraction
         return v_cm3 * vf * self.fibre_density_g_cm3 * 1e-3, v_cm3 * (1.0 - vf) * self.resin_density_g_cm3 * 1e-3
 
+    def masses_from_tows_kg(self, length_mm: float, tows: int) -> tuple[float, float]:
+        """(fibre, resin) mass in kg of a band of ``tows`` tows laid over ``length_mm`` (mm): the fibre from
+        the tows' linear density (tex, g/km), the resin from the fibre volume fraction."""
+        fibre = tows * self.tex_g_km * length_mm * 1e-9  # g/km * km -> g -> kg
+        vf = self.fibre_volume_fraction
+        resin = fibre / self.fibre_density_g_cm3 * (1.0 - vf) / vf * self.resin_density_g_cm3
+        return fibre, resin
+
 
 MATERIALS_FILE = Path(__file__).resolve().parents[1] / "resources" / "materials" / "fibres.toml"
 
@@ -960,7 +968,11 @@ def _figures(job: Job, i: int, name: str, layer: Any, ljob: Job, surface: Any, l
     length_mid = float(np.sum((ds * 0.5 * (stretch[1:] + stretch[:-1]))[on_part]))
     vol = length_mid * b * tb
     mat = find_material(band.material)
-    mass_f, mass_r = mat.masses_kg(vol)
+    tows = layer.band.tows if layer.band.tows is not None else getattr(job.band, "tows", None)
+    if tows:  # the band's linear density: tows x tex x length
+        mass_f, mass_r = mat.masses_from_tows_kg(length_mid, int(tows))
+    else:  # the laid volume at the material's fibre volume fraction
+        mass_f, mass_r = mat.masses_kg(vol)
     cov = line.coverage
     if layer.kind == "hoop":
         coverage = float(cov["fraction"])

@@ -338,6 +338,27 @@ def test_fibre_mass_from_material_file() -> None:
     assert f == pytest.approx(0.6 * 1.80, rel=1e-12) and r == pytest.approx(0.4 * 1.15, rel=1e-12)
 
 
+def test_fibre_mass_from_the_tows_linear_density() -> None:
+    """A layer with ``band.tows``: fibre mass = tows x tex x the laid length (the length recovered from the
+    reported volume / (width x thickness)); resin from the fibre volume fraction; without tows the mass
+    comes from the volume at the fibre volume fraction."""
+    from engine.laminate import load_materials
+
+    m = load_materials()["t700"]
+    text = PIPE.replace('[[layer]]\nkind = "helical"\n', '[[layer]]\nkind = "helical"\nband.tows = 3\n')
+    text = text.replace("friction = 0.15", 'friction = 0.15\nmaterial = "carbon T700 / epoxy"')
+    lam = _lam(text, upto="winding")
+    rows = [lr.figures for lr in lam.layers]
+    hel, hoop = rows[1], rows[0]
+    assert lam.layup()["layers"][1]["fibre_mass_kg"] == hel["fibre_mass_kg"]
+    length_mm = hel["volume_laid_mm3"] / (hel["band_width_mm"] * hel["band_thickness_mm"])
+    assert hel["fibre_mass_kg"] == pytest.approx(3 * 800.0 * length_mm * 1e-9, rel=1e-12)
+    vf, rho_f, rho_r = m.fibre_volume_fraction, m.fibre_density_g_cm3, m.resin_density_g_cm3
+    assert hel["resin_mass_kg"] == pytest.approx(hel["fibre_mass_kg"] / rho_f * (1 - vf) / vf * rho_r, rel=1e-12)
+    f, r = m.masses_kg(hoop["volume_laid_mm3"])
+    assert hoop["fibre_mass_kg"] == pytest.approx(f, rel=1e-12) and hoop["resin_mass_kg"] == pytest.approx(r, rel=1e-12)
+
+
 def test_job_model_defaults_one_helical_layer() -> None:
     job = Job.model_validate({"mandrel": {"kind": "pipe", "radius_mm": 10.0, "length_mm": 10.0}})
     assert job.is_single_line and [lay.kind for lay in job.layers] == ["helical"]
