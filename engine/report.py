@@ -47,8 +47,17 @@ def _fmt(v: Any, digits: int = 6) -> str:
     return str(v)
 
 
+def is_laminate_result(result: Any) -> bool:
+    """True for an :class:`engine.laminate.LaminateResult` (a layered job), False for a single-line result."""
+    return hasattr(result, "layers") and hasattr(result, "layup")
+
+
 def report_sections(result: Any, job_path: str | Path | None = None) -> list[Section]:
-    """The report's tables from a pipeline ``result`` (numbers as in ``result.report()``)."""
+    """The report's tables from a pipeline or laminate ``result`` (numbers as in ``result.report()``)."""
+    if is_laminate_result(result):
+        from engine.report_laminate import laminate_sections
+
+        return laminate_sections(result, job_path)
     rep = result.report()
     job = result.job
     out: list[Section] = []
@@ -104,126 +113,188 @@ def report_sections(result: Any, job_path: str | Path | None = None) -> list[Sec
                                         f"{line.max_abs_lambda:.3g}", f"{line.mu:g}"]]))
     mach = result.machine
     if mach is not None:
-        ranges = rep.get("axis_ranges", {})
-        sp, ac = rep.get("max_speed_ratio", {}), rep.get("max_accel_ratio", {})
-        rows = [["axis", "units", "min", "max", "used from", "used to", "max speed", "speed used", "accel used"]]
-        for ax in mach.axes:
-            lo, hi = ranges.get(ax.name, (float("nan"), float("nan")))
-            rows.append([ax.name, ax.units, _fmt(float(ax.min)), _fmt(float(ax.max)), _fmt(float(lo)),
-                         _fmt(float(hi)), _fmt(float(ax.max_speed)),
-                         f"{100 * float(sp.get(ax.name, float('nan'))):.0f} %",
-                         f"{100 * float(ac.get(ax.name, float('nan'))):.0f} %"])
-        out.append(Section(f"Machine {mach.name}: axes and limits", rows))
-    warns = list(rep.get("warnings", []))
-    viol = list(rep.get("violations", []))
-    out.append(Section("Warnings and limit violations",
-                       lines=[*(f"violation: {v}" for v in viol), *(f"warning: {w}" for w in warns)] or ["none"]))
+        out.append(axes_section(mach, rep))
+    out.append(warnings_section(rep))
     return out
 
 
-def report_figures(result: Any) -> list[tuple[str, Any]]:
-    """Every plot of the run as (title, matplotlib Figure), drawn from the engine's arrays."""
-    from matplotlib.figure import Figure
+def axes_section(mach: Any, rep: dict[str, Any]) -> Section:
+    """The machine's axes, their limits and the range the program uses (``rep``: the run's report)."""
+    ranges = rep.get("axis_ranges", {})
+    sp, ac = rep.get("max_speed_ratio"), rep.get("max_accel_ratio")
+    head = ["axis", "units", "min", "max", "used from", "used to", "max speed"]
+    if sp is not None:
+        head += ["speed used", "accel used"]
+    rows = [head]
+    for ax in mach.axes:
+        lo, hi = ranges.get(ax.name, (float("nan"), float("nan")))
+        row = [ax.name, ax.units, _fmt(float(ax.min)), _fmt(float(ax.max)), _fmt(float(lo)), _fmt(float(hi)),
+               _fmt(float(ax.max_speed))]
+        if sp is not None:
+            row += [f"{100 * float(sp.get(ax.name, float('nan'))):.0f} %",
+                    f"{100 * float((ac or {}).get(ax.name, float('nan'))):.0f} %"]
+        rows.append(row)
+    return Section(f"Machine {mach.name}: axes and limits", rows)
 
+
+def _violation_text(v: Any) -> str:
+    if not isinstance(v, dict):
+        return str(v)
+    where = f" at {v['places']} place(s)" if "places" in v else ""
+    first = f", first at NC line {v['nc_line']}" if v.get("nc_line") is not None else ""
+    return (f"{v.get('axis', '')} {v.get('what', v.get('kind', ''))}: {_fmt(v.get('value'))} against the limit "
+            f"{_fmt(v.get('limit'))}{where}{first}").strip()
+
+
+def warnings_section(rep: dict[str, Any]) -> Section:
+    """The run's warnings and grouped limit violations, as the run's report lists them."""
+    warns = list(rep.get("warnings", []))
+    viol = list(rep.get("violations", []))
+    return Section("Warnings and limit violations",
+                   lines=[*(f"violation: {_violation_text(v)}" for v in viol), *(f"warning: {w}" for w in warns)]
+                   or ["none"])
+
+
+def report_figures(result: Any) -> list[tuple[str, Any]]:
+    """Every plot of the run as (title, matplotlib Figure), drawn from the engine's arrays (a layered job:
+    :func:`engine.report_laminate.laminate_figures`)."""
+    if is_laminate_result(result):
+        from engine.report_laminate import laminate_figures
+
+        return laminate_figures(result)
     figs: list[tuple[str, Any]] = []
     m = result.mandrel
     if m is not None:
-        fig = Figure(figsize=(7.5, 2.6), layout="constrained")
-        ax = fig.add_subplot()
-        z = np.linspace(m.z_min, m.z_max, 600)
-        r = m.r(z)
-        ax.fill_between(z, -r, r, color="#c9d3e3")
-        ax.plot(z, r, color="#333")
-        ax.plot(z, -r, color="#333")
-        ax.axhline(0.0, color="#888", lw=0.8, ls="-.")
-        ax.set_aspect("equal", adjustable="datalim")
-        ax.set_xlabel("z [mm]")
-        ax.set_ylabel("r [mm]")
-        ax.set_title(f"Mandrel: L {m.length:.1f} mm, r {m.r_min:.1f}…{m.r_max:.1f} mm")
-        figs.append(("Mandrel drawing", fig))
+        figs.append(("Mandrel drawing", mandrel_figure(m)))
     line = result.line
     if line is not None:
-        sl = line.circuit_slice(0)
-        fig = Figure(figsize=(7.5, 6.0), layout="constrained")
-        axs = fig.subplots(3, 1, sharex=True)
-        zz = line.z[sl]
-        axs[0].plot(zz, np.degrees(line.beta[sl]), color="#1f77b4")
-        axs[0].set_ylabel("β [deg]")
-        axs[1].plot(zz, line.C[sl], color="#2ca02c")
-        axs[1].set_ylabel("C = r·sin β [mm]")
-        axs[2].plot(zz, line.lam[sl], color="#d62728")
-        for s in (1.0, -1.0):
-            axs[2].axhline(s * line.mu, color="#888", ls="--", lw=0.8)
-        axs[2].set_ylabel("λ [–]")
-        axs[2].set_xlabel("z [mm]")
-        for a in axs:
-            a.grid(alpha=0.3)
-            a.ticklabel_format(useOffset=False)
-        fig.suptitle("Winding line (first circuit); dashed: ±μ")
-        figs.append(("Winding angle, Clairaut function, slip tendency", fig))
+        figs.append(("Winding angle, Clairaut function, slip tendency", winding_figure(line)))
     eye = result.eye_circuit
     if eye is not None and m is not None:
-        fig = Figure(figsize=(7.5, 3.2), layout="constrained")
-        ax = fig.add_subplot()
-        z = np.linspace(m.z_min, m.z_max, 400)
-        ax.plot(z, m.r(z), color="#555", lw=2, label="mandrel r(z)")
-        ax.plot(eye.Z, eye.R, color="#d62728", lw=1.5, label=f"eye ({eye.law})")
-        ax.set_xlabel("Z, z [mm]")
-        ax.set_ylabel("R, r [mm]")
-        ax.set_aspect("equal", adjustable="datalim")
-        ax.grid(alpha=0.3)
-        ax.legend(loc="best", fontsize=8)
-        ax.set_title("Payout eye path (one circuit)")
-        figs.append(("Eye path", fig))
-    blocks, mach = result.blocks, result.machine
-    if blocks is not None and mach is not None:
-        t = np.concatenate([[0.0], np.cumsum(blocks.time)])
-        n = len(mach.axes)
-        per_page = 4
-        for start in range(0, n, per_page):
-            axes = mach.axes[start:start + per_page]
-            fig = Figure(figsize=(7.5, 2.3 * len(axes) + 0.6), layout="constrained")
-            grid = fig.subplots(len(axes), 2, squeeze=False, sharex=True)
-            for row, axspec in enumerate(axes):
-                k = start + row
-                q = blocks.q[:, k]
-                v = blocks.delta[:, k] / blocks.time
-                grid[row, 0].plot(t, q, lw=0.8)
-                grid[row, 0].set_ylabel(f"{axspec.name} [{axspec.units}]")
-                grid[row, 1].step(t[:-1], v, where="post", lw=0.6)
-                grid[row, 1].set_ylabel(f"{axspec.name}' [{axspec.units}/s]")
-                for lim in (axspec.min, axspec.max):
-                    if math.isfinite(lim) and abs(lim) < 1e11:
-                        grid[row, 0].axhline(lim, color="#c01010", ls="--", lw=0.8)
-                for lim in (-axspec.max_speed, axspec.max_speed):
-                    grid[row, 1].axhline(lim, color="#c01010", ls="--", lw=0.8)
-                for a in grid[row]:
-                    a.grid(alpha=0.3)
-                    a.ticklabel_format(useOffset=False, axis="y")
-            for a in grid[-1]:
-                a.set_xlabel("t [s]")
-            fig.suptitle(f"Axes: position and speed over the program ({blocks.total:.1f} s); dashed red: limits")
-            figs.append((f"Axes {', '.join(a.name for a in axes)}", fig))
+        figs.append(("Eye path", eye_figure(eye, m)))
+    if result.blocks is not None and result.machine is not None:
+        figs += axes_figures(result.blocks, result.machine)
     if line is not None:
-        from engine.coverage import coverage_map
-
-        cov = coverage_map(line, m)
-        fig = Figure(figsize=(7.5, 3.4), layout="constrained")
-        ax = fig.add_subplot()
-        from matplotlib.colors import ListedColormap
-
-        cmap = ListedColormap(["#d62728", "#9ecae1", "#74c476", "#238b45", "#005a32"])
-        im = ax.imshow(np.minimum(cov.count, 4).T, origin="lower", aspect="auto", cmap=cmap, vmin=-0.5, vmax=4.5,
-                       extent=(cov.z_edges[0], cov.z_edges[-1], 0.0, 360.0), interpolation="nearest")
-        bar = fig.colorbar(im, ax=ax, ticks=[0, 1, 2, 3, 4])
-        bar.ax.set_yticklabels(["gap", "1", "2", "3", "4+"])
-        bar.set_label("bands over a point")
-        ax.set_xlabel("meridian length m [mm]" if cov.meridian else "z [mm]")
-        ax.set_ylabel("v [deg]")
-        ax.set_title(f"Coverage: {100 * cov.covered_fraction:.1f} % covered, {100 * cov.overlap_fraction:.1f} % "
-                     f"overlapped (band {cov.band_width_mm:g} mm)")
-        figs.append(("Coverage map", fig))
+        figs.append(("Coverage map", coverage_figure(line, m)))
     return figs
+
+
+def mandrel_figure(m: Any, title: str = "") -> Any:
+    """The mandrel's drawing: its section through the axis (mm)."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(7.5, 2.6), layout="constrained")
+    ax = fig.add_subplot()
+    z = np.linspace(m.z_min, m.z_max, 600)
+    r = m.r(z)
+    ax.fill_between(z, -r, r, color="#c9d3e3")
+    ax.plot(z, r, color="#333")
+    ax.plot(z, -r, color="#333")
+    ax.axhline(0.0, color="#888", lw=0.8, ls="-.")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("z [mm]")
+    ax.set_ylabel("r [mm]")
+    ax.set_title(title or f"Mandrel: L {m.length:.1f} mm, r {m.r_min:.1f}…{m.r_max:.1f} mm")
+    return fig
+
+
+def winding_figure(line: Any, title: str = "Winding line (first circuit); dashed: ±μ") -> Any:
+    """Winding angle β, Clairaut function C and slip tendency λ along z on the first circuit."""
+    from matplotlib.figure import Figure
+
+    sl = line.circuit_slice(0)
+    fig = Figure(figsize=(7.5, 6.0), layout="constrained")
+    axs = fig.subplots(3, 1, sharex=True)
+    zz = line.z[sl]
+    axs[0].plot(zz, np.degrees(line.beta[sl]), color="#1f77b4")
+    axs[0].set_ylabel("β [deg]")
+    axs[1].plot(zz, line.C[sl], color="#2ca02c")
+    axs[1].set_ylabel("C = r·sin β [mm]")
+    axs[2].plot(zz, line.lam[sl], color="#d62728")
+    for s in (1.0, -1.0):
+        axs[2].axhline(s * line.mu, color="#888", ls="--", lw=0.8)
+    axs[2].set_ylabel("λ [–]")
+    axs[2].set_xlabel("z [mm]")
+    for a in axs:
+        a.grid(alpha=0.3)
+        a.ticklabel_format(useOffset=False)
+    fig.suptitle(title)
+    return fig
+
+
+def eye_figure(eye: Any, m: Any, title: str = "Payout eye path (one circuit)") -> Any:
+    """The payout eye's path Z-R over one circuit beside the surface r(z)."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(7.5, 3.2), layout="constrained")
+    ax = fig.add_subplot()
+    z = np.linspace(m.z_min, m.z_max, 400)
+    ax.plot(z, m.r(z), color="#555", lw=2, label="mandrel r(z)")
+    ax.plot(eye.Z, eye.R, color="#d62728", lw=1.5, label=f"eye ({eye.law})")
+    ax.set_xlabel("Z, z [mm]")
+    ax.set_ylabel("R, r [mm]")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title(title)
+    return fig
+
+
+def axes_figures(blocks: Any, mach: Any, per_page: int = 4) -> list[tuple[str, Any]]:
+    """Each axis's position and speed over the program time (``per_page`` axes a figure), limits dashed."""
+    from matplotlib.figure import Figure
+
+    figs: list[tuple[str, Any]] = []
+    t = np.concatenate([[0.0], np.cumsum(blocks.time)])
+    n = len(mach.axes)
+    for start in range(0, n, per_page):
+        axes = mach.axes[start:start + per_page]
+        fig = Figure(figsize=(7.5, 2.3 * len(axes) + 0.6), layout="constrained")
+        grid = fig.subplots(len(axes), 2, squeeze=False, sharex=True)
+        for row, axspec in enumerate(axes):
+            k = start + row
+            q = blocks.q[:, k]
+            v = blocks.delta[:, k] / blocks.time
+            grid[row, 0].plot(t, q, lw=0.8)
+            grid[row, 0].set_ylabel(f"{axspec.name} [{axspec.units}]")
+            grid[row, 1].step(t[:-1], v, where="post", lw=0.6)
+            grid[row, 1].set_ylabel(f"{axspec.name}' [{axspec.units}/s]")
+            for lim in (axspec.min, axspec.max):
+                if math.isfinite(lim) and abs(lim) < 1e11:
+                    grid[row, 0].axhline(lim, color="#c01010", ls="--", lw=0.8)
+            for lim in (-axspec.max_speed, axspec.max_speed):
+                grid[row, 1].axhline(lim, color="#c01010", ls="--", lw=0.8)
+            for a in grid[row]:
+                a.grid(alpha=0.3)
+                a.ticklabel_format(useOffset=False, axis="y")
+        for a in grid[-1]:
+            a.set_xlabel("t [s]")
+        fig.suptitle(f"Axes: position and speed over the program ({blocks.total:.1f} s); dashed red: limits")
+        figs.append((f"Axes {', '.join(a.name for a in axes)}", fig))
+    return figs
+
+
+def coverage_figure(line: Any, m: Any, title: str = "Coverage") -> Any:
+    """The unwrapped coverage map (bands per point: gaps red) with its covered and overlapped shares."""
+    from matplotlib.colors import ListedColormap
+    from matplotlib.figure import Figure
+
+    from engine.coverage import coverage_map
+
+    cov = coverage_map(line, m)
+    fig = Figure(figsize=(7.5, 3.4), layout="constrained")
+    ax = fig.add_subplot()
+    cmap = ListedColormap(["#d62728", "#9ecae1", "#74c476", "#238b45", "#005a32"])
+    im = ax.imshow(np.minimum(cov.count, 4).T, origin="lower", aspect="auto", cmap=cmap, vmin=-0.5, vmax=4.5,
+                   extent=(cov.z_edges[0], cov.z_edges[-1], 0.0, 360.0), interpolation="nearest")
+    bar = fig.colorbar(im, ax=ax, ticks=[0, 1, 2, 3, 4])
+    bar.ax.set_yticklabels(["gap", "1", "2", "3", "4+"])
+    bar.set_label("bands over a point")
+    ax.set_xlabel("meridian length m [mm]" if cov.meridian else "z [mm]")
+    ax.set_ylabel("v [deg]")
+    ax.set_title(f"{title}: {100 * cov.covered_fraction:.1f} % covered, {100 * cov.overlap_fraction:.1f} % "
+                 f"overlapped (band {cov.band_width_mm:g} mm)")
+    return fig
 
 
 def write_report(result: Any, path: str | Path, job_path: str | Path | None = None) -> Path:

@@ -400,6 +400,21 @@ def test_export_equals_winder_run_byte_for_byte(ran, tmp_path) -> None:
     assert "(layer 3 helical 55 copy [helical]" in gui_nc.read_text()
 
 
+def test_report_export_of_the_laminate_is_the_runs(ran, tmp_path) -> None:
+    """File -> Export report of a layered run: the layup table and every layer's figures, the numbers of
+    the run's report (LaminateResult.report)."""
+    w = ran
+    out = tmp_path / "report.html"
+    assert w.export_report(out)
+    assert w.wait_idle(180000) and w.last_error == ""
+    text = out.read_text("utf-8")
+    rep = w.result.report()
+    assert f"{rep['program_time_s']:.2f} s" in text and f"{rep['fibre_length_mm'] / 1000.0:.3f} m" in text
+    for row in rep["layers"]:
+        assert f"<td>{float(row['time_s']):.2f}</td>" in text
+    assert "Layer 2 (helical 55): winding line" in text and "Layer 3 (outer hoop): coverage map" in text
+
+
 EXAMPLE_JOBS = sorted(p for p in (Path(__file__).resolve().parents[1] / "resources" / "examples").glob("*.toml")
                       if "[[layer]]" in p.read_text("utf-8"))
 

@@ -1,4 +1,5 @@
-"""``winder report JOB.toml -o REPORT.pdf|.html [--post NAME]``: run the pipeline and write the job report."""
+"""``winder report JOB.toml -o REPORT.pdf|.html [--post NAME]``: run the job (the pipeline, or every layer of a
+laminate as ``winder run`` does) and write the job report."""
 
 from __future__ import annotations
 
@@ -33,7 +34,12 @@ def run(args: argparse.Namespace) -> int:
     if not out.resolve().parent.is_dir():
         raise InputError("the output folder does not exist", file=out)
     job = load_job(args.job)
-    result = run_pipeline(job, args.job, post_name=args.post, state=CliState(quiet=args.quiet))
+    if job.is_single_line:
+        result = run_pipeline(job, args.job, post_name=args.post, state=CliState(quiet=args.quiet))
+    else:  # a laminate: every layer and the joined program, as `winder run` writes it
+        from engine.laminate import run_laminate
+
+        result = run_laminate(job, args.job, post_name=args.post, state=CliState(quiet=args.quiet))
     write_report(result, out, job_path=args.job)
     if not args.quiet:
         print(f"wrote {out}", file=sys.stderr)
