@@ -380,7 +380,20 @@ def mandrel_distance(mandrel: Any, z: np.ndarray, rho: np.ndarray, step_mm: floa
 
 
 def _segment_min_rho(c: np.ndarray, e: np.ndarray, z0: float, z1: float) -> np.ndarray:
-    """Smallest distance from the axis of the segments c->e (N,3) within z0 <= z <= z1 (inf: none there)."""
+    """Smallest distance from the axis of the segments c->e (N,3) within z0 <= z <= z1 (inf: none there).
+
+    Only the segments whose z range meets [z0, z1] are evaluated (the others are ``inf``; the values of
+    the rest are those of :func:`_segment_min_rho_all`, bit for bit)."""
+    cz, ez = c[:, 2], e[:, 2]
+    near = np.flatnonzero((np.maximum(cz, ez) >= z0 - 1e-9) & (np.minimum(cz, ez) <= z1 + 1e-9))
+    out = np.full(c.shape[0], np.inf)
+    if near.size:
+        out[near] = _segment_min_rho_all(c[near], e[near], z0, z1)
+    return out
+
+
+def _segment_min_rho_all(c: np.ndarray, e: np.ndarray, z0: float, z1: float) -> np.ndarray:
+    """:func:`_segment_min_rho` evaluated on every segment (the reference)."""
     d = e - c
     dz = d[:, 2]
     with np.errstate(divide="ignore", invalid="ignore"):

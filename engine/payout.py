@@ -1916,12 +1916,89 @@ def payout_for_job(job: Any, line: Any, mandrel: Any, state: State | None = None
     return payout_law(cl, mandrel, job.payout, law=law, workspace=workspace, state=state)
 
 
+REPLICATE_MIN_CIRCUITS = 100
+"""From this many circuits on, :func:`extend_to_line` evaluates the eye path on the first circuit and
+turns it by k·Δv for circuit k (the winding line is circuit 0 turned, :func:`engine.winding._assemble`);
+smaller programs (every shipped example) are evaluated point by point as before."""
+
+
 def extend_to_line(eye: EyePath, line: Any) -> EyePath:
     """Evaluate ``eye``'s law l(x) at every point of ``line`` (all circuits: l repeats each circuit).
 
     l is interpolated linearly in the within-circuit parameter; grid points of the first circuit
-    keep their exact value.
+    keep their exact value.  A WindingLine of at least :data:`REPLICATE_MIN_CIRCUITS` circuits that
+    repeat circuit 0 turned about the axis gets circuit 0's eye path turned the same way (equal to the
+    point-by-point evaluation to rounding, about 1e-12 relative; tests/test_payout_cli.py).
     """
+    rep = _extend_replicated(eye, line)
+    if rep is not None:
+        return rep
+    return _extend_pointwise(eye, line)
+
+
+def _extend_replicated(eye: EyePath, line: Any) -> EyePath | None:
+    """:func:`extend_to_line` by turning circuit 0's eye path; None when ``line`` is not such a line."""
+    nc = int(getattr(line, "circuits", 1) or 1)
+    m = int(getattr(line, "points_per_circuit", 0) or 0)
+    take = getattr(line, "take_circuit", None)
+    twist = getattr(line, "twist_per_circuit_rad", None)
+    if nc < REPLICATE_MIN_CIRCUITS or m < 2 or take is None or twist is None or eye.parameter not in ("s", "v"):
+        return None
+    n = nc * m + 1
+    z = np.asarray(line.z)
+    if z.shape != (n,):
+        return None
+    # the line must repeat circuit 0: exactly in z, r, r', β and the direction, v shifted by Δv per circuit
+    for name in ("z", "r", "dr", "beta", "direction"):
+        a = np.asarray(getattr(line, name))
+        if not np.array_equal(a[:-1].reshape(nc, m), np.broadcast_to(a[:m], (nc, m))) or a[-1] != a[m]:
+            return None
+    v = np.asarray(line.v, dtype=float)
+    kk = np.arange(nc)
+    if np.any(np.abs(v[kk * m] - v[0] - kk * float(twist)) > 1e-9 * (1.0 + abs(float(v[-1])))):
+        return None
+    one_line = take(0)
+    one = _extend_pointwise(eye, one_line)
+    if one.index.size != m + 1:      # zero-length steps dropped: evaluate point by point
+        return None
+    del z
+
+    def tile(a: FloatArray) -> FloatArray:
+        out = np.empty(n, dtype=a.dtype)
+        out[:-1].reshape(nc, m)[:] = a[:m]
+        out[-1] = a[m]
+        return out
+
+    ang = kk * float(twist)
+    ck, sk = np.cos(ang)[:, None], np.sin(ang)[:, None]
+    cl, sl = float(ck[-1, 0]), float(sk[-1, 0])
+
+    def turned(a: FloatArray) -> FloatArray:
+        out = np.empty((n, 3))
+        body = out[:-1].reshape(nc, m, 3)
+        body[:, :, 0] = a[:m, 0] * ck - a[:m, 1] * sk
+        body[:, :, 1] = a[:m, 0] * sk + a[:m, 1] * ck
+        body[:, :, 2] = a[:m, 2]
+        out[-1] = (a[m, 0] * cl - a[m, 1] * sl, a[m, 0] * sl + a[m, 1] * cl, a[m, 2])
+        return out
+
+    s_all = np.asarray(line.s, dtype=float)
+    x = s_all if eye.parameter == "s" else v
+    l, R = tile(one.l), tile(one.R)
+    V = v + tile(one.V - np.asarray(one_line.v, dtype=float))
+    lam = s_all + l - one.k * R
+    out = EyePath(
+        x=x, index=np.arange(n, dtype=np.int64), l=l, Z=tile(one.Z), R=R, V=V,
+        eye_xyz=turned(one.eye_xyz), contact_xyz=turned(one.contact_xyz), fibre_dir=turned(one.fibre_dir),
+        s=s_all, lam_pulled=lam, u=np.diff(lam) / np.diff(x), x_mid=0.5 * (x[1:] + x[:-1]), law=eye.law,
+        k=one.k, parameter=eye.parameter,
+    )
+    return _with_report(out, {"law": eye.law, "extended_from_points": int(eye.x.size), "points": n,
+                              "replicated_circuits": nc})
+
+
+def _extend_pointwise(eye: EyePath, line: Any) -> EyePath:
+    """:func:`extend_to_line` evaluated at every point."""
     cl = ContactLine.from_line(line)
     x_all = _parameter(cl, eye.parameter)
     circ = cl.circuit if cl.circuit is not None else np.zeros(cl.z.size, dtype=np.int64)

@@ -15,6 +15,7 @@ from engine.kinematics import AxisPath, Violation, demo_eye_path, forward_kinema
 from engine.machine_setup import (
     Locator,
     _segment_min_rho,
+    _segment_min_rho_all,
     apply_setup,
     clearance_violations,
     compatible_posts,
@@ -148,6 +149,18 @@ def test_segment_distance_from_the_axis_against_sampling() -> None:
             assert np.isinf(got[k]) or got[k] >= 0
         else:
             assert got[k] == pytest.approx(want, abs=0.02)
+
+
+def test_segment_distance_prefilter_is_bit_identical() -> None:
+    """Skipping the segments whose z range misses the support changes no value (those are inf)."""
+    rng = np.random.default_rng(5)
+    c = rng.uniform(-100, 100, (4000, 3))
+    e = rng.uniform(-100, 100, (4000, 3))
+    e[::7, 2] = c[::7, 2]                                # flat segments, inside and outside the slab
+    e[1::9, 2] = -20.0                                    # ending on the slab's face
+    for z0, z1 in ((-20.0, 35.0), (90.0, 120.0), (-300.0, -150.0)):
+        got, ref = _segment_min_rho(c, e, z0, z1), _segment_min_rho_all(c, e, z0, z1)
+        assert np.array_equal(got, ref)
 
 
 def test_mandrel_distance_of_a_pipe_is_analytic() -> None:

@@ -158,3 +158,32 @@ def test_version_does_not_import_numpy() -> None:
     code = "import sys; from engine.cli import main; main(['--version']); print('numpy' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
     assert out.returncode == 0 and out.stdout.split() == ["winder", __version__, "False"], out.stdout + out.stderr
+
+
+def test_extend_by_turning_circuit_zero_equals_pointwise() -> None:
+    """A program of >= REPLICATE_MIN_CIRCUITS circuits gets circuit 0's eye path turned by k·Δv: equal to
+    the point-by-point evaluation to rounding in every per-point field."""
+    from engine.payout import REPLICATE_MIN_CIRCUITS, _extend_pointwise
+
+    job = load_job(VESSEL)
+    job = job.replace(winding={**job.winding.model_dump(), "circuits": REPLICATE_MIN_CIRCUITS + 3,
+                               "points_per_pass": 150},
+                      payout=job.payout.model_copy(update={"grid_points": 200}))
+    mandrel = build_mandrel(job, VESSEL)
+    line = winding_line_for_job(job, VESSEL)
+    assert line.circuits >= REPLICATE_MIN_CIRCUITS
+    eye1 = payout_for_job(job, line, mandrel)
+    rep = extend_to_line(eye1, line)
+    ref = _extend_pointwise(eye1, line)
+    assert rep.report.get("replicated_circuits") == line.circuits
+    assert "replicated_circuits" not in ref.report
+    assert np.array_equal(rep.index, ref.index) and rep.index.size == line.z.size
+    for name in ("x", "l", "Z", "R", "V", "eye_xyz", "contact_xyz", "fibre_dir", "s", "lam_pulled", "x_mid"):
+        a, b = getattr(rep, name), getattr(ref, name)
+        assert a.shape == b.shape, name
+        scale = 1.0 + np.abs(b).max()
+        assert np.abs(a - b).max() <= 1e-11 * scale, (name, np.abs(a - b).max())
+    assert np.abs(rep.u - ref.u).max() <= 1e-6 * (1.0 + np.abs(ref.u).max())
+    # the eye still lies on the line's tangent at the free length
+    d = np.linalg.norm(rep.eye_xyz - rep.contact_xyz, axis=1)
+    assert np.abs(d - rep.l).max() < 1e-9
