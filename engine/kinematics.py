@@ -654,9 +654,34 @@ def _as_path(a: np.ndarray, name: str) -> np.ndarray:
     return arr
 
 
+def unwrap_angles(p: np.ndarray) -> np.ndarray:
+    """``numpy.unwrap(p)`` of a 1-D float array (rad), bit for bit, in fewer passes over the data.
+
+    ``numpy.unwrap`` computes the correction ``mod(dd + π, 2π) - π - dd`` of every step ``dd`` and
+    zeroes it where ``|dd| < π``; here it is computed at the steps ``|dd| >= π`` only (the same
+    arithmetic), and the running sum of those few corrections (sequential, as ``cumsum``) is added to
+    the points after each one.  Anything but a 1-D float64 array goes to ``numpy.unwrap``.
+    """
+    p = np.asarray(p)
+    if p.ndim != 1 or p.dtype != np.float64 or p.size < 2:
+        return np.unwrap(p)
+    dd = np.diff(p)
+    big = np.flatnonzero(~(np.abs(dd) < np.pi))
+    up = p.copy()
+    if big.size == 0:
+        return up
+    d = dd[big]
+    ddmod = np.mod(d + np.pi, 2.0 * np.pi) - np.pi
+    np.copyto(ddmod, np.pi, where=(ddmod == -np.pi) & (d > 0))
+    corr = np.cumsum(ddmod - d)
+    lengths = np.diff(np.concatenate(([0], big, [dd.size])))
+    up[1:] += np.repeat(np.concatenate(([0.0], corr)), lengths)
+    return up
+
+
 def _unwrap_near(a: np.ndarray, ref: float = 0.0) -> np.ndarray:
     """Unwrap angles and shift by a multiple of 2 pi so the first one is nearest ``ref``."""
-    u = np.unwrap(a)
+    u = unwrap_angles(a)
     return u - 2 * np.pi * np.round((u[0] - ref) / (2 * np.pi))
 
 
@@ -715,15 +740,14 @@ def inverse_kinematics(machine: MachineTemplate, eye_xyz: np.ndarray, fibre_dir:
                 message=f"axis {ax.name}: the mandrel turns back by {back:.4g} {ax.units} between points "
                         f"{a - 1} and {b - 1} (winding needs one direction of rotation)"))
     ct, st = np.cos(theta), np.sin(theta)
-    pw = np.stack([ct * eye[:, 0] - st * eye[:, 1], st * eye[:, 0] + ct * eye[:, 1], eye[:, 2]], axis=1)
-    dw = np.stack([ct * d[:, 0] - st * d[:, 1], st * d[:, 0] + ct * d[:, 1], d[:, 2]], axis=1)
+    pw, dw = _turn_about_z(ct, st, eye), _turn_about_z(ct, st, d)
     q_int = np.zeros((n, len(machine.axes)))
     q_int[:, machine.axis_index("mandrel")] = theta
     check_cancel(state)
     if machine.kind == "cartesian":
         viol += _ik_cartesian(machine, pw, dw, q_int)
     else:
-        cw = np.stack([ct * c[:, 0] - st * c[:, 1], st * c[:, 0] + ct * c[:, 1], c[:, 2]], axis=1)
+        cw = _turn_about_z(ct, st, c)
         viol += _ik_robot(machine, pw, dw, cw, q_int, state)
     q = machine.to_controller(q_int)
     lo, hi = machine.limits("min"), machine.limits("max")
@@ -744,6 +768,18 @@ def inverse_kinematics(machine: MachineTemplate, eye_xyz: np.ndarray, fibre_dir:
     for a in arrs:
         a.flags.writeable = False
     return AxisPath(machine.name, machine.axis_names, *arrs, violations=tuple(viol), x=xs)
+
+
+def _turn_about_z(ct: np.ndarray, st: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Points (N,3) turned about z by the angles whose cosines / sines are ``ct``, ``st`` (written in place
+    of a stack of the three columns: the same values, one (N,3) array fewer)."""
+    out = np.empty_like(p)
+    np.multiply(ct, p[:, 0], out=out[:, 0])
+    out[:, 0] -= st * p[:, 1]
+    np.multiply(st, p[:, 0], out=out[:, 1])
+    out[:, 1] += ct * p[:, 1]
+    out[:, 2] = p[:, 2]
+    return out
 
 
 def _slide_to_radius(eye: np.ndarray, d: np.ndarray, c: np.ndarray, r0: float

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from engine.errors import InputError
-from engine.kinematics import UNIT_SCALE, AxisPath, MachineTemplate, Violation, violations_from_mask
+from engine.kinematics import UNIT_SCALE, AxisPath, MachineTemplate, Violation, unwrap_angles, violations_from_mask
 
 # --------------------------------------------------------------------------------------------------
 # Head geometry and placement
@@ -293,7 +293,7 @@ def monotone_eye_azimuth(machine: MachineTemplate, eye_xyz: np.ndarray, fibre_di
         return e, shift
     d = np.asarray(fibre_dir, dtype=float)
     c = np.asarray(contact_xyz, dtype=float)
-    phi = np.unwrap(np.arctan2(e[:, 1], e[:, 0]))
+    phi = unwrap_angles(np.arctan2(e[:, 1], e[:, 0]))
     major = 1.0 if phi[-1] >= phi[0] else -1.0
     target = major * np.maximum.accumulate(major * phi)
     back = np.abs(target - phi) > math.radians(tol_deg)
@@ -433,7 +433,11 @@ def clearance_violations(axes: AxisPath, mandrel: Any, setup: Any, eye_clearance
     out += violations_from_mask("clearance", None, dm < eye_gap - 1e-6, dm, eye_gap, " mm",
                                 what="gap between the eye and the mandrel")
     for ob in support_obstacles(mandrel, setup):
-        de = _rect_distance(z, rho, ob)
+        # only points within ``gap`` of the support's box can violate (elsewhere de >= gap; the values
+        # of :func:`violations_from_mask` are read inside the violating runs only)
+        near = np.flatnonzero((z > ob.z0 - gap) & (z < ob.z1 + gap) & (rho < ob.radius + gap))
+        de = np.full(z.size, np.inf)
+        de[near] = _rect_distance(z[near], rho[near], ob)
         out += violations_from_mask("clearance", None, de < gap - 1e-6, de, gap, " mm",
                                     what=f"gap between the eye and the {ob.name}")
         rf = _segment_min_rho(con, eye, ob.z0, ob.z1) - ob.radius
