@@ -11,11 +11,15 @@ prepared in the worker).  A single-line result clears the laminate views.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 from PySide6.QtCore import QObject, Signal
 
 from winder_gui.laminate_tasks import LaminateOutput, is_laminate
+
+_SHOW_STEPS = 5
+"""Steps of :meth:`LaminatePresenter.show_layer_steps`."""
 
 
 class LaminatePresenter(QObject):
@@ -63,16 +67,31 @@ class LaminatePresenter(QObject):
         self.v.laminate_plot.set_output(None)
 
     def set_output(self, out: LaminateOutput) -> None:
-        """Show the laminate of a finished run (GUI thread; the data were prepared in the worker)."""
-        self.output = out
+        """Show the laminate of a finished run at once (GUI thread; the data were prepared in the worker)."""
+        for step in self.output_updates(out):
+            step()
+
+    def output_updates(self, out: LaminateOutput) -> list[Callable[[], Any]]:
+        """:meth:`set_output` as short GUI-thread steps for the results presenter's queue (the table, the
+        laminate plot layer by layer, then the selected layer in 3D and its plots, step by step)."""
         panel = self.v.layers_panel
-        panel.set_layup(out.layup, out.figures_by_key())
         sel = panel.selected_layer()
         if out.view(sel) is None and out.views:
             sel = out.views[-1].index
-        self.v.laminate_plot.set_output(out, sel)
-        self.shown_layer = -1
-        self.show_layer(sel)
+        pending: list[Callable[[], Any]] = []
+
+        def table() -> None:
+            self.output = out
+            panel.set_layup(out.layup, out.figures_by_key())
+            self.shown_layer = -1
+
+        def show(k: int) -> None:
+            if k == 0:  # the layer's steps are made once the table and the plot show this output
+                pending[:] = self.show_layer_steps(sel) if self.output is out else []
+            if k < len(pending):
+                pending[k]()
+
+        return [table, *self.v.laminate_plot.updates(out, sel), *[lambda k=k: show(k) for k in range(_SHOW_STEPS)]]
 
     @staticmethod
     def summary(out: LaminateOutput, took_s: float, n_warnings: int) -> str:
@@ -85,19 +104,37 @@ class LaminatePresenter(QObject):
 
     def show_layer(self, index: int) -> None:
         """Show job layer ``index`` (0-based): its grown surface and line in 3D, its single-line plots."""
+        for step in self.show_layer_steps(index):
+            step()
+
+    def show_layer_steps(self, index: int) -> list[Callable[[], Any]]:
+        """:meth:`show_layer` as short GUI-thread steps (3D surface, 3D paths, line plots, eye plot); a
+        step does nothing once another layer or run is shown."""
         out = self.output
         v = self.v
         v.laminate_plot.select_layer(index)
         if out is None:
-            return
+            return []
         lv = out.view(index)
         if lv is None or index == self.shown_layer:
-            return
+            return []
         self.shown_layer = index
-        v.view3d.set_data(lv.surface)
-        v.view3d.set_paths(lv.paths)
         lr = self._layer_result(index)
-        if lr is not None and lr.result is not None and lr.result.line is not None:
+
+        def current() -> bool:
+            return self.output is out and self.shown_layer == index
+
+        def surface() -> None:
+            if current():
+                v.view3d.set_data(lv.surface)
+
+        def paths() -> None:
+            if current():
+                v.view3d.set_paths(lv.paths)
+
+        def line_plots() -> None:
+            if not current() or lr is None or lr.result is None or lr.result.line is None:
+                return
             line = lr.result.line
             v.winding_plots.set_line(line)
             v.coverage_plot.set_line(line)
@@ -107,17 +144,28 @@ class LaminatePresenter(QObject):
                 from winder_gui.laminate_tasks import coverage_task
 
                 self.ctl.layer_runner.submit(coverage_task, lv.key, line, lr.surface)
-            if lr.result.eye_circuit is not None:
-                v.eye_plot.set_eye(lr.result.eye_circuit, lr.surface)
-                key = (lr.key, lr.result.keys.get("payout"))
-                if key != self._laws_key:  # the payout laws compared on this layer's first circuit (worker)
-                    from winder_gui.tasks import laws_task
 
-                    self._laws_key = key
-                    self.ctl.laws_runner.submit(laws_task, lr.result)
-        if v.steps.current_step() == "winding":
-            v.plot_tabs.setCurrentWidget(v.laminate_plot)
-        self.layer_shown.emit(index)
+        def eye() -> None:
+            if not current() or lr is None or lr.result is None or lr.result.eye_circuit is None:
+                return
+            v.eye_plot.set_eye(lr.result.eye_circuit, lr.surface)
+            key = (lr.key, lr.result.keys.get("payout"))
+            if key != self._laws_key:  # the payout laws compared on this layer's first circuit (worker)
+                from winder_gui.tasks import laws_task
+
+                self._laws_key = key
+                self.ctl.laws_runner.submit(laws_task, lr.result)
+
+        def done() -> None:
+            if not current():
+                return
+            if v.steps.current_step() == "winding":
+                v.plot_tabs.setCurrentWidget(v.laminate_plot)
+            self.layer_shown.emit(index)
+
+        steps = [surface, paths, line_plots, eye, done]
+        assert len(steps) == _SHOW_STEPS
+        return steps
 
     def _on_coverage(self, out: tuple[str, Any]) -> None:
         key, cov = out

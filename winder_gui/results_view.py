@@ -112,7 +112,7 @@ class ResultsPresenter(QObject):
             self._shown.clear()
             self._paths_key = None
             warns = list(self.doc.run_warnings)
-            self.queue(lambda: v.laminate.set_output(out), lambda: v.nc_panel.set_result(res, warns),
+            self.queue(*v.laminate.output_updates(out), lambda: v.nc_panel.set_result(res, warns),
                        *v.axes_plot.updates(res.blocks, res.machine),  # the joined program's axes
                        lambda: self._on_stale(self.doc.is_stale()),
                        lambda: v.machine_panel.show_placement(res.machine, getattr(res, "placement", None)),

@@ -10,6 +10,7 @@ bare mandrel (mm) instead of radius, where layers of a few tenths of a millimetr
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -43,6 +44,8 @@ class LaminatePlots(PlotPage):
         leg.anchor(itemPos=(0.5, 1.0), parentPos=(0.5, 1.0), offset=(0, -8))
         self.output: Any = None
         self.selected = -1
+        self._inner: Any = None
+        self._total_t = np.zeros(0)
         self.fills: dict[str, Any] = {}
         self.buildup = QCheckBox("Build-up (height above the mandrel)")
         self.buildup.setToolTip("plot the boundaries as r − r_mandrel(z) (mm): thin layers become visible")
@@ -51,62 +54,106 @@ class LaminatePlots(PlotPage):
         self.set_message("No laminate yet: run a layered job (F5).")
 
     def set_output(self, out: Any, selected: int | None = None) -> None:
-        """Show a :class:`~winder_gui.laminate_tasks.LaminateOutput` (``None``: clear)."""
-        self.output = out
-        if selected is not None:
-            self.selected = selected
-        self._draw()
+        """Show a :class:`~winder_gui.laminate_tasks.LaminateOutput` (``None``: clear) at once."""
+        for step in self.updates(out, selected):
+            step()
+
+    def updates(self, out: Any, selected: int | None = None) -> list[Callable[[], Any]]:
+        """:meth:`set_output` as short GUI-thread steps (one per layer) for a presenter's update queue:
+        each stays far below the 100 ms an event-loop turn may take."""
+        def begin() -> None:
+            self.output = out
+            if selected is not None:
+                self.selected = selected
+            self._begin()
+
+        views = list(out.views) if out is not None else []
+        return [begin, *[lambda v=v: self._draw_layer(v) for v in views], self._finish]
 
     def select_layer(self, index: int) -> None:
-        """Draw job layer ``index`` (0-based) bold."""
+        """Draw job layer ``index`` (0-based) bold (pens and fills restyled, nothing recomputed)."""
         if index == self.selected:
             return
         self.selected = index
-        self._draw()
+        out = self.output
+        if out is None or not out.views:
+            return
+        for v in out.views:
+            sel = v.index == index
+            n = v.index + 1
+            col = layer_colour(v.index)
+            for name in (f"boundary {n}", f"angle {n}", f"thickness {n}"):
+                item = self.curves.get(name)
+                if item is not None:
+                    pen = pg.mkPen(item.opts["pen"])
+                    pen.setWidthF(3.0 if sel else 1.2)
+                    item.setPen(pen)
+            fill = self.fills.get(f"fill {n}")
+            if fill is not None:
+                c = QColor(col)
+                c.setAlpha(150 if sel else 70)
+                fill.setBrush(pg.mkBrush(c))
+        self._set_summary()
 
     def _draw(self) -> None:
+        for step in self.updates(self.output):
+            step()
+
+    def _y_of(self, z: np.ndarray, r: np.ndarray) -> np.ndarray:
+        out = self.output
+        return r - np.interp(z, np.asarray(out.bare_z), np.asarray(out.bare_r)) if self.buildup.isChecked() else r
+
+    def _begin(self) -> None:
         out = self.output
         for item in self.fills.values():
             self.plots["section"].removeItem(item)
         self.fills.clear()
+        self._inner: Any = None
         if out is None or not out.views:
             self.clear_data("No laminate yet: run a layered job (F5).")
             return
         self.clear_data("")
-        rel = self.buildup.isChecked()
         bz, br = np.asarray(out.bare_z), np.asarray(out.bare_r)
+        self._inner = self.set_curve("section", "bare", bz, self._y_of(bz, br), colour="#000000", width=1.5,
+                                     legend="mandrel")
+        self._total_t = np.zeros_like(bz)
 
-        def y_of(z: np.ndarray, r: np.ndarray) -> np.ndarray:
-            return r - np.interp(z, bz, br) if rel else r
+    def _draw_layer(self, v: Any) -> None:
+        if self._inner is None or v.outer_z.size == 0:
+            return
+        n = v.index + 1
+        col = layer_colour(v.index)
+        sel = v.index == self.selected
+        w = 3.0 if sel else 1.2
+        outer = self.set_curve("section", f"boundary {n}", v.outer_z, self._y_of(v.outer_z, v.outer_r), colour=col,
+                               width=w, legend=f"{n} {v.name}" if v.name != f"{n} {v.kind}" else f"{n} {v.kind}")
+        c = QColor(col)
+        c.setAlpha(150 if sel else 70)
+        fill = pg.FillBetweenItem(self._inner, outer, brush=pg.mkBrush(c))
+        self.plots["section"].addItem(fill)
+        self.fills[f"fill {n}"] = fill
+        self._inner = outer
+        if v.angle_z.size:
+            self.set_curve("angle", f"angle {n}", v.angle_z, v.angle_deg, colour=col, width=w)
+        self.set_curve("thickness", f"thickness {n}", v.thick_z, v.thick_t, colour=col, width=w)
+        bz = np.asarray(self.output.bare_z)
+        self._total_t = self._total_t + np.interp(bz, v.thick_z, v.thick_t, left=0.0, right=0.0)
 
-        inner = self.set_curve("section", "bare", bz, y_of(bz, br), colour="#000000", width=1.5, legend="mandrel")
-        total_z = bz
-        total_t = np.zeros_like(bz)
-        for v in out.views:
-            if v.outer_z.size == 0:
-                continue
-            n = v.index + 1
-            col = layer_colour(v.index)
-            sel = v.index == self.selected
-            w = 3.0 if sel else 1.2
-            outer = self.set_curve("section", f"boundary {n}", v.outer_z, y_of(v.outer_z, v.outer_r), colour=col,
-                                   width=w, legend=f"{n} {v.name}" if v.name != f"{n} {v.kind}" else f"{n} {v.kind}")
-            c = QColor(col)
-            c.setAlpha(150 if sel else 70)
-            fill = pg.FillBetweenItem(inner, outer, brush=pg.mkBrush(c))
-            self.plots["section"].addItem(fill)
-            self.fills[f"fill {n}"] = fill
-            inner = outer
-            if v.angle_z.size:
-                self.set_curve("angle", f"angle {n}", v.angle_z, v.angle_deg, colour=col, width=w)
-            self.set_curve("thickness", f"thickness {n}", v.thick_z, v.thick_t, colour=col, width=w)
-            total_t = total_t + np.interp(total_z, v.thick_z, v.thick_t, left=0.0, right=0.0)
-        self.set_curve("thickness", "total thickness", total_z, total_t, colour="#000000", width=1.0, dash=True)
-        names = [v.name for v in out.views if v.index == self.selected]
-        self.set_message(f"{len(out.views)} layers wound" + (f"; selected: {names[0]}" if names else ""))
+    def _finish(self) -> None:
+        out = self.output
+        if self._inner is None or out is None:
+            return
+        self.set_curve("thickness", "total thickness", np.asarray(out.bare_z), self._total_t, colour="#000000",
+                       width=1.0, dash=True)
+        self._set_summary()
         self.export_button.setEnabled(True)
         for p in self.plots.values():
             p.enableAutoRange()
+
+    def _set_summary(self) -> None:
+        out = self.output
+        names = [v.name for v in out.views if v.index == self.selected]
+        self.set_message(f"{len(out.views)} layers wound" + (f"; selected: {names[0]}" if names else ""))
 
     def selected_pen_width(self, name: str) -> float:
         """The pen width of curve ``name`` (the selected layer's are bold)."""
