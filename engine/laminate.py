@@ -768,6 +768,8 @@ def layer_keys(job: Job) -> list[str]:
     """A key per layer of every input it depends on: the job's sections and all layers up to it."""
     data = job.model_dump(mode="json")
     layers = data.pop("layers")
+    for k in ("post", "controller", "output"):   # the dialect is rendered by the join only: the layers stay
+        data.get("post", {}).pop(k, None)
     base = _hash(data)
     return [_hash(base, layers[: k + 1]) for k in range(len(layers))]
 
@@ -826,6 +828,16 @@ def run_laminate(
     from engine.budget import check_laminate
 
     check_laminate(job, bare, file=jp)  # every layer's size and physics, and the sum, before any work
+    if upto == "nc":
+        # the post x machine mismatch is refused before any layer is wound (issue 15): the layers' own
+        # runs stop at the blocks and never reach the post's check
+        from engine.machine_setup import controller_for
+        from engine.pipeline import _locate, setup_machine_for_job
+
+        try:
+            controller_for(job.post.post, job.post.controller, setup_machine_for_job(job, jp))
+        except InputError as exc:
+            raise _locate(exc, jp, "nc") from None
     keys = layer_keys(job)
     prev_by_key = {lr.key: lr for lr in previous.layers} if previous is not None else {}
     active = job.active_layers
@@ -1017,7 +1029,8 @@ def _sorted(x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
 def _join(res: LaminateResult, machine: Any) -> LaminateResult:
     """Join the layers' blocks with transition moves into one program and render it."""
     from engine.blocks import Blocks
-    from engine.post import get_post, load_controller
+    from engine.machine_setup import controller_for
+    from engine.post import get_post
 
     job = res.job
     machine, shifts, placement = _common_placement(res, machine)
@@ -1093,22 +1106,66 @@ def _join(res: LaminateResult, machine: Any) -> LaminateResult:
         total_t17=float(np.concatenate(t17).sum()), total_start=float(time_all.sum()),
         sections=tuple(sections))
     post = get_post(job.post.post)
-    profile = load_controller(job.post.controller or post.name)
+    # the profile that addresses the machine's axes (e.g. linuxcnc_robot for the robot cell's E1, J1..J6),
+    # as the single-line NC stage chooses it
+    profile = controller_for(post.name, job.post.controller, machine)
     text = post.render(blocks, machine, profile)
-    problems: list[str] = []
-    lo, hi = machine.limits("min"), machine.limits("max")
-    for k, ax in enumerate(machine.axes):
-        col = q_all[:, k]
-        for side, bad in (("below its minimum", col < lo[k] - 1e-9), ("above its maximum", col > hi[k] + 1e-9)):
-            if bad.any():
-                i = int(np.argmax(bad))
-                worst = float(col.min() if side.startswith("below") else col.max())
-                problems.append(f"axis {ax.name}: the joined program goes {side} ({worst:.4g} against "
-                                f"{lo[k] if side.startswith('below') else hi[k]:g} {ax.units}) at {int(bad.sum())} "
-                                f"block boundaries, first at block {i}")
+    problems = _joined_problems(machine, blocks, text, new_layers, transitions, placement)
     return replace(res, layers=tuple(new_layers), machine=machine, blocks=blocks, nc_text=text,
                    post_name=post.name, extension=post.extension, transitions=tuple(transitions),
                    sections=tuple(sections), placement=placement, program_problems=tuple(problems))
+
+
+class _JoinedLocator:
+    """Block of the joined program -> NC line, time and the layer (or transition) it belongs to."""
+
+    def __init__(self, blocks: Any, text: str, layers: list[LayerResult], transitions: list[tuple[int, int, float]]
+                 ) -> None:
+        from engine.machine_setup import nc_move_lines
+
+        self.lines = nc_move_lines(text)
+        self.start = np.concatenate(([0.0], np.cumsum(np.asarray(blocks.time, dtype=float))))
+        # (first block, label) of every section in program order: layer, transition, layer, ...
+        laid = [lr for lr in layers if lr.result is not None]
+        spans: list[tuple[int, str]] = [(0, str(laid[0].index + 1))] if laid else []
+        for j, (b0, n, _t) in enumerate(transitions):
+            nxt = str(laid[j + 1].index + 1) if j + 1 < len(laid) else "?"
+            spans += [(b0, f"transition to layer {nxt}"), (b0 + n, nxt)]
+        self.spans = sorted(spans)
+
+    def locate(self, point: int | None = None, block: int | None = None) -> dict[str, Any]:
+        out: dict[str, Any] = {"layer": None, "circuit": None, "time_s": None, "nc_line": None, "block": block,
+                               "point": point}
+        if block is None:
+            return out
+        out["time_s"] = float(self.start[min(block, self.start.size - 1)])
+        if block < self.lines.size:
+            out["nc_line"] = int(self.lines[block])
+        label = None
+        for b0, name in self.spans:
+            if b0 <= block:
+                label = name
+        out["layer"] = label
+        return out
+
+
+def _joined_problems(machine: Any, blocks: Any, text: str, layers: list[LayerResult],
+                     transitions: list[tuple[int, int, float]], placement: Any) -> list[str]:
+    """What the joined program breaks beyond the layers' own checks: every block of it (the layers' speed
+    ramps, the transitions, the common placement) against every position, speed and speed-jump limit,
+    grouped and located by NC line, time and layer; a placement that does not fit says which would."""
+    from engine.blocks import check_blocks
+    from engine.machine_setup import group_violations
+
+    own = {(v.kind, v.axis) for lr in layers if lr.result is not None for v in lr.result.violations
+           if v.kind != "position"}
+    viol = [v for v in check_blocks(machine, blocks) if v.kind == "position" or (v.kind, v.axis) not in own]
+    out: list[str] = []
+    if placement is not None and not placement.fits:
+        out.append(placement.message())
+    loc = _JoinedLocator(blocks, text, layers, transitions)
+    out += [f"joined program, {g.message}" for g in group_violations(viol, loc)]
+    return out
 
 
 def _common_placement(res: LaminateResult, machine: Any) -> tuple[Any, dict[int, tuple[int, float]], Any]:
@@ -1303,6 +1360,16 @@ def laminate_refusals(result: LaminateResult) -> list[str]:
         for z0, z1 in getattr(line, "slips", ()) or ():
             out.append(f"layer {lr.index + 1} ({lr.name}): the band slips (|λ| up to {line.max_abs_lambda:.4g} > "
                        f"μ = {line.mu:g}) for z in [{z0:.2f}, {z1:.2f}] mm")
+        # as a single line's run refuses them (winder run): a bridging band, an infeasible eye path
+        for z0, z1 in getattr(line, "bridging", ()) or ():
+            out.append(f"layer {lr.index + 1} ({lr.name}): the band bridges (does not lie on the surface) for z in "
+                       f"[{z0:.2f}, {z1:.2f}] mm")
+        eye = lr.result.eye_circuit
+        if eye is not None and not eye.feasible:
+            from engine.pipeline import _payout_warnings
+
+            out += [f"layer {lr.index + 1} ({lr.name}): {w}" for w in _payout_warnings(eye)
+                    if not (lr.kind == "hoop" and "not cyclic" in w)]  # a hoop layer is no repeated circuit
     return out
 
 

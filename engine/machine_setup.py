@@ -587,8 +587,9 @@ def _where(loc: dict[str, Any]) -> str:
         parts.append(f"t = {loc['time_s']:.2f} s")
     if loc.get("circuit") is not None:
         parts.append(f"circuit {loc['circuit']}")
-    if loc.get("layer") is not None:
-        parts.append(f"layer {loc['layer']}")
+    lay = loc.get("layer")
+    if lay is not None:   # a layer's number, or a named part of a joined program ("transition to layer 2")
+        parts.append(lay if isinstance(lay, str) and not lay.isdigit() else f"layer {lay}")
     if not parts and loc.get("point") is not None:
         parts.append(f"path point {loc['point']}")
     return ", ".join(parts)
@@ -709,12 +710,17 @@ def _suggest(machine: MachineTemplate) -> str:
 # --------------------------------------------------------------------------------------------------
 # Up-front checks
 # --------------------------------------------------------------------------------------------------
-def precheck(job: Any, machine: MachineTemplate, mandrel: Any | None = None, with_post: bool = True) -> None:
+def precheck(job: Any, machine: MachineTemplate, mandrel: Any | None = None, with_post: bool = True,
+             line: Any | None = None) -> None:
     """Checks that need no long computation; raises :class:`InputError` naming the field.
 
     * the post (and controller) can address the machine's axes (``with_post``);
     * a fixed eye radius clears the mandrel's largest radius by ``setup.clearance_mm``;
-    * the carriage (track) travel is at least the mandrel's length.
+    * the carriage (track) travel is at least the mandrel's length;
+    * with the winding ``line`` (before the payout and the time law): the carriage range the eye path
+      needs at least (:func:`carriage_need`) fits the travel - and, with a fixed placement
+      (``mandrel_z0_mm``), lies inside it; the message names the axis, by how much it leaves its range
+      and which placement (or eye radius) would fit.
     """
     if with_post:
         controller_for(job.post.post, job.post.controller, machine)
@@ -734,9 +740,101 @@ def precheck(job: Any, machine: MachineTemplate, mandrel: Any | None = None, wit
         if travel < mandrel.length:
             raise InputError(f"axis {ax.name} travels {travel:g} mm but the mandrel is {mandrel.length:g} mm long: "
                              f"no placement fits it on machine {machine.name}", field="machine.template")
+    if line is not None and k is not None:
+        _precheck_carriage(job, machine, mandrel, line)
 
 
-__all__ = ["Locator", "Obstacle", "Placement", "ViolationGroup", "apply_setup", "carriage_index",
+def _fixed_radius(machine: MachineTemplate) -> bool:
+    return machine.kind == "cartesian" and machine.axis_index("cross") is None and machine.eye_radius is not None
+
+
+def carriage_need(machine: MachineTemplate, line: Any, eye_radius_mm: float | None = None
+                  ) -> tuple[float, float, str] | None:
+    """The mandrel-frame z range (mm) the eye must cover, from the winding line alone: ``(z_lo, z_hi, how)``.
+
+    The eye always sits on the free fibre, the tangent ray of the line at its contact point, ahead of
+    the contact.  On a fixed-radius machine (no cross feed) the eye is that ray's point at the eye radius
+    (``eye_radius_mm``, default the machine's): the range is exact, whatever the payout law.  On the other
+    cartesian machines it is a lower bound: where the contact is at its largest (smallest) z the ray runs
+    along the parallel or away from the mandrel, so the eye is at least as far out.  ``None`` for a robot
+    (its arm reaches along the mandrel axis beyond the track)."""
+    if machine.kind != "cartesian":
+        return None
+    c = np.asarray(line.xyz, dtype=float)
+    if c.shape[0] == 0:
+        return None
+    if _fixed_radius(machine):
+        from engine.kinematics import _slide_to_radius
+
+        r = float(eye_radius_mm if eye_radius_mm is not None else machine.eye_radius)
+        pts, _s, viol = _slide_to_radius(c, np.asarray(line.tau, dtype=float), c, r)
+        if not viol:
+            return float(pts[:, 2].min()), float(pts[:, 2].max()), f"the eye at radius {r:g} mm"
+    return float(c[:, 2].min()), float(c[:, 2].max()), "the winding line (turnarounds included)"
+
+
+def _precheck_carriage(job: Any, machine: MachineTemplate, mandrel: Any, line: Any) -> None:
+    setup = job.machine.setup
+    k = carriage_index(machine)
+    ax = machine.axes[k]
+    lo, hi = float(ax.min), float(ax.max)
+    if not (math.isfinite(lo) and math.isfinite(hi)) or hi - lo >= 1e11:
+        return
+    need = carriage_need(machine, line)
+    if need is None:
+        return
+    z_lo, z_hi, how = need
+    s = float(ax.scale)
+    travel = (hi - lo) / abs(s)
+    span = z_hi - z_lo
+    slack = 1e-6 * max(1.0, travel) + 1e-3            # numerical noise: only a sure misfit is refused here
+    exact = how.startswith("the eye at radius")
+    if span > travel + slack:
+        extra, fld = "", "machine.template"
+        tail = (f"; no placement fits - use a machine with a longer {ax.name} axis or shorten the turnarounds "
+                f"(dwell, pins)")
+        if exact:
+            r_min = float(mandrel.r_max) + float(setup.clearance_mm)
+            room = travel - 1.0                        # as fit_eye_radius: 1 mm to spare for the rounding
+
+            def span_at(r: float) -> float:
+                got = carriage_need(machine, line, r)
+                return got[1] - got[0] if got is not None else math.inf
+
+            if span_at(r_min) <= room:
+                if setup.eye_radius_mm is None:
+                    return                             # the set-up reduces the eye radius (fit_eye_radius)
+                a_r, b_r = r_min, float(machine.eye_radius)
+                for _ in range(40):
+                    mid = 0.5 * (a_r + b_r)
+                    a_r, b_r = (mid, b_r) if span_at(mid) <= room else (a_r, mid)
+                extra = (f"; machine.setup.eye_radius_mm up to {math.floor(a_r * 10.0) / 10.0:g} mm fits (or remove "
+                         f"it to let the set-up choose)")
+                tail, fld = "", "machine.setup.eye_radius_mm"
+            else:
+                extra = (f"; even the smallest eye radius {r_min:g} mm (largest mandrel radius + clearance) needs "
+                         f"{span_at(r_min):.1f} mm")
+        raise InputError(
+            f"axis {ax.name} of machine {machine.name} travels {travel:g} mm ({lo:g}..{hi:g} {ax.units}) but "
+            f"{how} runs z = {z_lo:.1f}..{z_hi:.1f} mm: it needs {'' if exact else 'at least '}{span:.1f} mm, "
+            f"{span - travel:.1f} mm more than the axis has{extra}{tail}", field=fld)
+    if setup.mandrel_z0_mm is None:
+        return
+    z0 = float(ax.offset)                             # the fixed placement (apply_setup) with the head offset
+    a, b = sorted((z0 + s * z_lo, z0 + s * z_hi))
+    if a >= lo - slack and b <= hi + slack:
+        return
+    over, side = (b - hi, f"above its maximum {hi:g}") if b - hi >= lo - a else (lo - a, f"below its minimum {lo:g}")
+    fit_lo, fit_hi = float(setup.mandrel_z0_mm) + lo - a, float(setup.mandrel_z0_mm) + hi - b
+    raise InputError(
+        f"with the mandrel's z = 0 at {ax.name} = {float(setup.mandrel_z0_mm):g} (machine.setup.mandrel_z0_mm) "
+        f"axis {ax.name} would run {'' if exact else 'at least '}{a:.1f}..{b:.1f} {ax.units} ({how} runs "
+        f"z = {z_lo:.1f}..{z_hi:.1f} mm), {over:.1f} {ax.units} {side}; it "
+        f"{'fits' if exact else 'can only fit'} with mandrel_z0_mm between {fit_lo:.1f} and {fit_hi:.1f} "
+        f"(or remove mandrel_z0_mm to centre the mandrel on the machine)", field="machine.setup.mandrel_z0_mm")
+
+
+__all__ = ["Locator", "Obstacle", "Placement", "ViolationGroup", "apply_setup", "carriage_index", "carriage_need",
            "clearance_violations", "compatible_posts", "controller_for", "fit_eye_radius", "group_violations",
            "hold_back_turns", "limit_speed_steps", "monotone_eye_azimuth", "nc_move_lines", "place_on_machine",
            "placement_report", "post_mismatch", "precheck", "support_obstacles"]

@@ -111,6 +111,8 @@ class PipelineResult:
                 )
         if self.eye_circuit is not None and not self.eye_circuit.feasible:
             out += _payout_warnings(self.eye_circuit)
+        if self.placement is not None and not self.placement.fits:
+            out.append(self.placement.message())   # which placement would fit (or that none does)
         out += [g.message for g in self.violation_groups()]
         if self.timelaw is not None and self.blocks is not None and self.machine is not None:
             r = float(self.timelaw.get("max_accel_ratio", 0.0))
@@ -361,7 +363,7 @@ def run_pipeline(
             from engine.machine_setup import precheck
 
             try:
-                precheck(job, setup_machine_for_job(job, jp), res.mandrel, with_post=upto == "nc")
+                precheck(job, setup_machine_for_job(job, jp), res.mandrel, with_post=upto == "nc", line=res.line)
             except InputError as exc:
                 raise _locate(exc, jp, "nc") from None
         res = replace(res, keys={**res.keys, stage: keys[stage]})
@@ -1044,4 +1046,12 @@ def write_program(result: PipelineResult, path: str | Path, force: bool = False)
             raise InputError(f"not written: {bad.size} block(s) have a non-finite or zero duration (block {i}: "
                              f"{t[i]!r} s), which would be an infinite or zero feed", file=path,
                              field="post.min_block_time_s")
-    return write_nc(path, result.nc_text, result.violation_groups(), force=force)
+    problems: list[Any] = list(result.violation_groups())
+    if problems and result.placement is not None and not result.placement.fits:
+        problems.insert(0, _Msg(result.placement.message()))
+    return write_nc(path, result.nc_text, problems, force=force)
+
+
+@dataclass(frozen=True)
+class _Msg:
+    message: str

@@ -3,6 +3,7 @@ back-turn tolerance, clearance against the supports, speed steps, grouping, post
 
 from __future__ import annotations
 
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -277,10 +278,17 @@ def test_a_new_job_on_lathe2_fits_by_reducing_the_eye_radius() -> None:
     assert pl.q_max - pl.q_min <= 1199.0 + 1e-6
     # by hand: the eye sits on the fibre line at exactly that radius from the axis
     assert np.allclose(np.hypot(res.axes.eye_xyz[:, 0], res.axes.eye_xyz[:, 1]), r, atol=1e-6)
-    # an explicit radius is kept as it is (and then the program does not fit)
+    # an explicit radius is kept as it is: it cannot fit, and the pre-check says so before the payout,
+    # with the largest radius that fits - which the full run (payout, inverse kinematics) confirms
     fixed = job.replace(machine={"template": "lathe2", "setup": {"eye_radius_mm": 160.0}})
-    res2 = run_pipeline(fixed, None, upto="axes", previous=res)
-    assert res2.machine.eye_radius == 160.0 and not res2.placement.fits
+    with pytest.raises(InputError, match=r"it needs 1215\.4 mm, 15\.4 mm more than the axis has") as info:
+        run_pipeline(fixed, None, upto="axes", line=res.line, mandrel=res.mandrel)
+    assert info.value.location.field == "machine.setup.eye_radius_mm"
+    r_fit = float(re.search(r"eye_radius_mm up to ([0-9.]+) mm fits", info.value.message).group(1))
+    assert r_fit == pytest.approx(r, abs=0.1)     # the automatic choice, from the payout's own eye path
+    ok = run_pipeline(fixed.replace(machine={"template": "lathe2", "setup": {"eye_radius_mm": r_fit}}), None,
+                      upto="axes", previous=res)
+    assert ok.placement.fits and ok.violations == [] and ok.machine.eye_radius == r_fit
 
 
 def test_the_eye_slides_along_its_fibre_instead_of_turning_the_mandrel_back() -> None:
@@ -308,3 +316,103 @@ def test_the_eye_slides_along_its_fibre_instead_of_turning_the_mandrel_back() ->
     assert np.all(np.einsum("ij,ij->i", rel, d) > 0)
     # a fixed-radius machine (its eye slides to the radius in the kinematics) is left alone
     assert not monotone_eye_azimuth(load_machine("lathe2"), eye, d, c, 0.01)[1].any()
+
+
+@pytest.fixture(scope="module")
+def new_job_line():
+    """The default new job's winding line and mandrel (cheap: no payout)."""
+    from engine.pipeline import run_pipeline
+
+    job = default_job().replace(machine={"template": "lathe2"})
+    res = run_pipeline(job, None, upto="winding")
+    return job, res
+
+
+@pytest.mark.parametrize("template", ["lathe2", "lathe3", "lathe4", "gantry6"])
+def test_carriage_need_from_the_line_against_the_inverse_kinematics(new_job_line, template) -> None:
+    """The pre-check's carriage range (from the winding line alone) against the carriage column of the full
+    run (payout law, inverse kinematics): equal on the fixed-radius lathe2, a lower bound on the others."""
+    from engine.machine_setup import carriage_need
+    from engine.pipeline import run_pipeline
+
+    job, wres = new_job_line
+    job = job.replace(machine={"template": template, "axes": {"X": {"min": -1e4, "max": 1e4}}})
+    res = run_pipeline(job, None, upto="axes", line=wres.line, mandrel=wres.mandrel)
+    k = res.machine.axis_index("carriage")
+    ax = res.machine.axes[k]
+    z = (np.asarray(res.axes.q[:, k]) - ax.offset) / ax.scale     # the eye's z along the mandrel, mm
+    z_lo, z_hi, how = carriage_need(res.machine, wres.line)
+    if template == "lathe2":
+        assert how.startswith("the eye at radius 160")
+        assert z_lo == pytest.approx(z.min(), abs=1e-6) and z_hi == pytest.approx(z.max(), abs=1e-6)
+    else:
+        assert z.min() <= z_lo + 1e-9 and z.max() >= z_hi - 1e-9
+    assert carriage_need(load_machine("robot_cell"), wres.line) is None
+
+
+def test_fixed_placement_is_refused_before_the_payout_and_the_range_it_names_fits(new_job_line, monkeypatch) -> None:
+    import engine.payout
+    from engine.pipeline import run_pipeline
+
+    job, wres = new_job_line
+    job = job.replace(machine={"template": "lathe2", "setup": {"eye_radius_mm": 120.0, "mandrel_z0_mm": 900.0}})
+    with monkeypatch.context() as mp:
+        mp.setattr(engine.payout, "payout_for_job", lambda *a, **k: pytest.fail("the payout ran"))
+        with pytest.raises(InputError) as info:
+            run_pipeline(job, None, upto="axes", line=wres.line, mandrel=wres.mandrel)
+    msg = info.value.message
+    assert info.value.location.field == "machine.setup.mandrel_z0_mm"
+    m = re.search(r"would run ([0-9.-]+)\.\.([0-9.-]+) mm .*?, ([0-9.]+) mm above its maximum 1200; it fits with "
+                  r"mandrel_z0_mm between ([0-9.-]+) and ([0-9.-]+)", msg)
+    assert m, msg
+    a, b, over, f0, f1 = (float(x) for x in m.groups())
+    assert over == pytest.approx(b - 1200.0, abs=0.11)
+    # the full run at both ends of the named range fits (within the 0.1 mm of the printed numbers)
+    for z0 in (f0 + 0.1, f1 - 0.1, 0.5 * (f0 + f1)):
+        j2 = job.replace(machine={"template": "lathe2", "setup": {"eye_radius_mm": 120.0, "mandrel_z0_mm": z0}})
+        res = run_pipeline(j2, None, upto="axes", line=wres.line, mandrel=wres.mandrel)
+        assert res.placement.mode == "fixed" and res.placement.fits and res.violations == [], z0
+    # just outside it does not
+    j3 = job.replace(machine={"template": "lathe2", "setup": {"eye_radius_mm": 120.0, "mandrel_z0_mm": f1 + 0.2}})
+    with pytest.raises(InputError, match="above its maximum"):
+        run_pipeline(j3, None, upto="axes", line=wres.line, mandrel=wres.mandrel)
+
+
+def test_a_path_longer_than_any_eye_radius_allows_is_refused_up_front(new_job_line) -> None:
+    from engine.pipeline import run_pipeline
+
+    job, wres = new_job_line
+    job = job.replace(machine={"template": "lathe2", "axes": {"X": {"max": 560.0}}})   # line spans ~ 535 mm
+    with pytest.raises(InputError, match=r"axis X of machine lathe2 travels 560 mm .* even the smallest eye radius "
+                                         r"105 mm .* no placement fits") as info:
+        run_pipeline(job, None, upto="axes", line=wres.line, mandrel=wres.mandrel)
+    assert info.value.location.field == "machine.template"
+
+
+def test_laminate_post_mismatch_is_refused_before_any_layer(monkeypatch) -> None:
+    """A post that cannot address the template's axes: refused before any layer is wound, naming what
+    works; the post the robot cell can use (LinuxCNC with its linuxcnc_robot profile) is found without a
+    controller (the joined program is rendered through the same choice as a single line)."""
+    import engine.laminate as lam
+    from engine.laminate import run_laminate
+
+    text = """schema_version = 2
+[mandrel]
+kind = "pipe"
+radius_mm = 50.0
+length_mm = 200.0
+[winding]
+points_per_pass = 200
+[machine]
+template = "robot_cell"
+[post]
+post = "marlin"
+[[layer]]
+kind = "hoop"
+"""
+    monkeypatch.setattr(lam, "_wind_layer", lambda *a, **k: pytest.fail("a layer was wound"))
+    with pytest.raises(InputError) as info:
+        run_laminate(parse_job(text))
+    assert "post marlin cannot write machine robot_cell" in info.value.message
+    assert 'post linuxcnc with [post] controller = "linuxcnc_robot"' in info.value.message
+    assert info.value.location.field == "post.post"

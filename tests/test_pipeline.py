@@ -104,17 +104,18 @@ def test_machine_overrides_and_bad_axis() -> None:
 
 def test_cli_run_refuses_to_write_a_violating_program(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     job = tmp_path / "tight.toml"
-    # 1100 mm of travel holds the 1000 mm pipe (the up-front check passes) but not the eye's 1198 mm
+    # lathe4 (cross feed): 1010 mm of travel holds the 1000 mm pipe and its winding line (the up-front
+    # checks pass) but not the eye's 1084 mm (the payout law decides how far the eye leads)
     text = (EXAMPLES / "pipe.toml").read_text()
     text = text[: text.index("# The laminate")]  # the pipe's single line (the laminate: test_laminate.py)
-    # with the eye at the template's fixed radius (an automatic radius would fit the eye path into 1100 mm)
-    job.write_text(text.replace("max = 1800.0", "max = 1100.0") + "\n[machine.setup]\neye_radius_mm = 160.0\n")
+    job.write_text(text.replace("max = 1800.0", "max = 1010.0").replace('template = "lathe2"', 'template = "lathe4"'))
     out = tmp_path / "p.ngc"
     rep = tmp_path / "r.json"
     assert main(["run", str(job), "-o", str(out), "--report", str(rep), "--quiet"]) == 1
     assert not out.exists()
     err = capsys.readouterr().err
     assert "not written" in err and "axis X" in err and "NC line" in err
+    assert "of X travel but the axis has 1010 (0..1010); no placement fits" in err   # what the placement says
     data = json.loads(rep.read_text())
     assert data["written"] is False and any("axis X" in w for w in data["warnings"])
     # grouped: one entry per kind and axis, located by NC line and time
@@ -123,6 +124,22 @@ def test_cli_run_refuses_to_write_a_violating_program(tmp_path: Path, capsys: py
     assert not data["placement"]["fits"] and data["placement"]["z0_fit"] is None
     assert main(["run", str(job), "-o", str(out), "--force", "--quiet"]) == 0
     assert out.read_text().count("G1 ") > 10
+
+
+def test_cli_run_fixed_eye_radius_too_long_for_the_travel_is_refused_before_the_payout(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """lathe2's eye at its fixed 160 mm needs 1198 mm of X for the pipe: with 1100 mm the pre-check (the eye on
+    each fibre tangent at that radius, from the winding line alone) refuses it before the payout, naming
+    the excess and the largest eye radius that fits."""
+    job = tmp_path / "tight.toml"
+    text = (EXAMPLES / "pipe.toml").read_text()
+    text = text[: text.index("# The laminate")]
+    job.write_text(text.replace("max = 1800.0", "max = 1100.0") + "\n[machine.setup]\neye_radius_mm = 160.0\n")
+    out = tmp_path / "p.ngc"
+    assert main(["run", str(job), "-o", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "axis X of machine lathe2 travels 1100 mm" in err and "it needs 1197.9 mm, 97.9 mm more" in err
+    assert "machine.setup.eye_radius_mm up to" in err and "line " in err and not out.exists()
 
 
 def test_cli_run_too_short_travel_is_refused_before_computing(tmp_path: Path,
