@@ -454,6 +454,12 @@ def test_every_layered_example_in_the_window(qtbot, tmp_path, example) -> None:
         out = tmp_path / f"{example.stem}{res.extension}"
         assert w.export_nc(out, force=True) and w.wait_idle(180000)
         assert out.read_bytes() == res.nc_text.encode()
+        # export = screen = `winder run` of the shipped file, byte for byte (issue 15), written without --force
+        from engine.cli import main as cli_main
+
+        cli_nc = tmp_path / f"cli{res.extension}"
+        assert cli_main(["run", str(example), "-o", str(cli_nc), "--quiet"]) == 0
+        assert out.read_bytes() == cli_nc.read_bytes()
     finally:
         close_window(w, 120000)
 
@@ -472,3 +478,70 @@ def test_layered_run_reports_progress_per_layer(job_file) -> None:
     assert all(0.0 <= f <= 1.0 for f in st.fractions) and st.fractions[-1] == 1.0
     assert st.partials == []  # a layer's own single-line result is never published as the job's
     assert [v.index for v in out.views] == [0, 1, 2]
+
+
+def _other_value(ed) -> object:
+    """A value unlike the editor's, as a user would type or pick it."""
+    from PySide6.QtWidgets import QCheckBox, QComboBox
+
+    if isinstance(ed, QCheckBox):
+        return not ed.isChecked()
+    if isinstance(ed, QComboBox):
+        others = [ed.itemText(i) for i in range(ed.count()) if ed.itemText(i) != ed.currentText()]
+        return others[0] if others else None
+    text = ed.text()
+    try:
+        return format(float(text) * 1.1 + 1.0, ".6g")
+    except ValueError:
+        return "1" if not text.strip() else text + "x"
+
+
+def _old_value(ed) -> object:
+    from PySide6.QtWidgets import QCheckBox, QComboBox
+
+    if isinstance(ed, QCheckBox):
+        return ed.isChecked()
+    return ed.currentText() if isinstance(ed, QComboBox) else ed.text()
+
+
+def _export_refused(w, where: str, tmp_path) -> None:
+    assert not w.actions["export_nc"].isEnabled() and not w.nc_panel.export_button.isEnabled(), where
+    assert not w.actions["export_report"].isEnabled(), where
+    assert w.export_block_reason(), where
+    target = tmp_path / "stale.ngc"
+    assert not w.export_nc(target, force=True), where
+    assert "Export disabled" in w.status_msg.text(), where
+    assert w.wait_idle(pipeline=False) and not target.exists(), where
+
+
+def test_every_layer_field_edit_after_a_run_disables_export(ran, tmp_path) -> None:
+    """Export = screen for a laminate (issue 15): after a run, every field of every layer, typed as a user
+    would (a valid or an invalid value), and every layer-table operation disables Export NC and Export
+    report (refused with the reason in the status bar, nothing written); typing the old value back or
+    undoing makes the run current again."""
+    w = ran
+    p = w.layers_panel
+    assert w.actions["export_nc"].isEnabled()
+    edited = 0
+    for i in range(len(w.job.layers)):
+        p.select_layer(i)
+        for key in list(p.editors):
+            ed = p.editor(key)
+            old, new = _old_value(ed), _other_value(ed)
+            if new is None:
+                continue
+            p.set_value(key, new)
+            _export_refused(w, f"layer {i + 1} {key}: {old!r} -> {new!r}", tmp_path)
+            p.set_value(key, old)
+            assert w.wait_idle(pipeline=False)
+            assert not p.errors() and w.job == w.doc.result_job, f"layer {i + 1} {key}: back to {old!r}"
+            assert w.actions["export_nc"].isEnabled(), f"layer {i + 1} {key}: back to {old!r}"
+            edited += 1
+    assert edited >= 15
+    # the table's operations are edits too
+    for op in (lambda: p.duplicate_layer(0), lambda: p.add_layer("hoop"), lambda: p.move_layer(0, 1)):
+        op()
+        _export_refused(w, "layer table", tmp_path)
+        w.undo_stack.undo()
+        assert w.wait_idle(pipeline=False)
+        assert w.job == w.doc.result_job and w.actions["export_nc"].isEnabled()
