@@ -264,6 +264,9 @@ class SetupSpec(_Model):
     clearance_mm: NonNegMM = 5.0
     """Smallest gap the eye keeps from the mandrel, the shafts, the chuck and the tailstock, and the free
     fibre from the shafts, the chuck and the tailstock."""
+    head_radius_mm: NonNegMM = 0.0
+    """Radius of the payout head's body around the eye (a sphere: roller, guide, its bracket): the gaps of
+    the eye to the mandrel and the supports are measured from that body (the clearance plus this radius)."""
     back_turn_tol_deg: NonNegMM = 0.01
     """Mandrel back-turns up to this angle are numerical noise: the mandrel angle is held instead."""
 

@@ -1110,7 +1110,8 @@ def _join(res: LaminateResult, machine: Any) -> LaminateResult:
     # as the single-line NC stage chooses it
     profile = controller_for(post.name, job.post.controller, machine)
     text = post.render(blocks, machine, profile)
-    problems = _joined_problems(machine, blocks, text, new_layers, transitions, placement)
+    problems = _joined_problems(machine, blocks, text, new_layers, transitions, placement, res.mandrel,
+                                job.machine.setup)
     return replace(res, layers=tuple(new_layers), machine=machine, blocks=blocks, nc_text=text,
                    post_name=post.name, extension=post.extension, transitions=tuple(transitions),
                    sections=tuple(sections), placement=placement, program_problems=tuple(problems))
@@ -1149,17 +1150,66 @@ class _JoinedLocator:
         return out
 
 
+TRANSITION_SUBSTEPS = 16
+"""Eye positions checked inside each transition block (the controller interpolates the axes linearly)."""
+
+
+def transition_clearance(machine: Any, blocks: Any, layers: list[LayerResult],
+                         transitions: list[tuple[int, int, float]], bare: Any, setup: Any) -> list[Any]:
+    """The eye along every transition move against the laminate laid so far (the surface the next layer is
+    wound on), the shafts, the chuck and the tailstock (of the bare mandrel): violations of kind
+    ``clearance`` located by block of the joined program.  The eye is sampled at
+    :data:`TRANSITION_SUBSTEPS` points of each block (axes interpolated linearly, as the controller
+    moves them); the first and the last point of a transition are the layers' own end points, which the
+    layers' own checks cover."""
+    from engine.kinematics import forward_kinematics, violations_from_mask
+    from engine.machine_setup import _rect_distance, mandrel_distance, support_obstacles
+
+    laid = [lr for lr in layers if lr.result is not None]
+    gap = float(setup.clearance_mm) + float(getattr(setup, "head_radius_mm", 0.0))   # from the head's body
+    q = np.asarray(blocks.q, dtype=float)
+    nb = q.shape[0] - 1
+    d_surf = np.full(nb, np.inf)
+    d_sup = {ob.name: np.full(nb, np.inf) for ob in support_obstacles(bare, setup)}
+    u = (np.arange(TRANSITION_SUBSTEPS) + 1.0) / TRANSITION_SUBSTEPS     # inside and at the end of each block
+    for j, (b0, n, _t) in enumerate(transitions):
+        if j + 1 >= len(laid) or n < 1:
+            continue
+        qq = q[b0: b0 + n + 1]
+        dense = (qq[:-1, None, :] + u[None, :, None] * np.diff(qq, axis=0)[:, None, :]).reshape(-1, q.shape[1])
+        blk = np.repeat(np.arange(b0, b0 + n), u.size)
+        dense, blk = dense[:-1], blk[:-1]                # the next layer's first point is its own
+        if dense.shape[0] == 0:
+            continue
+        eye, _ = forward_kinematics(machine, dense, fibre=False)
+        z, rho = eye[:, 2], np.hypot(eye[:, 0], eye[:, 1])
+        dm = mandrel_distance(laid[j + 1].surface, z, rho, upto_mm=2.0 * gap + 1.0)
+        np.minimum.at(d_surf, blk, dm)
+        for ob in support_obstacles(bare, setup):
+            np.minimum.at(d_sup[ob.name], blk, _rect_distance(z, rho, ob))
+    out = violations_from_mask("clearance", None, d_surf < gap - 1e-6, d_surf, gap, " mm", where="block",
+                               what="gap between the eye and the laminate on a transition")
+    for name, d in d_sup.items():
+        out += violations_from_mask("clearance", None, d < gap - 1e-6, d, gap, " mm", where="block",
+                                    what=f"gap between the eye and the {name} on a transition")
+    return out
+
+
 def _joined_problems(machine: Any, blocks: Any, text: str, layers: list[LayerResult],
-                     transitions: list[tuple[int, int, float]], placement: Any) -> list[str]:
+                     transitions: list[tuple[int, int, float]], placement: Any, bare: Any = None,
+                     setup: Any = None) -> list[str]:
     """What the joined program breaks beyond the layers' own checks: every block of it (the layers' speed
     ramps, the transitions, the common placement) against every position, speed and speed-jump limit,
-    grouped and located by NC line, time and layer; a placement that does not fit says which would."""
+    the eye's clearance along the transitions (with ``bare`` and ``setup``), grouped and located by NC line,
+    time and layer or transition; a placement that does not fit says which would."""
     from engine.blocks import check_blocks
     from engine.machine_setup import group_violations
 
     own = {(v.kind, v.axis) for lr in layers if lr.result is not None for v in lr.result.violations
            if v.kind != "position"}
     viol = [v for v in check_blocks(machine, blocks) if v.kind == "position" or (v.kind, v.axis) not in own]
+    if bare is not None and setup is not None:
+        viol += transition_clearance(machine, blocks, layers, transitions, bare, setup)
     out: list[str] = []
     if placement is not None and not placement.fits:
         out.append(placement.message())

@@ -420,11 +420,13 @@ def clearance_violations(axes: AxisPath, mandrel: Any, setup: Any, eye_clearance
     """The eye against the mandrel and the supports, the free fibre against the supports, at every point.
 
     ``eye_clearance_mm`` (default ``setup.clearance_mm``) is the smallest gap between the eye and the
-    mandrel; the supports keep ``setup.clearance_mm`` from the eye and from the free fibre.
+    mandrel; the supports keep ``setup.clearance_mm`` from the eye and from the free fibre.  The eye's gaps
+    are measured from the head's body around it: ``setup.head_radius_mm`` is added to them.
     Violations have kind ``"clearance"``, ``axis`` None, ``amount`` = the missing gap (mm).
     """
     gap = float(setup.clearance_mm)
-    eye_gap = gap if eye_clearance_mm is None else float(eye_clearance_mm)
+    head = float(getattr(setup, "head_radius_mm", 0.0))
+    eye_gap = (gap if eye_clearance_mm is None else float(eye_clearance_mm)) + head
     eye = np.asarray(axes.eye_xyz, dtype=float)
     con = np.asarray(axes.contact_xyz, dtype=float)
     z, rho = eye[:, 2], np.hypot(eye[:, 0], eye[:, 1])
@@ -435,10 +437,11 @@ def clearance_violations(axes: AxisPath, mandrel: Any, setup: Any, eye_clearance
     for ob in support_obstacles(mandrel, setup):
         # only points within ``gap`` of the support's box can violate (elsewhere de >= gap; the values
         # of :func:`violations_from_mask` are read inside the violating runs only)
-        near = np.flatnonzero((z > ob.z0 - gap) & (z < ob.z1 + gap) & (rho < ob.radius + gap))
+        g_eye = gap + head
+        near = np.flatnonzero((z > ob.z0 - g_eye) & (z < ob.z1 + g_eye) & (rho < ob.radius + g_eye))
         de = np.full(z.size, np.inf)
         de[near] = _rect_distance(z[near], rho[near], ob)
-        out += violations_from_mask("clearance", None, de < gap - 1e-6, de, gap, " mm",
+        out += violations_from_mask("clearance", None, de < g_eye - 1e-6, de, g_eye, " mm",
                                     what=f"gap between the eye and the {ob.name}")
         rf = _segment_min_rho(con, eye, ob.z0, ob.z1) - ob.radius
         out += violations_from_mask("clearance", None, rf < gap - 1e-6, rf, gap, " mm",

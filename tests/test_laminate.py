@@ -478,3 +478,36 @@ def test_joined_program_is_checked_block_by_block_and_located() -> None:
     first = int(re.search(r"NC line (\d+)", speed[0]).group(1))
     assert ok.nc_text.splitlines()[first - 2] == "(transition to layer 2: 0.451 s)"
     assert any("speed jump" in p for p in probs)
+
+
+def test_transition_clearance_against_the_laminate_and_the_supports() -> None:
+    """The eye along a transition move is checked against the laminate laid so far and the supports: a
+    transition driven into the pipe is found, located in that transition, with the gap of the closed form
+    (eye radius - pipe radius - the thickness laid so far)."""
+    import re
+    from dataclasses import replace as dc_replace
+
+    from engine.kinematics import forward_kinematics
+    from engine.laminate import _joined_problems, transition_clearance
+
+    res = run_laminate(parse_job(PIPE.replace('template = "lathe2"', 'template = "lathe4"')))
+    setup = res.job.machine.setup
+    layers, trans = list(res.layers), list(res.transitions)
+    assert transition_clearance(res.machine, res.blocks, layers, trans, res.mandrel, setup) == []
+    b0, n, _t = trans[0]
+    q = np.array(res.blocks.q)
+    ci = res.machine.axis_index("cross")
+    mid = b0 + n // 2
+    q[mid, ci] = res.machine.axes[ci].min            # the eye dives towards the axis in mid-transition
+    bad = dc_replace(res.blocks, q=q, delta=np.diff(q, axis=0))
+    viol = transition_clearance(res.machine, bad, layers, trans, res.mandrel, setup)
+    assert viol and all(v.kind == "clearance" and b0 <= v.block < b0 + n for v in viol)
+    worst = min(v.value for v in viol if "laminate" in v.message)
+    eye, _ = forward_kinematics(res.machine, q[mid][None, :], fibre=False)
+    rho = float(np.hypot(eye[0, 0], eye[0, 1]))
+    th = float(layers[1].surface.r(np.array([eye[0, 2]]))[0]) - 60.0    # the inner hoop's build-up
+    assert 0.3 <= th <= 2.0
+    assert worst == pytest.approx(rho - 60.0 - th, abs=0.05)
+    probs = _joined_problems(res.machine, bad, res.nc_text, layers, trans, None, res.mandrel, setup)
+    clr = [p for p in probs if "gap between the eye and the laminate on a transition" in p]
+    assert len(clr) == 1 and clr[0].endswith("transition to layer 2") and re.search(r"NC line \d+", clr[0])

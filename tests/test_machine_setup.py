@@ -416,3 +416,26 @@ kind = "hoop"
     assert "post marlin cannot write machine robot_cell" in info.value.message
     assert 'post linuxcnc with [post] controller = "linuxcnc_robot"' in info.value.message
     assert info.value.location.field == "post.post"
+
+
+def test_head_body_radius_widens_the_eye_gaps() -> None:
+    """The payout head's body (a sphere of head_radius_mm about the eye): its gap to the mandrel and the
+    supports is the eye's minus that radius (closed form on a pipe: rho - R - h)."""
+    pipe = Mandrel.pipe(50.0, 300.0)
+    contact = np.array([[50.0, 0.0, 140.0], [50.0, 0.0, 150.0], [50.0, 0.0, 150.0]])
+    eye = np.array([[58.0, 0.0, 150.0], [70.0, 0.0, 150.0], [120.0, 0.0, 150.0]])     # 8, 20, 70 mm off
+    ap = AxisPath("lathe3", ("A", "X", "Y"), np.zeros((3, 3)), eye, np.zeros((3, 3)), contact, np.zeros(3))
+    base = SetupSpec(clearance_mm=5.0)
+    assert clearance_violations(ap, pipe, base) == []
+    v = clearance_violations(ap, pipe, base.model_copy(update={"head_radius_mm": 10.0}))    # needs 15 mm
+    assert [(x.index, x.count) for x in v] == [(0, 1)]
+    assert v[0].value == pytest.approx(8.0, abs=0.03) and v[0].limit == 15.0
+    v = clearance_violations(ap, pipe, base.model_copy(update={"head_radius_mm": 16.0}))    # needs 21 mm
+    assert [(x.index, x.count) for x in v] == [(0, 2)]
+    # and the supports: an eye 12 mm beyond the tailstock face (z = 300 + 100 + 150 + 12)
+    far = np.array([[10.0, 0.0, 562.0]])
+    ap2 = AxisPath("lathe3", ("A", "X", "Y"), np.zeros((1, 3)), far, np.zeros((1, 3)), far, np.zeros(1))
+    assert not [x for x in clearance_violations(ap2, pipe, base) if "tailstock" in x.message]
+    vt = [x for x in clearance_violations(ap2, pipe, base.model_copy(update={"head_radius_mm": 10.0}))
+          if "eye and the tailstock" in x.message]
+    assert vt and vt[0].value == pytest.approx(12.0) and vt[0].limit == 15.0

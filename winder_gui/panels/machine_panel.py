@@ -61,6 +61,7 @@ SETUP_FIELDS: tuple[tuple[str, str, bool], ...] = (
     ("tailstock_radius_mm", "Tailstock radius [mm]", True),
     ("tailstock_length_mm", "Tailstock length [mm]", False),
     ("clearance_mm", "Clearance to supports [mm]", False),
+    ("head_radius_mm", "Head body radius around the eye [mm]", False),
     ("back_turn_tol_deg", "Back-turn tolerance [deg]", False),
 )
 SETUP_DEFAULT_TEXT = {"mandrel_z0_mm": "centred", "eye_radius_mm": "template's",
