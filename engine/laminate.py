@@ -711,6 +711,11 @@ class LaminateResult:
                                 "travel": [p.lo, p.hi], "fits": p.fits,
                                 "z0_fit": list(p.z0_fit) if p.z0_fit else None, "message": p.message()}
         if self.blocks is not None and self.machine is not None:
+            from engine.pipeline import _accel_ratios, _jump_ratios, _speed_ratios
+
+            rep["max_speed_ratio"] = _speed_ratios(self.blocks, self.machine)
+            rep["max_accel_ratio"] = _accel_ratios(self.blocks, self.machine)
+            rep["max_jump_ratio"] = _jump_ratios(self.blocks, self.machine)
             qb = np.asarray(self.blocks.q, dtype=float)
             rep["axis_ranges"] = {n: [float(qb[:, k].min()), float(qb[:, k].max())]
                                   for k, n in enumerate(self.machine.axis_names)}

@@ -391,11 +391,15 @@ def simulate(prog: NcProgram, machine: MachineTemplate, line: Any | None = None,
         extra = float((np.maximum(step - p, 0.0) / amax).max(axis=1).sum())
     eye, _ = forward_kinematics(machine, q)
     ranges = {n: [float(q[:, k].min()), float(q[:, k].max())] for k, n in enumerate(machine.axis_names)}
-    acc = {}
+    acc, jmp = {}, {}
     if v.shape[0] >= 2:
+        # constant speed in each move; a step up to max_jump at once, the rest bled at max_accel within the
+        # two moves around the corner (the model of time_with_limits_s and of the pipeline's report)
         tm = 0.5 * (t[1:] + t[:-1])
-        a = np.abs(np.diff(v, axis=0)) / tm[:, None]
+        dv = np.abs(np.diff(v, axis=0))
+        a = np.maximum(dv - p, 0.0) / tm[:, None]
         acc = {n: float(a[:, k].max() / amax[k]) for k, n in enumerate(machine.axis_names)}
+        jmp = {n: float(dv[:, k].max() / p[k]) for k, n in enumerate(machine.axis_names)}
     rep: dict[str, Any] = {
         "file": prog.file, "machine": machine.name, "moves": prog.n, "feed_mode": prog.feed_mode,
         "program_time_s": float(t.sum()), "time_with_limits_s": float(t_lim.sum()) + extra,
@@ -403,6 +407,7 @@ def simulate(prog: NcProgram, machine: MachineTemplate, line: Any | None = None,
         "axis_ranges": ranges,
         "max_speed_ratio": {n: float(np.abs(v[:, k]).max() / vmax[k]) for k, n in enumerate(machine.axis_names)},
         "max_accel_ratio": acc,
+        "max_jump_ratio": jmp,
         "eye_path_length_mm": float(np.linalg.norm(np.diff(eye, axis=0), axis=1).sum()),
     }
     contact = None

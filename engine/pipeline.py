@@ -170,6 +170,7 @@ class PipelineResult:
             rep["program_time_start_s"] = float(b.total_start)
             rep["max_speed_ratio"] = _speed_ratios(b, self.machine)
             rep["max_accel_ratio"] = _accel_ratios(b, self.machine)
+            rep["max_jump_ratio"] = _jump_ratios(b, self.machine)
             rep["max_error_mm"] = float(np.max(b.max_error)) if b.n else 0.0
         if self.timelaw is not None:
             rep["timelaw"] = dict(self.timelaw)
@@ -207,21 +208,38 @@ def _speed_ratios(blocks: Any, machine: Any) -> dict[str, float]:
     return {name: float(v[:, k].max() / lim[k]) if blocks.n else 0.0 for k, name in enumerate(machine.axis_names)}
 
 
-def _accel_ratios(blocks: Any, machine: Any) -> dict[str, float]:
-    """Speed change between neighbouring blocks over their mean duration, per axis, / max_accel."""
-    if blocks.n < 2:
-        return {name: 0.0 for name in machine.axis_names}
+def _corner_steps(blocks: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Speed steps at the block boundaries (units/s) and the mean duration of the two blocks (s)."""
     v = blocks.speed
     t = blocks.time
     if blocks.cyclic:
-        dv = np.abs(np.roll(v, -1, axis=0) - v)
-        tm = 0.5 * (t + np.roll(t, -1))
-    else:
-        dv = np.abs(np.diff(v, axis=0))
-        tm = 0.5 * (t[1:] + t[:-1])
-    a = dv / tm[:, None]
-    lim = np.array([ax.max_accel for ax in machine.axes])
+        return np.abs(np.roll(v, -1, axis=0) - v), 0.5 * (t + np.roll(t, -1))
+    return np.abs(np.diff(v, axis=0)), 0.5 * (t[1:] + t[:-1])
+
+
+def _accel_ratios(blocks: Any, machine: Any) -> dict[str, float]:
+    """Acceleration the program needs, per axis, / max_accel.
+
+    Each block runs at a constant speed; at a block boundary the machine takes a speed step of up to
+    ``max_jump`` at once (the template's allowed jump, (18) of the seeds) and only the part of a step
+    beyond it must be bled at ``max_accel``, within the two blocks around the boundary.  So this is
+    ``max((|Δv| − max_jump)⁺ / t_mean) / max_accel`` - 0 when every step is within the jump."""
+    if blocks.n < 2:
+        return {name: 0.0 for name in machine.axis_names}
+    dv, tm = _corner_steps(blocks)
+    p = machine.limits("max_jump")
+    a = np.maximum(dv - p, 0.0) / tm[:, None]
+    lim = machine.limits("max_accel")
     return {name: float(a[:, k].max() / lim[k]) for k, name in enumerate(machine.axis_names)}
+
+
+def _jump_ratios(blocks: Any, machine: Any) -> dict[str, float]:
+    """Largest speed step at a block boundary, per axis, / max_jump."""
+    if blocks.n < 2:
+        return {name: 0.0 for name in machine.axis_names}
+    dv, _tm = _corner_steps(blocks)
+    p = machine.limits("max_jump")
+    return {name: float(dv[:, k].max() / p[k]) for k, name in enumerate(machine.axis_names)}
 
 
 def stage_keys(job: Job) -> dict[str, str]:

@@ -121,10 +121,12 @@ def report_sections(result: Any, job_path: str | Path | None = None) -> list[Sec
 def axes_section(mach: Any, rep: dict[str, Any]) -> Section:
     """The machine's axes, their limits and the range the program uses (``rep``: the run's report)."""
     ranges = rep.get("axis_ranges", {})
-    sp, ac = rep.get("max_speed_ratio"), rep.get("max_accel_ratio")
+    sp, ac, jp = rep.get("max_speed_ratio"), rep.get("max_accel_ratio"), rep.get("max_jump_ratio")
     head = ["axis", "units", "min", "max", "used from", "used to", "max speed"]
     if sp is not None:
-        head += ["speed used", "accel used"]
+        # accel used: what the speed steps beyond max_jump need of max_accel (0 % when every step is within
+        # the jump a block boundary may take at once)
+        head += ["speed used", "jump used", "accel used"]
     rows = [head]
     for ax in mach.axes:
         lo, hi = ranges.get(ax.name, (float("nan"), float("nan")))
@@ -132,6 +134,7 @@ def axes_section(mach: Any, rep: dict[str, Any]) -> Section:
                _fmt(float(ax.max_speed))]
         if sp is not None:
             row += [f"{100 * float(sp.get(ax.name, float('nan'))):.0f} %",
+                    f"{100 * float((jp or {}).get(ax.name, float('nan'))):.0f} %",
                     f"{100 * float((ac or {}).get(ax.name, float('nan'))):.0f} %"]
         rows.append(row)
     return Section(f"Machine {mach.name}: axes and limits", rows)

@@ -281,3 +281,18 @@ def test_corrupted_laminate_program_exit_2_with_the_line(laminate_program, tmp_p
     err = capsys.readouterr().err
     assert rc == 2, err
     assert f"line {k + 1}" in err and words in err and "Traceback" not in err, err
+
+
+def test_jump_and_acceleration_used_by_hand() -> None:
+    """Constant speed per move; a step up to max_jump is taken at once, the rest bled at max_accel: X at
+    10 mm/s then 100 mm/s on lathe2 (max_jump 60, max_accel 2000): jump used 90/60, acceleration used
+    (90 - 60) / 1 s / 2000, the time with the limits 30/2000 s longer, and a located jump violation."""
+    m = load_machine("lathe2")
+    text = "\n".join(["G21 G90", "G92 X0 Y0", "G1 X10 F600", "G1 X110 F6000", "M2"])
+    sim = simulate(read_nc(text, m, load_controller("marlin")), m)
+    r = sim.report
+    assert r["max_jump_ratio"]["X"] == pytest.approx(1.5)
+    assert r["max_accel_ratio"]["X"] == pytest.approx(30.0 / 2000.0)
+    assert r["time_with_limits_s"] - r["program_time_s"] == pytest.approx(30.0 / 2000.0)
+    jumps = [v for v in r["violations"] if v["kind"] == "jump"]
+    assert len(jumps) == 1 and jumps[0]["nc_line"] == 3 and jumps[0]["value"] == pytest.approx(90.0)

@@ -42,6 +42,8 @@ def test_every_stage_ran(example) -> None:
     # (18) never makes the program slower than its feasible start, and speeds stay within limits
     assert rep["program_time_s"] <= res.blocks.total_start * (1 + 1e-12)
     assert max(rep["max_speed_ratio"].values()) <= 1 + 1e-9
+    # every speed step within the jump a block boundary may take at once: no acceleration beyond it
+    assert max(rep["max_jump_ratio"].values()) <= 1 + 1e-9 and max(rep["max_accel_ratio"].values()) == 0.0
     json.dumps(rep)  # JSON-able
 
 
