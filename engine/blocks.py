@@ -119,6 +119,30 @@ def _seg_max(err: np.ndarray, seg_start: np.ndarray) -> np.ndarray:
     return np.maximum.reduceat(err, seg_start) if err.size else np.zeros(0)
 
 
+def time_metric(q: np.ndarray, fmax: np.ndarray) -> np.ndarray:
+    """The (17) time metric along an axis path: ``w[0] = 0``, ``w[i] = Σ_{j<i} max_k |Δq_jk| / fmax_k``
+    (s; ``q`` (N, axes) in controller units, ``fmax`` units/s).
+
+    The same values as ``cumsum(max(|diff(q)| / fmax, axis=1))`` bit for bit (a maximum is exact);
+    taken column by column, as numpy's reduction over a short last axis is four times slower."""
+    q = np.asarray(q, dtype=float)
+    n = q.shape[0]
+    w = np.empty(n)
+    w[0] = 0.0
+    if n < 2:
+        return w
+    m = None
+    for k in range(q.shape[1]):
+        c = np.subtract(q[1:, k], q[:-1, k])
+        np.abs(c, out=c)
+        c /= fmax[k]
+        m = c if m is None else np.maximum(m, c, out=m)
+    if m is None:
+        raise ValueError("time_metric: the axis path has no axes")
+    np.cumsum(m, out=w[1:])
+    return w
+
+
 def make_blocks(machine: MachineTemplate, axis_path: AxisPath, tol_mm: float = 0.05, cyclic: bool = True,
                 min_block_time: float | None = None, state: State | None = None,
                 pieces: list[tuple[int, int]] | None = None) -> Blocks:
@@ -154,7 +178,7 @@ def make_blocks(machine: MachineTemplate, axis_path: AxisPath, tol_mm: float = 0
     n = q.shape[0]
     fmax = machine.limits("max_speed")
     # time-like progress along the path (the metric of (17))
-    w = np.concatenate(([0.0], np.cumsum(np.max(np.abs(np.diff(q, axis=0)) / fmax, axis=1))))
+    w = time_metric(q, fmax)
     if pieces is not None and len(pieces) >= 4:
         breaks = np.zeros(n, dtype=bool)
         seg_err = np.zeros(n)

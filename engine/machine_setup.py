@@ -286,7 +286,7 @@ def monotone_eye_azimuth(machine: MachineTemplate, eye_xyz: np.ndarray, fibre_di
     of turning back.  Where no point of the free fibre has that azimuth the eye is left (the back-turn
     is then reported).  Returns ``(eye_xyz, shift_mm)`` (shift along the fibre, 0 where unchanged).
     """
-    e = np.array(eye_xyz, dtype=float)
+    e = np.asarray(eye_xyz, dtype=float)            # copied only where the eye is moved
     n = e.shape[0]
     shift = np.zeros(n)
     if machine.mandrel_phase != "eye" or (machine.kind == "cartesian" and machine.axis_index("cross") is None):
@@ -307,6 +307,9 @@ def monotone_eye_azimuth(machine: MachineTemplate, eye_xyz: np.ndarray, fibre_di
     p = e[i] + t[:, None] * d[i]
     free = np.einsum("ij,ij->i", p - c[i], d[i])
     ok = np.isfinite(t) & (np.abs(den) > 1e-12) & (p[:, 0] * ct + p[:, 1] * st > 0) & (free > 0)
+    if not ok.any():
+        return e, shift
+    e = e.copy()
     e[i[ok]] = p[ok]
     shift[i[ok]] = t[ok]
     return e, shift

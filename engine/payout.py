@@ -1982,6 +1982,24 @@ def _extend_replicated(eye: EyePath, line: Any) -> EyePath | None:
         out[-1] = (a[m, 0] * cl - a[m, 1] * sl, a[m, 0] * sl + a[m, 1] * cl, a[m, 2])
         return out
 
+    # the line's own points are circuit 0's turned by the same k·Δv with the same arithmetic
+    # (engine.winding._assemble): where they match bit for bit the eye path shares the line's array
+    xyz = getattr(line, "xyz", None)
+    contact = None
+    if xyz is not None:
+        xyz = np.asarray(xyz)
+        c0 = one.contact_xyz
+
+        def turned_k(k: int, rows: slice) -> FloatArray:
+            a, c, sn = c0[rows], ck[k, 0], sk[k, 0]
+            return np.column_stack([a[:, 0] * c - a[:, 1] * sn, a[:, 0] * sn + a[:, 1] * c, a[:, 2]])
+
+        if (xyz.shape == (n, 3) and xyz.dtype == np.float64 and np.array_equal(xyz[:m + 1], c0)
+                and all(np.array_equal(xyz[k * m:(k + 1) * m], turned_k(k, slice(0, m))) for k in (1, nc // 2))
+                and np.array_equal(xyz[-1:], turned_k(nc - 1, slice(m, m + 1)))):
+            contact = xyz
+    if contact is None:
+        contact = turned(one.contact_xyz)
     s_all = np.asarray(line.s, dtype=float)
     x = s_all if eye.parameter == "s" else v
     l, R = tile(one.l), tile(one.R)
@@ -1989,7 +2007,7 @@ def _extend_replicated(eye: EyePath, line: Any) -> EyePath | None:
     lam = s_all + l - one.k * R
     out = EyePath(
         x=x, index=np.arange(n, dtype=np.int64), l=l, Z=tile(one.Z), R=R, V=V,
-        eye_xyz=turned(one.eye_xyz), contact_xyz=turned(one.contact_xyz), fibre_dir=turned(one.fibre_dir),
+        eye_xyz=turned(one.eye_xyz), contact_xyz=contact, fibre_dir=turned(one.fibre_dir),
         s=s_all, lam_pulled=lam, u=np.diff(lam) / np.diff(x), x_mid=0.5 * (x[1:] + x[:-1]), law=eye.law,
         k=one.k, parameter=eye.parameter,
     )

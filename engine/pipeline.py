@@ -1018,6 +1018,7 @@ def _block_errors(machine: Any, axes: Any, idx: np.ndarray, sel: np.ndarray | No
     """Largest eye-position error of the linear interpolation inside every block (as make_blocks
     measures it: a path point is compared at its (17) time fraction of the block), mm; with ``sel``
     (a mask over the blocks) only those blocks are measured (the others get 0)."""
+    from engine.blocks import time_metric
     from engine.kinematics import forward_kinematics
 
     q = np.asarray(axes.q, dtype=float)
@@ -1036,7 +1037,7 @@ def _block_errors(machine: Any, axes: Any, idx: np.ndarray, sel: np.ndarray | No
     first = np.concatenate([[0], np.cumsum(lengths)[:-1]])
     pts = np.arange(int(lengths.sum())) - np.repeat(first - idx[chosen] - 1, lengths)
     # the (17) time metric w at the points used (a cumulative sum over the path)
-    w = np.concatenate(([0.0], np.cumsum(np.max(np.abs(np.diff(q, axis=0)) / fmax, axis=1))))
+    w = time_metric(q, fmax)
     a, b = idx[blk], idx[blk + 1]
     span = w[b] - w[a]
     u = np.where(span > 0, (w[pts] - w[a]) / np.where(span > 0, span, 1.0), (pts - a) / (b - a))

@@ -335,3 +335,14 @@ def test_blocks_of_repeated_circuits_are_computed_once() -> None:
     # the shipped examples (fewer than 100 circuits) are approximated as a whole, as before
     small = run_pipeline(load_job(path), path, upto="axes")
     assert _block_pieces(small) is None
+
+
+def test_time_metric_is_the_17_metric_bit_for_bit():
+    from engine.blocks import time_metric
+
+    rng = np.random.default_rng(2)
+    q = np.cumsum(rng.normal(size=(5000, 4)), axis=0)
+    fmax = np.array([1000.0, 20.0, 300.0, 7.5])
+    ref = np.concatenate(([0.0], np.cumsum(np.max(np.abs(np.diff(q, axis=0)) / fmax, axis=1))))
+    assert np.array_equal(time_metric(q, fmax), ref)
+    assert np.array_equal(time_metric(q[:1], fmax), [0.0])

@@ -184,6 +184,8 @@ def test_extend_by_turning_circuit_zero_equals_pointwise() -> None:
         scale = 1.0 + np.abs(b).max()
         assert np.abs(a - b).max() <= 1e-11 * scale, (name, np.abs(a - b).max())
     assert np.abs(rep.u - ref.u).max() <= 1e-6 * (1.0 + np.abs(ref.u).max())
+    # the contact points are the line's own points (one shared array, bit for bit)
+    assert rep.contact_xyz is line.xyz
     # the eye still lies on the line's tangent at the free length
     d = np.linalg.norm(rep.eye_xyz - rep.contact_xyz, axis=1)
     assert np.abs(d - rep.l).max() < 1e-9
