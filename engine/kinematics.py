@@ -749,7 +749,10 @@ def inverse_kinematics(machine: MachineTemplate, eye_xyz: np.ndarray, fibre_dir:
     else:
         cw = _turn_about_z(ct, st, c)
         viol += _ik_robot(machine, pw, dw, cw, q_int, state)
+        del cw
+    del pw, dw, ct, st, theta, dth                # the peak of a big program: drop them before the next copy
     q = machine.to_controller(q_int)
+    del q_int
     lo, hi = machine.limits("min"), machine.limits("max")
     for k, ax in enumerate(machine.axes):
         u = " " + ax.units
