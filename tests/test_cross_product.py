@@ -151,11 +151,14 @@ def test_laminate_example_template_post(laminate_case, post, tmp_path, monkeypat
     write_laminate(res, out)
     prof = controller_for(post, None, machine)
     bare = setup_machine_for_job(jp, path)          # the template with the job's overrides, not yet placed
-    sim = simulate(read_nc(out.read_text(), bare, prof, file=out), bare, laid_line(res))
+    # the laid fibre does not depend on the dialect: matched to the line once per example and template
+    with_line = post == compatible_posts(machine)[0][0]
+    sim = simulate(read_nc(out.read_text(), bare, prof, file=out), bare, laid_line(res) if with_line else None)
     assert sim.report["ok"], [v["message"] for v in sim.report["violations"]][:3]
     rep = res.report()
     assert sim.report["program_time_s"] == pytest.approx(rep["program_time_s"], rel=1e-3)
-    assert sim.report["fibre_length_mm"] == pytest.approx(rep["fibre_length_mm"], rel=1e-3)
+    if with_line:
+        assert sim.report["fibre_length_mm"] == pytest.approx(rep["fibre_length_mm"], rel=1e-3)
     for name, (lo, hi) in rep["axis_ranges"].items():
         got = sim.report["axis_ranges"][name]
         assert got[0] == pytest.approx(lo, abs=2e-3 * max(1.0, abs(lo)))
