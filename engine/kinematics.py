@@ -751,8 +751,9 @@ def inverse_kinematics(machine: MachineTemplate, eye_xyz: np.ndarray, fibre_dir:
         viol += _ik_robot(machine, pw, dw, cw, q_int, state)
         del cw
     del pw, dw, ct, st, theta, dth                # the peak of a big program: drop them before the next copy
-    q = machine.to_controller(q_int)
-    del q_int
+    q = q_int                                     # machine.to_controller, in place (the same arithmetic)
+    q *= machine.scales
+    q += machine.offsets
     lo, hi = machine.limits("min"), machine.limits("max")
     for k, ax in enumerate(machine.axes):
         u = " " + ax.units

@@ -485,16 +485,19 @@ def _run_stage(res: PipelineResult, stage: str, state: State | None) -> Pipeline
 
         check_post(job.post.min_block_time_s, file=jp)
 
+        # internal axis positions, once for the circuit plan and the time law (an (N, axes) array)
+        X = (res.machine.to_internal(np.asarray(res.axes.q, dtype=float)) if job.timelaw.method != "blocks"
+             else None)
         blocks = make_blocks(
             res.machine, res.axes, tol_mm=job.post.tolerance_mm, min_block_time=job.post.min_block_time_s,
-            state=SubState(state, 0.0, 0.5) if state is not None else None, pieces=_block_pieces(res),
+            state=SubState(state, 0.0, 0.5) if state is not None else None, pieces=_block_pieces(res, X),
         )
         if job.timelaw.method == "blocks":
             blocks = optimise_block_times(blocks, res.machine, state=SubState(state, 0.5, 1.0) if state else None)
             return replace(res, blocks=blocks, timelaw=None, timelaw_laws=(), timelaw_labels=(), timelaw_paths=())
         kept: list[tuple[str, Any, TimeLawPath]] = []
         blocks, info = _time_law_blocks(res, blocks, SubState(state, 0.5, 1.0) if state is not None else None,
-                                        keep=kept)
+                                        keep=kept, X=X)
         return replace(res, blocks=blocks, timelaw=info, timelaw_laws=tuple(k[1] for k in kept),
                        timelaw_labels=tuple(k[0] for k in kept), timelaw_paths=tuple(k[2] for k in kept))
     if stage == "nc":
@@ -691,15 +694,16 @@ def _circuit_plan(res: PipelineResult, s: np.ndarray, X: np.ndarray) -> list[tup
 _BLOCKS_REPLICATE_MIN = 100   # circuits from which the blocks of the repeated circuit are computed once
 
 
-def _block_pieces(res: PipelineResult) -> list[tuple[int, int]] | None:
+def _block_pieces(res: PipelineResult, X: np.ndarray | None = None) -> list[tuple[int, int]] | None:
     """The circuits for :func:`engine.blocks.make_blocks`'s replication, when the program has at
     least ``_BLOCKS_REPLICATE_MIN`` circuits and circuits 2 .. n-1 repeat circuit 1 up to a constant
     mandrel angle only (to 1e-9 relative).  Smaller programs (every shipped example) are approximated
     as a whole, as before."""
     if int(getattr(res.line, "circuits", 1) or 1) < _BLOCKS_REPLICATE_MIN or res.eye is None:
         return None
-    machine, q = res.machine, np.asarray(res.axes.q, dtype=float)
-    X = machine.to_internal(q)
+    machine = res.machine
+    if X is None:
+        X = machine.to_internal(np.asarray(res.axes.q, dtype=float))
     pieces = _circuit_plan(res, np.asarray(res.eye.s, dtype=float), X)
     if len(pieces) < 4:
         return None
@@ -814,7 +818,8 @@ def _end_law(method: str, nodes: tuple[np.ndarray, ...], mid: tuple[np.ndarray, 
 
 
 def _time_law_blocks(res: PipelineResult, blocks: Any, state: State | None,
-                     keep: list[tuple[str, Any, TimeLawPath]] | None = None) -> tuple[Any, dict[str, Any]]:
+                     keep: list[tuple[str, Any, TimeLawPath]] | None = None, X: np.ndarray | None = None
+                     ) -> tuple[Any, dict[str, Any]]:
     """Block times from a time law s(t) of the whole program (see docs/timeparam.md, "NC output").
 
     ``keep`` (optional) receives ``(label, TimeLaw, TimeLawPath)`` of every law computed."""
@@ -830,7 +835,8 @@ def _time_law_blocks(res: PipelineResult, blocks: Any, state: State | None,
     q = np.asarray(axes.q, dtype=float)
     if s.shape[0] != q.shape[0]:
         raise InputError(f"the eye path has {s.shape[0]} points but the axis path {q.shape[0]}", field="timelaw")
-    X = machine.to_internal(q)
+    if X is None:
+        X = machine.to_internal(q)
     scales = np.abs(machine.scales)
     V = machine.limits("max_speed") / scales
     A = machine.limits("max_accel") / scales
