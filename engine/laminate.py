@@ -457,7 +457,14 @@ def grow_surface(surface: Any, th: Thickness, name: str = "grown", n: int = GROW
     prev = surface.meta.get("concave_tol_mm", CONCAVE_GAP_TOL_MM) if isinstance(surface.meta, dict) else \
         CONCAVE_GAP_TOL_MM
     tol = max(float(prev), float(th.t.max()))
-    return replace(grown, meta={**grown.meta, "concave_tol_mm": tol})
+    # the shafts, the chuck and the tailstock stay where the bare mandrel put them (the laminate grows over
+    # its ends): every grown surface carries the bare mandrel's support frame (machine_setup.support_obstacles)
+    frame = surface.meta.get("support_frame") if isinstance(surface.meta, dict) else None
+    if frame is None:
+        from engine.machine_setup import default_shaft_radius
+
+        frame = (float(surface.z_min), float(surface.z_max), float(default_shaft_radius(surface)))
+    return replace(grown, meta={**grown.meta, "concave_tol_mm": tol, "support_frame": tuple(frame)})
 
 
 # --------------------------------------------------------------------------------------------------

@@ -336,9 +336,18 @@ def default_shaft_radius(mandrel: Any) -> float:
 
 def support_obstacles(mandrel: Any, setup: Any) -> list[Obstacle]:
     """Shafts, chuck (left) and tailstock (right) as coaxial cylinders in the mandrel frame (defaults:
-    shaft 0.6 x the smaller end radius, chuck 2 x and tailstock 1.5 x the shaft radius)."""
-    rs = float(setup.shaft_radius_mm) if setup.shaft_radius_mm is not None else default_shaft_radius(mandrel)
-    z0, z1, gap = float(mandrel.z_min), float(mandrel.z_max), float(setup.shaft_length_mm)
+    shaft 0.6 x the smaller end radius, chuck 2 x and tailstock 1.5 x the shaft radius).  A laminate's
+    grown surface (``meta["support_frame"]``: the bare mandrel's ends and default shaft radius) keeps the
+    bare mandrel's supports."""
+    meta = getattr(mandrel, "meta", None)
+    frame = meta.get("support_frame") if isinstance(meta, dict) else None
+    if frame is not None:   # a laminate's grown surface: the supports of the bare mandrel under it
+        z0, z1, r_def = (float(x) for x in frame)
+    else:
+        z0, z1 = float(mandrel.z_min), float(mandrel.z_max)
+        r_def = default_shaft_radius(mandrel) if setup.shaft_radius_mm is None else 0.0
+    rs = float(setup.shaft_radius_mm) if setup.shaft_radius_mm is not None else r_def
+    gap = float(setup.shaft_length_mm)
     out = []
     if gap > 0:
         out += [Obstacle("left shaft", z0 - gap, z0, rs), Obstacle("right shaft", z1, z1 + gap, rs)]

@@ -511,3 +511,19 @@ def test_transition_clearance_against_the_laminate_and_the_supports() -> None:
     probs = _joined_problems(res.machine, bad, res.nc_text, layers, trans, None, res.mandrel, setup)
     clr = [p for p in probs if "gap between the eye and the laminate on a transition" in p]
     assert len(clr) == 1 and clr[0].endswith("transition to layer 2") and re.search(r"NC line \d+", clr[0])
+
+
+def test_supports_stay_those_of_the_bare_mandrel_under_the_laminate() -> None:
+    """Shafts, chuck and tailstock are machine parts: every layer's surface (grown over the mandrel's ends)
+    is checked against the bare mandrel's supports, not supports moved and widened with the laminate."""
+    from engine.job import SetupSpec
+    from engine.machine_setup import support_obstacles
+
+    res = run_laminate(parse_job(VESSEL), upto="winding")
+    setup = SetupSpec()
+    bare = support_obstacles(res.mandrel, setup)
+    grown = res.layers[-1].surface
+    assert grown.z_min < res.mandrel.z_min - 0.1          # the laminate does grow over the end
+    for lr in res.layers:
+        assert support_obstacles(lr.surface, setup) == bare, lr.index
+    assert support_obstacles(res.final_surface, SetupSpec(shaft_radius_mm=12.0))[0].radius == 12.0
