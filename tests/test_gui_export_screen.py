@@ -160,3 +160,57 @@ def test_report_export_describes_the_run_on_screen(pipe_run, tmp_path) -> None:
     assert not w.export_report(late)
     assert w.wait_idle(pipeline=False) and not late.exists()
     assert "Export disabled" in w.status_msg.text()
+
+
+def test_machine_step_edits_after_a_run_disable_export(pipe_run, tmp_path) -> None:
+    """The Machine step's own editors (not section rows): every [machine.setup] field, every limit cell of
+    every axis, the template, the dialect and the controller profile - each edit after a run disables
+    export until it is undone (typed back or picked back)."""
+    from winder_gui.panels.machine_panel import DEFAULT_CONTROLLER, LIMIT_COLUMNS
+
+    w = pipe_run
+    w.go_to_step("machine")
+    mp = w.machine_panel
+    edited = 0
+
+    def back(where: str) -> None:
+        assert w.wait_idle(pipeline=False)
+        assert w.job == w.doc.result_job and _export_enabled(w), f"{where}: back"
+
+    for key, ed in mp.setup_edits.items():
+        old = ed.text()
+        ed.setText(_different(old) if old else "7")
+        mp._on_edited()
+        _check_refused(w, f"setup {key}", tmp_path)
+        ed.setText(old)
+        mp._on_edited()
+        back(f"setup {key}")
+        edited += 1
+    for row in mp.axes_rows():
+        for key, _h in LIMIT_COLUMNS:
+            old = row[key]
+            mp.set_cell(row["name"], key, _different(old) if old else "5000")
+            _check_refused(w, f"axis {row['name']} {key}", tmp_path)
+            mp.set_cell(row["name"], key, old)
+            back(f"axis {row['name']} {key}")
+            edited += 1
+    # the combos, picked as a user does (activated)
+    for combo, handler in ((mp.post_combo, mp._on_post), (mp.controller_combo, mp._on_edited)):
+        old = combo.currentText()
+        other = next(combo.itemText(i) for i in range(combo.count()) if combo.itemText(i) != old)
+        combo.setCurrentText(other)
+        handler()
+        _check_refused(w, f"{combo.objectName()} {old} -> {other}", tmp_path)
+        combo.setCurrentText(old)
+        handler()
+        if combo is mp.post_combo:   # the profile list follows the dialect: pick the job's back too
+            mp.controller_combo.setCurrentText(w.doc.result_job.post.controller or DEFAULT_CONTROLLER)
+            mp._on_edited()
+        back(combo.objectName())
+        edited += 1
+    old = mp.template_combo.currentText()
+    mp.select_template("lathe4")
+    _check_refused(w, "template lathe2 -> lathe4", tmp_path)
+    w.undo_stack.undo()
+    back("template")
+    assert edited >= 13 + 2 * len(LIMIT_COLUMNS) and old == "lathe2"
