@@ -346,7 +346,7 @@ def test_unwrap_angles_is_numpy_unwrap_bit_for_bit():
     rng = np.random.default_rng(11)
     walks = [np.angle(np.exp(1j * np.cumsum(rng.normal(0.0, 0.3, 5000)))),
              np.angle(np.exp(1j * np.cumsum(rng.uniform(0.0, 0.2, 20000)))),
-             rng.uniform(-10.0, 10.0, 3000),
+             rng.uniform(-10.0, 10.0, 3000), rng.uniform(-10.0, 10.0, 60000),
              np.array([0.0, np.pi, 0.0, -np.pi, 0.0, 2 * np.pi, -3.5, 3.5]),
              np.linspace(-1.0, 1.0, 100)]
     nan = walks[0].copy()
