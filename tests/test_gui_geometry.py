@@ -105,3 +105,15 @@ def test_closed_pole_profile_builds_and_converts() -> None:
     z, r, dev = sketch_points(m, tol_mm=0.05)
     assert np.all(r >= 0.0) and r[0] < 1e-12 and r[-1] < 1e-12
     Mandrel.from_points(z, r)              # a valid sketch
+
+
+def test_sorted_unique_is_numpy_unique() -> None:
+    """The sort-based unique of the decimation (lets the GUI thread run) equals np.unique."""
+    import numpy as np
+
+    from winder_gui.views.geometry import _sorted_unique
+
+    rng = np.random.default_rng(0)
+    for n in (0, 1, 2, 1000, 100_000):
+        a = rng.integers(0, n // 2 + 1, n).astype(np.int64)
+        assert np.array_equal(_sorted_unique(a), np.unique(a))
