@@ -258,8 +258,20 @@ def field_line(file: str | Path, field: str) -> int | None:
         text = p.read_text(encoding="utf-8", errors="replace")
     except OSError:
         return None
-    loc = tuple(x for x in field.replace("]", "").replace("[", ".").split(".") if x and not x.isdigit())
-    return _find_line(text, loc)
+    parts = [x for x in field.replace("]", "").replace("[", ".").split(".") if x]
+    if len(parts) >= 2 and parts[0] == "layer" and parts[1].isdigit():  # 'layer.3.band.width_mm': 3rd [[layer]]
+        from engine.job import _find_line_in_array
+
+        line = _find_line_in_array(text, "layer", int(parts[1]) - 1, [x for x in parts[2:] if not x.isdigit()])
+        if line is not None:
+            return line
+    if len(parts) >= 3 and parts[:2] == ["mandrel", "segments"] and parts[2].isdigit():
+        from engine.job import _segment_line
+
+        line = _segment_line(text, int(parts[2]), parts[3] if len(parts) > 3 else None)
+        if line is not None:
+            return line
+    return _find_line(text, tuple(x for x in parts if not x.isdigit()))
 
 
 def check_laminate(job: Any, mandrel: Any, *, file: str | Path | None = None) -> Estimate:
@@ -302,10 +314,17 @@ def check_laminate(job: Any, mandrel: Any, *, file: str | Path | None = None) ->
                     else length)
             pitch = b * (1.0 - float(layer.overlap))
             passes = 1 if layer.terminal else int(layer.passes)
-            count = passes * (abs(span) / pitch + 1.0) * int(layer.points_per_turn) * int(layer.repeat)
-            est = Estimate("hoop-layer points", count, BYTES_PER_LINE_POINT, field=f"{pre}.overlap",
-                           detail=f"layer {i + 1}: {passes} pass(es) × {abs(span) / pitch:.4g} turns × "
-                                  f"{layer.points_per_turn} points a turn")
+            turns = abs(span) / pitch + 1.0
+            count = passes * turns * int(layer.points_per_turn) * int(layer.repeat)
+            # the field named is the factor furthest above its default (a size attack names the one it set)
+            factors = {f"{pre}.repeat": float(layer.repeat), f"{pre}.passes": float(passes),
+                       f"{pre}.points_per_turn": layer.points_per_turn / 72.0,
+                       f"{pre}.overlap": 1.0 / (1.0 - float(layer.overlap)),
+                       where("band.width_mm"): 10.0 / b, f"{pre}.z_range_mm": abs(span) / max(length, 1e-9)}
+            worst_factor = max(factors, key=factors.__getitem__)
+            est = Estimate("hoop-layer points", count, BYTES_PER_LINE_POINT, field=worst_factor,
+                           detail=f"layer {i + 1}: {passes} pass(es) × {turns - 1.0:.4g} turns × "
+                                  f"{layer.points_per_turn} points a turn × repeat {layer.repeat}")
             check(est, file=file)
         else:
             spec = effective_winding(job, layer, mandrel)

@@ -681,6 +681,7 @@ def _find_line_in_array(text: str, table: str, index: int, keys: list[str]) -> i
     """Line (1-based) of ``keys`` inside the ``index``-th ``[[table]]`` (its header when absent)."""
     count = -1
     header: int | None = None
+    inline: int | None = None
     sub = ""
     for i, line in enumerate(text.splitlines(), start=1):
         h = _HEADER.match(line)
@@ -707,7 +708,9 @@ def _find_line_in_array(text: str, table: str, index: int, keys: list[str]) -> i
         k = _KEY.match(line)
         if k and sub == ".".join(keys[:-1]) and k.group(1).strip("\"'") == keys[-1]:
             return i
-    return header
+        if k and not sub and len(keys) > 1 and k.group(1).strip("\"'") == keys[0] and inline is None:
+            inline = i  # an inline table: 'band = { width_mm = ... }'
+    return inline or header
 
 
 def build_mandrel(job: Job, job_path: str | Path | None = None) -> Any:

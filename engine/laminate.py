@@ -1412,8 +1412,10 @@ def _deg_to_units(ax: Any, deg: float) -> float:
 
 
 def laminate_refusals(result: LaminateResult) -> list[str]:
-    """Why the joined program must not be written (each naming its layer): machine-limit violations and
-    slipping lines of every layer; empty when it may be written."""
+    """Why the joined program must not be written (each naming its layer): machine-limit violations, and
+    per layer what ``winder trajectory`` / ``winder payout`` / ``winder layup`` report as failing (the band
+    slips or bridges, the eye path is infeasible, as :func:`engine.pipeline.process_refusals`); empty when it
+    may be written."""
     out: list[str] = [g.message for g in result.violation_groups()] + list(result.program_problems)
     for lr in result.layers:
         if lr.result is None:

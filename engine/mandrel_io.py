@@ -747,8 +747,10 @@ def _dxf_pieces(entities: list[Any], scale: float) -> tuple[list[_Piece], list[A
                     verts = [part.dxf.start, part.dxf.end]
                 elif pt == "ARC":  # exact points on the circle (ezdxf paths would use Bezier arcs)
                     verts = list(part.flattening(sagitta=distance))
-                elif pt in ("SPLINE", "ELLIPSE"):
-                    verts = list(part.flattening(distance, segments=16))
+                elif pt == "SPLINE":  # flattened in the drawing plane (z dropped, as for every other point)
+                    verts = _bounded(_planar_bspline(part).flattening(distance, segments=16), label)
+                elif pt == "ELLIPSE":
+                    verts = _bounded(part.flattening(distance, segments=16), label)
                 else:
                     continue
                 v = np.array([(q.x, q.y) for q in verts], dtype=float)
@@ -759,6 +761,39 @@ def _dxf_pieces(entities: list[Any], scale: float) -> tuple[list[_Piece], list[A
         except Exception as exc:  # noqa: BLE001
             raise InputError(f"cannot flatten {label} ({type(exc).__name__}: {exc})") from None
     return pieces, ignored, curves
+
+
+MAX_FLATTEN_POINTS = 200_000
+"""Most points one DXF curve may flatten into (an adaptive subdivision that does not converge, e.g. on
+a spline with a control point far off the drawing plane, is refused instead of running for hours)."""
+
+
+def _planar_bspline(spline: Any) -> Any:
+    """The B-spline of a DXF SPLINE with its control points projected on the drawing plane (z = 0): the
+    profile uses x and y only, and a control point far out of the plane would make the adaptive
+    flattening subdivide without end (its distances are measured in 3D)."""
+    from ezdxf.math import BSpline
+
+    tool = spline.construction_tool()
+    knots = np.asarray(list(spline.knots), dtype=float)  # as written in the file
+    if knots.size and not (np.isfinite(knots).all() and (np.diff(knots) >= 0).all() and knots[-1] > knots[0]):
+        i = int(np.flatnonzero(~np.isfinite(knots) | np.r_[False, np.diff(knots) < 0])[0]) if not (
+            np.isfinite(knots).all() and (np.diff(knots) >= 0).all()) else knots.size - 1
+        raise InputError(f"{_entity_label(spline)}: its knot vector is not finite and increasing (knot {i + 1} of "
+                         f"{knots.size} is {knots[i]:g})")
+    return BSpline([(p.x, p.y, 0.0) for p in tool.control_points], order=tool.order, knots=tool.knots(),
+                   weights=tool.weights() or None)
+
+
+def _bounded(points: Any, label: str) -> list[Any]:
+    """At most :data:`MAX_FLATTEN_POINTS` points of a flattening generator, else an InputError."""
+    import itertools
+
+    out = list(itertools.islice(points, MAX_FLATTEN_POINTS + 1))
+    if len(out) > MAX_FLATTEN_POINTS:
+        raise InputError(f"{label} flattens into more than {MAX_FLATTEN_POINTS} points within the drawing's "
+                         "tolerance (a degenerate curve); redraw or simplify it")
+    return out
 
 
 def _profile_from_pieces(pieces: list[_Piece], curves: list[Any]) -> tuple[FloatArray, FloatArray]:

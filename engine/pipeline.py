@@ -181,6 +181,24 @@ class PipelineResult:
         return rep
 
 
+def process_refusals(result: Any) -> list[str]:
+    """Why the process itself fails, as ``winder trajectory`` (slip, bridging) and ``winder payout``
+    (an infeasible eye path) report it with exit code 1; empty when it does not.  ``winder run``
+    refuses to write a program for any of these (unless ``--force``)."""
+    out: list[str] = []
+    line = result.line
+    if line is not None:
+        for z0, z1 in getattr(line, "slips", ()) or ():
+            out.append(f"the band slips (|λ| up to {line.max_abs_lambda:.4g} > μ = {line.mu:g}) for z in "
+                       f"[{z0:.2f}, {z1:.2f}] mm")
+        for z0, z1 in getattr(line, "bridging", ()) or ():
+            out.append(f"the band bridges (does not lie on the mandrel) for z in [{z0:.2f}, {z1:.2f}] mm")
+    eye = result.eye_circuit
+    if eye is not None and not eye.feasible:
+        out += _payout_warnings(eye)
+    return out
+
+
 def _payout_warnings(eye: Any) -> list[str]:
     """One line per payout constraint the eye path breaks: where and by how much."""
     law = eye.report.get("law", "?")

@@ -425,6 +425,11 @@ class _Problem:
     ineg: np.ndarray | None = None
 
 
+MAX_PATH_VALUE = 1e9
+"""Largest |s| (mm) and |X|, |dX|, |ddX| (axis units, per mm, per mm²) of a path: beyond it the numbers are
+a unit mistake and their squares would overflow the interval polynomials."""
+
+
 def _validate(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits | None) -> tuple[np.ndarray, ...]:
     s = np.asarray(path_s, dtype=float)
     if s.ndim != 1 or s.size < 2:
@@ -439,6 +444,10 @@ def _validate(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits | None)
             raise InputError(f"{name} must have shape (N={n}, p), got {a.shape}", field=name)
         if not np.all(np.isfinite(a)):
             raise InputError(f"{name} has non-finite values", field=name)
+        big = np.flatnonzero(np.abs(a).max(axis=1) > MAX_PATH_VALUE) if a.size else np.array([], int)
+        if big.size:
+            raise InputError(f"{name}[{int(big[0])}] = {np.abs(a[big[0]]).max():g} is beyond {MAX_PATH_VALUE:g} "
+                             "(axis units per mm of path): check the units", field=name)
         arrs.append(a)
     p = arrs[0].shape[1]
     if arrs[1].shape[1] != p or arrs[2].shape[1] != p:
@@ -447,6 +456,11 @@ def _validate(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits | None)
     if not np.all(np.isfinite(s)) or np.any(np.diff(s) <= 0):
         i = int(np.argmax(~(np.diff(s) > 0)))
         raise InputError(f"s must increase strictly; s[{i}] = {s[i]} >= s[{i + 1}] = {s[i + 1]}", field="s")
+    span = float(s[-1] - s[0])
+    if not (np.abs(s).max() <= MAX_PATH_VALUE and np.diff(s).min() >= 1e-12 * span):
+        i = int(np.argmin(np.diff(s)))
+        raise InputError(f"s must lie within ±{MAX_PATH_VALUE:g} mm with steps of at least 1e-12 of its range; "
+                         f"s[{i}] = {s[i]:g}, s[{i + 1}] = {s[i + 1]:g}", field="s")
     if limits is None:  # the arrays alone (load_path_npz)
         return s, arrs[0], arrs[1], arrs[2]
     if len(limits.v_max) != p or len(limits.a_max) != p:
@@ -454,6 +468,11 @@ def _validate(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits | None)
                          f"a_max has {len(limits.a_max)} values", field="v_max")
     if min(limits.v_max) <= 0 or min(limits.a_max) <= 0:
         raise InputError("v_max and a_max must be > 0", field="a_max")
+    for name in ("v_max", "a_max"):
+        vals = getattr(limits, name)
+        if not all(1e-9 <= float(v) <= MAX_PATH_VALUE for v in vals):
+            raise InputError(f"{name} = {list(vals)}: every value must be in 1e-9..{MAX_PATH_VALUE:g} (axis units "
+                             "per s, per s²): check the units", field=name)
     if not 2 <= limits.levels <= _MAX_LEVELS:
         raise InputError(f"levels must be in 2..{_MAX_LEVELS}, got {limits.levels}", field="levels")
     if limits.accel_check not in ("interval", "arrival"):

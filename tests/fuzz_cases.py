@@ -133,6 +133,148 @@ template = "lathe4"
 method = "blocks"
 """
 
+SMALL_LAYERED = """schema_version = 2
+name = "fuzz laminate"
+[mandrel]
+kind = "pipe"
+radius_mm = 40.0
+length_mm = 200.0
+[band]
+width_mm = 10.0
+thickness_mm = 0.4
+friction = 0.2
+[winding]
+mode = "geodesic"
+points_per_pass = 100
+dwell_deg = [180.0, 180.0]
+[[winding.angles]]
+z_mm = 100.0
+angle_deg = 55.0
+[payout]
+law = "min-range"
+grid_points = 200
+[machine]
+template = "lathe2"
+[machine.axes.X]
+max = 1800.0
+[timelaw]
+method = "blocks"
+[post]
+post = "linuxcnc"
+[[layer]]
+kind = "hoop"
+name = "inner hoop"
+passes = 1
+[[layer]]
+kind = "helical"
+name = "helical 55"
+repeat = 1
+[[layer]]
+kind = "skip"
+angle_deg = 30.0
+[[layer]]
+kind = "hoop"
+name = "outer hoop"
+terminal = true
+"""
+
+SMALL_LAYERED_VESSEL = """schema_version = 2
+name = "fuzz vessel laminate"
+[mandrel]
+kind = "vessel"
+radius_mm = 50.0
+cylinder_length_mm = 100.0
+dome = "isotensoid"
+pole_radius_mm = [15.0, 20.0]
+[band]
+width_mm = 10.0
+thickness_mm = 0.3
+friction = 0.2
+[winding]
+mode = "auto"
+points_per_pass = 100
+[payout]
+law = "min-range"
+grid_points = 200
+[machine]
+template = "lathe4"
+[timelaw]
+method = "blocks"
+[post]
+post = "fanuc"
+[[layer]]
+kind = "polar"
+name = "polar"
+[[layer]]
+kind = "hoop"
+name = "hoop"
+[layer.band]
+width_mm = 8.0
+"""
+
+LAYER_ATTACKS = [("passes", ["1000", "1000000", "0", "-1", "1e308", "500"]),
+                 ("repeat", ["1000", "1000000000", "0", "999"]),
+                 ("z_range_mm", ["[-1e6, 1e6]", "[500, 900]", "[100, 100]", "[1e308, -1e308]", "[nan, 5]",
+                                 "[-50, 10]"]),
+                 ("overlap", ["0.999999", "1", "-0.5", "nan"]),
+                 ("points_per_turn", ["2000", "8", "1e9", "7"]),
+                 ("angle_deg", ["1e308", "-1e308", "1e-300", "89.9999999", "0.0000001", "nan", "720000"]),
+                 ("circuits", ["1000000000", "100000", "1"]),
+                 ("pattern_p", ["1000000000000", "997", "50000"]),
+                 ("points_per_pass", ["200000", "50"]),
+                 ("dwell_deg", ["[1e308, 1e308]", "[1e6, 0]", "[3600, 3600]"]),
+                 ("lead_in_mm", ["1e308", "1e9", "-1"]),
+                 ("lead_out_deg", ["1e308", "1e9", "3600000"]),
+                 ("pole_c_mm", ["[1e6, 1e6]", "[0, 0]", "[39.999, 39.999]"]),
+                 ("kind", ['"hoop"', '"polar"', '"skip"', '"helical"', '"bogus"', "3"]),
+                 ("enabled", ["false", "0", '"yes"']),
+                 ("terminal", ["true", "1"]),
+                 ("band", ["{ width_mm = 1e-9 }", "{ width_mm = 1e6 }", "{ thickness_mm = 1e308 }",
+                           "{ width_mm = 0.001, thickness_mm = 1e-9 }", "{ tows = 1000 }", "{ friction = 1e-9 }",
+                           "{ width_mm = 100 }", "{ nosuch = 1 }"])]
+
+
+def mutate_layers(text: str, rng: random.Random) -> str:
+    """Mutations of the ``[[layer]]`` tables: a field of one layer set to an extreme (huge passes or
+    repeat, an absurd band, a hoop range outside the mandrel, a skip of 1e308 deg), layers duplicated
+    many times or all removed."""
+    x = rng.random()
+    if x < 0.12:  # many layers: a long laminate (every copy is a layer to wind)
+        n = rng.choice([50, 2000, 100_000, 1_000_000])
+        layer = rng.choice(['[[layer]]\nkind = "skip"\nangle_deg = 1.0\n', '[[layer]]\nkind = "hoop"\n',
+                            '[[layer]]\nkind = "helical"\n'])
+        return text + layer * n
+    if x < 0.16:
+        return re.sub(r"(?ms)^\[\[layer\]\].*", "", text) + "[[layer]]\n"
+    starts = [m.start() for m in re.finditer(r"(?m)^\[\[layer\]\]$", text)]
+    if not starts:
+        return text + "[[layer]]\nkind = \"hoop\"\n"
+    k = rng.randrange(len(starts))
+    key, vals = rng.choice(LAYER_ATTACKS)
+    val = rng.choice(vals)
+    end = starts[k + 1] if k + 1 < len(starts) else len(text)
+    block = text[starts[k]:end]
+    if key == "band" and "[layer.band]" in block:
+        block = block.split("[layer.band]")[0]
+    if re.search(rf"(?m)^{key}\s*=", block):
+        block = re.sub(rf"(?m)^{key}\s*=.*$", f"{key} = {val}", block, count=1)
+    else:
+        block = block.replace("[[layer]]\n", f"[[layer]]\n{key} = {val}\n", 1)
+    return text[:starts[k]] + block + text[end:]
+
+
+NC_PROGRAM = """%
+(fuzz program)
+G21 G90 G94
+G0 X0 Y0 Z0
+G1 X10 Y90 F1000
+G1 X20 Y180 Z5 F1200
+G1 X30 Y270 Z0 F900
+G1 X40 Y360 F1000
+M2
+%
+"""
+
 LIMITS = """v_max = [100.0, 50.0]
 a_max = [500.0, 300.0]
 levels = 40
@@ -377,7 +519,8 @@ def _out(rng: random.Random, name: str) -> tuple[str, bool]:
 
 def make_case(i: int, rng: random.Random, heavy: bool = True) -> Case:
     """Case ``i``: a random kind (job, profile, npz, arguments), random mutations."""
-    kinds = ["job"] * 8 + ["csv"] * 3 + ["dxf"] * 2 + ["npz"] * 2 + ["args"] * 3 + (["step"] if heavy else [])
+    kinds = (["job"] * 6 + ["layered"] * 6 + ["csv"] * 3 + ["dxf"] * 2 + ["npz"] * 2 + ["args"] * 3 + ["nc"]
+             + (["step"] if heavy else []))
     kind = rng.choice(kinds)
     name = f"{i:05d}-{kind}"
     files: dict[str, bytes] = {}
@@ -408,6 +551,46 @@ def make_case(i: int, rng: random.Random, heavy: bool = True) -> Case:
                 outputs += ["line.csv"] if ok else []
         else:
             argv.append("--json")
+    elif kind == "layered":
+        text = rng.choice([SMALL_LAYERED, SMALL_LAYERED_VESSEL])
+        for _ in range(rng.randint(1, 2)):
+            text = mutate_layers(text, rng)
+        if rng.random() < 0.3:
+            text = mutate_job(text, rng)
+        files["job.toml"] = text.encode("utf-8", "replace")
+        cmd = rng.choice(["run", "run", "layup", "layup", "report", "trajectory"])
+        argv = [cmd, "{d}/job.toml"]
+        if cmd == "run":
+            o, ok = _out(rng, "out.ngc")
+            argv += ["-o", o, "--quiet"]
+            outputs += ["out.ngc"] if ok else []
+            if ok and rng.random() < 0.3:
+                previous["out.ngc"] = b"G0 X0 ; the previous program\n"
+            if rng.random() < 0.1:
+                argv.append("--force")
+        elif cmd == "layup":
+            argv += ["--json"] + (["--no-program"] if rng.random() < 0.3 else [])
+            if rng.random() < 0.3:
+                o, ok = _out(rng, "t.csv")
+                argv += ["--thickness", o]
+                outputs += ["t.csv"] if ok else []
+        elif cmd == "report":
+            o, ok = _out(rng, "r.html")
+            argv += ["-o", o, "--quiet"]
+            outputs += ["r.html"] if ok else []
+        else:
+            argv.append("--json")
+    elif kind == "nc":
+        prog = NC_PROGRAM
+        for _ in range(rng.randint(1, 3)):
+            prog = _mutate_text(prog, rng)
+        if rng.random() < 0.1:
+            prog = "G1 X1 Y1 F100\nG1 X2 Y2\n" * rng.choice([1000, 200_000])
+        files["prog.ngc"] = prog.encode("utf-8", "replace")
+        argv = ["simulate", "{d}/prog.ngc", "--json", "--machine", rng.choice(["lathe2", "lathe4", "nosuch", ""])]
+        if rng.random() < 0.3:
+            files["job.toml"] = mutate_job(SMALL_PIPE, rng).encode("utf-8", "replace")
+            argv += ["--job", "{d}/job.toml"]
     elif kind in ("csv", "dxf", "step"):
         src = {"csv": EXAMPLES / "bottle_profile.csv", "dxf": EXAMPLES / "vessel_profile.dxf",
                "step": EXAMPLES / "vessel.step"}[kind]
@@ -612,6 +795,13 @@ class Runner:
             res.problems["slow"] = f"{res.cpu_s:.1f} s of CPU > {time_budget_s:g} s (wall {res.elapsed_s:.1f} s)"
         if res.peak_rss > self.memory_budget:
             res.problems["memory"] = f"peak {res.peak_rss / 2**20:.0f} MB > {self.memory_budget / 2**20:.0f} MB"
+        err_line = next((ln for ln in res.stderr.splitlines() if ": error: " in ln), "")
+        if res.rc == 2 and err_line and "usage:" not in res.stderr and case.files:
+            # a bad input names its place: the file (or the option), and in a job file the line of the field
+            if str(d) not in err_line and "field '" not in err_line:
+                res.problems["unlocated"] = err_line[:200]
+            elif re.search(r"\.toml, field '", err_line):
+                res.problems["no line"] = err_line[:200]
         left = [p.name for p in d.iterdir() if ".winder-" in p.name or re.match(r"^\..+\.\w{8}\.\w+$", p.name)]
         if left:
             res.problems["temp file"] = ", ".join(left)

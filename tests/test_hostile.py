@@ -299,6 +299,8 @@ def _path_arrays(n: int = 40) -> dict[str, np.ndarray]:
     ({"ddX": np.zeros((40, 2, 2))}, "3 dimensions"),
     ({"s": np.linspace(100.0, 0.0, 40)}, "increase strictly"),
     ({"X": np.zeros((7, 2))}, "shape"),
+    ({"dX": np.full((40, 2), 1e308)}, "beyond 1e+09"),  # found by the fuzzer: dp overflowed, NaN in the JSON
+    ({"s": np.linspace(0.0, 1e300, 40)}, "within ±1e+09 mm"),
 ])
 def test_bad_npz_paths_are_input_errors(tmp_path, capsys, change, words) -> None:
     lim = tmp_path / "limits.toml"
@@ -333,6 +335,21 @@ def test_run_refuses_what_trajectory_reports_as_slipping(tmp_path, capsys) -> No
     out = tmp_path / "o.ngc"
     rc, _, err = _cli(capsys, "run", str(job), "-o", str(out), "--quiet")
     assert rc_t == 1 and rc == 1 and not out.exists() and "slips" in err and "--force" in err
+    rc, _, _ = _cli(capsys, "run", str(job), "-o", str(out), "--quiet", "--force")
+    assert rc == 0 and out.exists()
+
+
+def test_run_of_a_laminate_refuses_what_payout_and_layup_report_infeasible(tmp_path, capsys) -> None:
+    """A layered job whose helical layer's eye path sags at the pins (parallel law): ``payout`` and
+    ``layup`` exit 1, and ``run`` writes nothing (exit 1, naming the layer) unless --force."""
+    text = PIPE.replace("schema_version = 1", "schema_version = 2").replace('law = "min-range"', 'law = "parallel"')
+    job = _job(tmp_path, text + '[[layer]]\nkind = "hoop"\n[[layer]]\nkind = "helical"\nname = "h55"\n')
+    rc_p, _, _ = _cli(capsys, "payout", str(job))
+    rc_l, _, _ = _cli(capsys, "layup", str(job), "--quiet")
+    out = tmp_path / "o.ngc"
+    rc, _, err = _cli(capsys, "run", str(job), "-o", str(out), "--quiet")
+    assert (rc_p, rc_l, rc) == (1, 1, 1) and not out.exists(), err
+    assert "layer 2 (h55): payout (parallel law)" in err and "--force" in err, err
     rc, _, _ = _cli(capsys, "run", str(job), "-o", str(out), "--quiet", "--force")
     assert rc == 0 and out.exists()
 
@@ -490,6 +507,28 @@ def test_sketch_with_too_many_points_is_refused(tmp_path, capsys) -> None:
     assert rc == 2 and "line 4, field 'mandrel.z_mm'" in err and "at most 20000" in err
 
 
+def test_dxf_spline_with_a_broken_knot_vector_is_refused_quickly(tmp_path, capsys) -> None:
+    """Found by the fuzzer: a SPLINE whose last knot was 0 made ezdxf's adaptive flattening subdivide for
+    hours (trajectory hung); a control point far off the drawing plane did the same."""
+    import ezdxf
+
+    doc = ezdxf.readfile(EXAMPLES / "vessel_profile.dxf")
+    spline = next(e for e in doc.modelspace() if e.dxftype() == "SPLINE")
+    knots = list(spline.knots)
+    spline.knots = knots[:-1] + [0.0]
+    p = tmp_path / "knots.dxf"
+    doc.saveas(p)
+    rc, _, err = _cli(capsys, "mandrel", str(p))
+    assert rc == 2 and str(p) in err and "knot vector is not finite and increasing" in err, err
+    spline.knots = knots
+    cps = [tuple(c) for c in spline.control_points]
+    cps[15] = (cps[15][0], cps[15][1], 1.23456789e7)
+    spline.control_points = cps
+    doc.saveas(p)
+    rc, _, err = _cli(capsys, "mandrel", str(p))
+    assert rc == 0, err  # the profile is the drawing's x, y: the spline is flattened in its plane
+
+
 def test_huge_dxf_is_refused_before_parsing(tmp_path, capsys) -> None:
     from engine.mandrel_io import MAX_DXF_TAGS
 
@@ -508,6 +547,36 @@ def test_laminate_layers_are_budgeted(tmp_path, capsys, extra, field, words) -> 
     job = _job(tmp_path, text)
     rc, _, err = _cli(capsys, "run", str(job), "-o", str(tmp_path / "o.ngc"), "--quiet")
     assert rc == 2 and f"field '{field}'" in err and words in err and str(job) in err, err
+
+
+LAYERED = PIPE.replace("schema_version = 1", "schema_version = 2") + """[[layer]]
+kind = "hoop"
+name = "inner"
+[[layer]]
+kind = "helical"
+[[layer]]
+kind = "hoop"
+name = "outer"
+"""
+
+
+@pytest.mark.parametrize(("edit", "field", "words"), [
+    ("passes = 1000\nrepeat = 1000", "layer.3.repeat", "hoop-layer points"),
+    ("points_per_turn = 2000\npasses = 1000", "layer.3.passes", "hoop-layer points"),
+    ("z_range_mm = [-1e6, 1e6]", "layer.3.z_range_mm", "hoop-layer points"),
+    ("z_range_mm = [500.0, 900.0]", "layer.3.z_range_mm", "outside the surface"),
+    ("band = { width_mm = 1e-9 }", "layer.3.band.width_mm", "narrower than a single fibre"),
+])
+def test_hostile_layer_fields_name_their_layer_line_and_field(tmp_path, capsys, edit, field, words) -> None:
+    """A size attack on one layer is refused before any work, naming that layer's field and its line in
+    the file (the third [[layer]], not the first one that has the key)."""
+    job = _job(tmp_path, LAYERED.replace('name = "outer"', 'name = "outer"\n' + edit))
+    key = field.split(".")[2] + " ="
+    line = max(i for i, ln in enumerate(job.read_text().splitlines(), 1) if ln.startswith(key))
+    out = tmp_path / "o.ngc"
+    rc, _, err = _cli(capsys, "run", str(job), "-o", str(out), "--quiet")
+    assert rc == 2 and not out.exists(), err
+    assert f"{job}, line {line}, field '{field}'" in err and words in err, err
 
 
 def test_laminate_sum_of_layers_is_budgeted(tmp_path) -> None:

@@ -79,7 +79,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 budget.set_max_memory(budget.parse_size(args.max_memory))
             rc = int(args._run(args) or 0)
         except InputError as exc:
-            print(f"winder {args.command}: error: {exc}", file=sys.stderr)
+            print(f"winder {args.command}: error: {_located(exc, getattr(args, 'job', None))}", file=sys.stderr)
             rc = 2
         except KeyboardInterrupt:
             print("winder: interrupted", file=sys.stderr)
@@ -96,6 +96,27 @@ def main(argv: Sequence[str] | None = None) -> int:
     if rc in (0, 1):  # after an input error the message says it all
         _report_warnings(args.command, caught)
     return rc
+
+
+def _located(exc: InputError, job: str | None) -> InputError:
+    """``exc`` with its place completed: an error naming a job field but no file is the job file's, and
+    a field of a ``.toml`` file gets its line (best effort: the key's line, else its table's header)."""
+    loc = exc.location
+    if not loc.field or loc.field.startswith("-"):
+        return exc
+    if loc.file is None and isinstance(job, str) and job.lower().endswith(".toml"):
+        exc = exc.at(file=job)
+        loc = exc.location
+    if loc.line is None and loc.file and loc.file.lower().endswith(".toml"):
+        from engine.budget import field_line
+
+        try:
+            line = field_line(loc.file, loc.field)
+        except Exception:  # noqa: BLE001 - the line is a courtesy; the message stands without it
+            line = None
+        if line is not None:
+            exc = exc.at(line=line)
+    return exc
 
 
 def _broken_pipe() -> int:

@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from typing import Any
 
 from engine.errors import InfeasibleError
 
@@ -22,31 +21,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bar, no stage times")
 
 
-def process_refusals(result: Any) -> list[str]:
-    """Why the process itself fails, as ``winder trajectory`` (slip, bridging) and ``winder payout``
-    (an infeasible eye path) report it with exit code 1; empty when it does not."""
-    from engine.pipeline import _payout_warnings
-
-    out: list[str] = []
-    line = result.line
-    if line is not None:
-        for z0, z1 in getattr(line, "slips", ()) or ():
-            out.append(f"the band slips (|λ| up to {line.max_abs_lambda:.4g} > μ = {line.mu:g}) for z in "
-                       f"[{z0:.2f}, {z1:.2f}] mm")
-        for z0, z1 in getattr(line, "bridging", ()) or ():
-            out.append(f"the band bridges (does not lie on the mandrel) for z in [{z0:.2f}, {z1:.2f}] mm")
-    eye = result.eye_circuit
-    if eye is not None and not eye.feasible:
-        out += _payout_warnings(eye)
-    return out
-
-
 def run(args: argparse.Namespace) -> int:
     t_start = time.perf_counter()
     from engine.cli import dump_json
     from engine.fileio import atomic_write_text, check_output_path
     from engine.job import load_job
-    from engine.pipeline import run_pipeline, write_program
+    from engine.pipeline import process_refusals, run_pipeline, write_program
     from engine.state import CliState
 
     out = check_output_path(args.output, "NC program")
