@@ -49,6 +49,9 @@ SUPPORTED_VERSIONS = (1, 2)
 PositiveMM = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNegMM = Annotated[float, Field(ge=0, allow_inf_nan=False)]
 Finite = Annotated[float, Field(allow_inf_nan=False)]
+MAX_TURN_DEG = 3600.0
+"""Largest mandrel rotation of a skip layer or a layer's lead-out (deg): 10 turns; more is a unit mistake
+and would be a transition of millions of blocks."""
 
 
 class _Model(BaseModel):
@@ -327,10 +330,12 @@ class _LayerBase(_Model):
     enabled: bool = True
     """A disabled layer stays in the document but is neither wound nor counted."""
     band: LayerBand = Field(default_factory=LayerBand)
-    lead_in_mm: NonNegMM = 0.0
-    """Carriage move (mm) from the transition position to the layer's first point, before the fibre is laid."""
-    lead_out_deg: NonNegMM = 0.0
-    """Extra mandrel rotation (deg) after the layer's last point (the band is tied off on the shaft)."""
+    lead_in_mm: Annotated[float, Field(ge=0.0, le=1e5)] = 0.0
+    """Carriage move (mm, at most 100 m) from the transition position to the layer's first point, before the
+    fibre is laid."""
+    lead_out_deg: Annotated[float, Field(ge=0.0, le=MAX_TURN_DEG)] = 0.0
+    """Extra mandrel rotation (deg, at most 10 turns) after the layer's last point (the band is tied off on
+    the shaft)."""
 
 
 class HoopLayer(_LayerBase):
@@ -381,8 +386,8 @@ class SkipLayer(_LayerBase):
     """A pure mandrel reposition between layers (no fibre laid)."""
 
     kind: Literal["skip"] = "skip"
-    angle_deg: Finite = 0.0
-    """Mandrel rotation (deg)."""
+    angle_deg: Annotated[float, Field(ge=-MAX_TURN_DEG, le=MAX_TURN_DEG)] = 0.0
+    """Mandrel rotation (deg, at most 10 turns either way)."""
 
 
 LayerSpec = Annotated[HoopLayer | HelicalLayer | PolarLayer | SkipLayer, Field(discriminator="kind")]

@@ -798,7 +798,8 @@ class Runner:
         err_line = next((ln for ln in res.stderr.splitlines() if ": error: " in ln), "")
         if res.rc == 2 and err_line and "usage:" not in res.stderr and case.files:
             # a bad input names its place: the file (or the option), and in a job file the line of the field
-            if str(d) not in err_line and "field '" not in err_line:
+            paths = [a for a in argv if "/" in a]
+            if not any(a in err_line for a in [*paths, str(d)]) and "field '" not in err_line:
                 res.problems["unlocated"] = err_line[:200]
             elif re.search(r"\.toml, field '", err_line):
                 res.problems["no line"] = err_line[:200]

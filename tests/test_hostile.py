@@ -579,6 +579,31 @@ def test_hostile_layer_fields_name_their_layer_line_and_field(tmp_path, capsys, 
     assert f"{job}, line {line}, field '{field}'" in err and words in err, err
 
 
+@pytest.mark.parametrize(("edit", "field"), [
+    ("lead_out_deg = 1e9", "layer.3.lead_out_deg"),  # found by the fuzzer: a 9.5 GB transition, MemoryError
+    ("lead_in_mm = 1e308", "layer.3.lead_in_mm"),
+])
+def test_schema_refuses_turns_and_leads_the_engine_cannot_move(tmp_path, capsys, edit, field) -> None:
+    job = _job(tmp_path, LAYERED.replace('name = "outer"', 'name = "outer"\n' + edit))
+    rc, _, err = _cli(capsys, "layup", str(job), "--quiet")
+    line = _line_of(job, edit.split(" =")[0])
+    assert rc == 2 and f"line {line}, field '{field}'" in err and "less than or equal" in err, err
+    skip = _job(tmp_path, LAYERED + '[[layer]]\nkind = "skip"\nangle_deg = 1e308\n', "skip.toml")
+    rc, _, err = _cli(capsys, "layup", str(skip), "--quiet")
+    last = len(skip.read_text().splitlines())  # angle_deg = 1e308 is the file's last line
+    assert rc == 2 and f"line {last}, field 'layer.4.angle_deg'" in err, err
+
+
+@pytest.mark.parametrize(("argv", "field"), [
+    (["turning", "--example", "paper", "--set", "material.k=nan"], "--set material.k"),
+    (["turning", "--example", "paper", "--set", "x=y"], "--set x"),
+    (["payout", str(EXAMPLES / "pipe.toml"), "--points", "0"], "--points"),
+])
+def test_option_errors_name_the_option(capsys, argv, field) -> None:
+    rc, _, err = _cli(capsys, *argv)
+    assert rc == 2 and f"field '{field}'" in err and ".toml" not in err, err
+
+
 def test_laminate_sum_of_layers_is_budgeted(tmp_path) -> None:
     """Each layer fits the budget, all of them together do not (their results are kept together)."""
     from engine.job import build_mandrel, load_job

@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
         upd["impregnation_k"] = args.k
     if args.points is not None:
         if not 50 <= args.points <= 100_000:
-            raise InputError(f"--points must be in [50, 100000], got {args.points}")
+            raise InputError(f"must be in [50, 100000], got {args.points}", field="--points")
         upd["grid_points"] = args.points
     if upd:
         job = job.replace(payout=job.payout.model_copy(update=upd))

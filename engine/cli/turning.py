@@ -90,7 +90,15 @@ def run(args: argparse.Namespace) -> int:
     if args.disable:
         cons = doc.setdefault("constraints", {})
         cons["disable"] = list(dict.fromkeys([*cons.get("disable", []), *args.disable]))
-    case = case_from_dict(doc, file=path)
+    try:
+        case = case_from_dict(doc, file=path)
+    except InputError as exc:  # a bad value that came from --set is the option's, not the file's
+        set_keys = {item.partition("=")[0].strip() for item in args.set}
+        f = exc.location.field or ""
+        key = next((k for k in set_keys if f and (k == f or k.startswith(f + "."))), None)
+        if key is not None:
+            raise InputError(exc.message, field=f"--set {key}") from None
+        raise
     res = optimise(case, data, snap=args.snap)
     if args.json:
         dump_json(result_to_json(res))
