@@ -1055,8 +1055,11 @@ def _assemble(pl: PassLine, dwell: tuple[float, float], total: int, twist_circ: 
     for name, (x0, y0, z0) in local.items():
         arr = np.empty((n, 3))
         body = arr[:-1].reshape(total, m, 3)
-        body[:, :, 0] = x0[:m] * ck - y0[:m] * sk
-        body[:, :, 1] = x0[:m] * sk + y0[:m] * ck
+        # x0·cos − y0·sin and x0·sin + y0·cos written in place (the same arithmetic, one temporary)
+        np.multiply(x0[:m], ck, out=body[:, :, 0])
+        body[:, :, 0] -= y0[:m] * sk
+        np.multiply(x0[:m], sk, out=body[:, :, 1])
+        body[:, :, 1] += y0[:m] * ck
         body[:, :, 2] = z0[:m]
         cl, sl = float(ck[-1, 0]), float(sk[-1, 0])
         arr[-1] = (x0[m] * cl - y0[m] * sl, x0[m] * sl + y0[m] * cl, z0[m])
