@@ -678,6 +678,11 @@ def _law_nodes(s: np.ndarray, X: np.ndarray, D1: np.ndarray, D2: np.ndarray, V: 
     return np.flatnonzero(isn)
 
 
+def _abs_max(X: np.ndarray) -> np.ndarray:
+    """``np.abs(X).max(axis=0)`` without the (N, axes) temporary (the same values: max |x| = max(max x, −min x))."""
+    return np.maximum(X.max(axis=0), -X.min(axis=0))
+
+
 def _circuit_plan(res: PipelineResult, s: np.ndarray, X: np.ndarray) -> list[tuple[int, int]]:
     """Path-index ranges ``(start, end)`` (inclusive) of the pieces that get a law each: the circuits
     when the middle ones repeat the same motion (up to constant axis offsets, e.g. the mandrel angle),
@@ -700,7 +705,7 @@ def _circuit_plan(res: PipelineResult, s: np.ndarray, X: np.ndarray) -> list[tup
     a1, b1 = pieces[1]
     dq_ref = X[a1:b1 + 1] - X[a1]
     ds_ref = s[a1:b1 + 1] - s[a1]
-    tol_q = 1e-7 * (1.0 + np.abs(X).max(axis=0))
+    tol_q = 1e-7 * (1.0 + _abs_max(X))
     tol_s = 1e-7 * (1.0 + abs(float(s[-1])))
     for a, b in pieces[2:-1]:
         if (b - a != b1 - a1 or np.any(np.abs(X[a:b + 1] - X[a] - dq_ref) > tol_q)
@@ -727,7 +732,7 @@ def _block_pieces(res: PipelineResult, X: np.ndarray | None = None) -> list[tupl
         return None
     a1, b1 = pieces[1]
     ref = X[a1:b1 + 1] - X[a1]
-    tol = 1e-9 * (1.0 + np.abs(X).max(axis=0))
+    tol = 1e-9 * (1.0 + _abs_max(X))
     mandrel = machine.axis_index("mandrel")
     if mandrel is None:
         return None
