@@ -218,7 +218,7 @@ def test_scrubbing_shows_the_band_laid_up_to_that_time(qt_display, qtbot) -> Non
                 if a.GetVisibility():
                     drawn += a.mapper.dataset.n_cells
             now = v.plotter.actors.get("band_now")
-            if now is not None:
+            if now is not None and now.GetVisibility():
                 drawn += now.mapper.dataset.n_cells
             assert drawn == k, (frac, drawn, k)
             # the eye is where the program is at that time
@@ -229,5 +229,54 @@ def test_scrubbing_shows_the_band_laid_up_to_that_time(qt_display, qtbot) -> Non
         assert v.points_in_view(v.scene_points()[::50]).all()
         SHOTS_DIR.mkdir(parents=True, exist_ok=True)
         w.screenshot().save(str(SHOTS_DIR / "band_scrubbed.png"))
+    finally:
+        w.close()
+
+
+def test_laminate_plays_on_through_its_layers_and_jumps_to_a_layer(qt_display, qtbot) -> None:
+    """A layered job (the pipe example: hoop, helical, hoop): the 3D view's layer chooser lists the wound
+    layers; a jump shows that layer from its start, the read-out in the whole program's time; played at
+    the highest speed the program goes on from layer to layer to the end of the last one, each layer's
+    surface, eye path and band framed in the viewport."""
+    from winder_gui.main_window import MainWindow
+    from winder_gui.views.playback import SPEEDS
+
+    w = MainWindow(ROOT / "resources/examples/pipe.toml")
+    w.confirm_discard = False
+    w.auto_run = False
+    qtbot.addWidget(w)
+    w.resize(*SIZES[0])
+    w.show()
+    try:
+        assert w.wait_idle()
+        qtbot.waitUntil(lambda: w.view3d.backend != "pending", timeout=30000)
+        assert w.run_pipeline_now() and w.wait_idle(300000) and w.last_error == ""
+        v, res = w.view3d, w.result
+        wound = [lr for lr in res.layers if lr.result is not None and lr.result.line is not None]
+        assert [i for i, _l, _t in v.layers] == [lr.index for lr in wound]
+        assert [t for _i, _l, t in v.layers] == [lr.t0 for lr in wound]
+        assert v.layer_combo.isVisible() and v.layer_combo.count() == len(wound)
+        assert v.program_total_s == res.blocks.total
+        last = wound[-1]
+        v.layer_combo.activated.emit(len(wound) - 1)  # the user picks the last layer
+        assert v.layer_index == last.index == w.laminate.shown_layer
+        assert w.layers_panel.selected_layer() == last.index and v.time_s == 0.0
+        assert v.paths is w.laminate.output.view(last.index).paths
+        assert v.frame_label.text().startswith(f"t {last.t0:.1f} / {res.blocks.total:.1f} s")
+        v.jump_to_layer(wound[0].index)
+        assert v.layer_index == wound[0].index and v.time_s == 0.0 and v.band_quads == 0
+        seen: list[int] = []
+        v.layer_requested.connect(seen.append)
+        v.set_speed(max(SPEEDS))
+        v.play()
+        qtbot.waitUntil(lambda: not v.is_playing(), timeout=120000)
+        assert seen == [lr.index for lr in wound[1:]]  # on through every layer in winding order
+        assert v.layer_index == last.index and v.time_s == v.timeline.total_s
+        assert abs(v.program_time_s() - (last.t0 + v.timeline.total_s)) < 1e-9
+        assert v.band_quads == v.paths.band.m - 1  # the last layer's band laid whole
+        for lr in wound:  # each layer's surface and eye path framed after a jump
+            v.jump_to_layer(lr.index)
+            v.frame_all()
+            assert v.points_in_view(v.scene_points()[::40]).all(), lr.name
     finally:
         w.close()

@@ -41,6 +41,7 @@ class LaminatePresenter(QObject):
         v = views
         ctl.layer_data_done.connect(self._on_coverage)
         v.layers_panel.layer_selected.connect(self.show_layer)
+        v.view3d.layer_requested.connect(self._on_layer_requested)
         doc.results_changed.connect(self._on_results)
         doc.stale_changed.connect(self._on_stale)
         v.steps.step_selected.connect(self._on_step)
@@ -65,6 +66,8 @@ class LaminatePresenter(QObject):
         self._laws_key = None
         self.v.layers_panel.set_layup(None, None)
         self.v.laminate_plot.set_output(None)
+        self.v.view3d.set_layers([], None)
+        self.v.view3d.set_layer_shown(-1)
 
     def set_output(self, out: LaminateOutput) -> None:
         """Show the laminate of a finished run at once (GUI thread; the data were prepared in the worker)."""
@@ -84,6 +87,11 @@ class LaminatePresenter(QObject):
             self.output = out
             panel.set_layup(out.layup, out.figures_by_key())
             self.shown_layer = -1
+            res = out.result
+            total = float(res.blocks.total) if res.blocks is not None else None
+            starts = {lr.index: float(lr.t0) for lr in res.layers}
+            self.v.view3d.set_layers([(lv.index, f"layer {lv.index + 1} {lv.name}", starts.get(lv.index, 0.0))
+                                      for lv in out.views if lv.paths is not None], total)
 
         def show(k: int) -> None:
             if k == 0:  # the layer's steps are made once the table and the plot show this output
@@ -92,6 +100,12 @@ class LaminatePresenter(QObject):
                 pending[k]()
 
         return [table, *self.v.laminate_plot.updates(out, sel), *[lambda k=k: show(k) for k in range(_SHOW_STEPS)]]
+
+    def _on_layer_requested(self, index: int) -> None:
+        """The 3D view asks for layer ``index`` (its layer chooser, or playback going on to the next layer):
+        select it in the table, which shows it everywhere."""
+        self.v.layers_panel.select_layer(index)
+        self.show_layer(index)
 
     @staticmethod
     def summary(out: LaminateOutput, took_s: float, n_warnings: int) -> str:
@@ -131,6 +145,7 @@ class LaminatePresenter(QObject):
         def paths() -> None:
             if current():
                 v.view3d.set_paths(lv.paths)
+                v.view3d.set_layer_shown(index)
 
         def line_plots() -> None:
             if not current() or lr is None or lr.result is None or lr.result.line is None:

@@ -27,7 +27,7 @@ import sys
 from typing import Any
 
 import numpy as np
-from PySide6.QtCore import Qt, QTimer
+from PySide6.QtCore import Qt, QTimer, Signal
 from PySide6.QtGui import QGuiApplication, QImage
 from PySide6.QtWidgets import (
     QLabel,
@@ -59,6 +59,8 @@ MULTI_SAMPLES = _env_int("WINDER_3D_MULTISAMPLES", 0)
 default of 8, and FXAA too, more than double llvmpipe's time per frame (``benchmarks/bench_gui_3d.py``);
 with a GPU, 4 or 8 look smoother at no cost."""
 LOD_UPDATE_RATE = 1.0
+MANDREL_LOD_POINTS = 12000
+"""Points of the mandrel's coarse copy drawn while playing or moving (rows of the surface grid dropped)."""
 """VTK asks for more frames per second than this while the camera moves: then the coarse paths are drawn."""
 MAX_FRAMES = 20_000
 """Animation frames over the eye path (thinned by a stride above it)."""
@@ -78,7 +80,12 @@ def gl_available() -> bool:
 
 
 class MandrelView3D(PlaybackMixin, SceneMixin, QWidget):
-    """Container for the 3D view; :attr:`backend` is ``"pending"``, ``"vtk"`` or ``"placeholder"``."""
+    """Container for the 3D view; :attr:`backend` is ``"pending"``, ``"vtk"`` or ``"placeholder"``.
+
+    Signals: ``layer_requested(int)`` — show job layer ``index`` of the laminate (the layer chooser, or the
+    playback reaching the end of the shown layer)."""
+
+    layer_requested = Signal(int)
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
@@ -234,7 +241,7 @@ class MandrelView3D(PlaybackMixin, SceneMixin, QWidget):
         self._sync_slider()
         if self.backend == "vtk":
             self._render_paths()
-            if paths is not None:
+            if paths is not None and not self.is_playing():
                 self.frame_all()   # the mandrel, the whole eye path and the head in view after a run
         elif self.backend == "placeholder":
             self._update_label()
@@ -323,12 +330,18 @@ class MandrelView3D(PlaybackMixin, SceneMixin, QWidget):
             self.plotter.render()                   # _choose_detail runs at the start of the render
 
     def _choose_detail(self, *_args: Any) -> None:
-        """Renderer start: draw the coarse paths while the camera moves or the animation plays."""
+        """Renderer start: draw the coarse paths (and mandrel) while the camera moves or the animation plays."""
         if self.plotter is None:
             return
-        full, lod = self.plotter.actors.get("paths"), self.plotter.actors.get("paths_lod")
+        actors = self.plotter.actors
+        full, lod = actors.get("paths"), actors.get("paths_lod")
         moving = self.plotter.render_window.GetDesiredUpdateRate() > LOD_UPDATE_RATE
-        self.lod_active = lod is not None and (moving or self._anim.isActive() or self._was_busy)
+        playing = moving or self._anim.isActive()
+        m_full, m_lod = actors.get("mandrel"), actors.get("mandrel_lod")
+        if m_full is not None and m_lod is not None:
+            m_lod.SetVisibility(playing)
+            m_full.SetVisibility(not playing)
+        self.lod_active = lod is not None and (playing or self._was_busy)
         if lod is not None:
             lod.SetVisibility(self.lod_active)
         if full is not None:
@@ -421,6 +434,15 @@ class MandrelView3D(PlaybackMixin, SceneMixin, QWidget):
         self.plotter.suppress_rendering = True     # one render at the end, not one inside add_mesh
         try:
             self._add_mandrel_actor(grid)
+            # a coarse copy drawn while the animation plays or the camera moves (the full surface is a
+            # third of a software-GL frame)
+            step = max(1, int(np.ceil(d.surface_x.size / MANDREL_LOD_POINTS)))
+            coarse = pv.StructuredGrid(d.surface_x[::step], d.surface_y[::step], d.surface_z[::step])
+            coarse.point_data["concave"] = concave[::step].ravel(order="F")
+            self.plotter.add_mesh(coarse, name="mandrel_lod", scalars="concave", cmap=["#9fb3cf", "#e0504a"],
+                                  clim=[0.0, 1.0], show_scalar_bar=False, smooth_shading=True, specular=0.3,
+                                  reset_camera=False)
+            self.plotter.actors["mandrel_lod"].SetVisibility(False)
         finally:
             self.plotter.suppress_rendering = False
         self.plotter.render()

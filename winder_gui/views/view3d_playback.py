@@ -1,7 +1,8 @@
 """Playback, band and camera of the 3D view (mixins of :class:`winder_gui.views.view3d.MandrelView3D`).
 
 The program plays in machine time (:class:`winder_gui.views.playback.Timeline`): a slider in tenths
-of a second, speeds ×1…×1000, a jump to a circuit; the band of true width is laid as the time
+of a second, speeds ×1…×1000, a jump to a circuit and, for a laminate, to a layer (playing goes on
+from one layer to the next, the read-out in the whole program's time); the band of true width is laid as the time
 advances (static chunks plus the chunk being laid, so a frame re-uploads only a few hundred quads);
 camera presets and framing of the mandrel with the whole eye path.
 """
@@ -33,7 +34,10 @@ SLIDER_STEPS_PER_S = 10
 """The time slider moves in tenths of a machine second."""
 CAMERA_PRESETS = ("iso", "side", "axis")
 BAND_CHUNK = 400
-"""Quads per static piece of the band in 3D (the piece being laid is rebuilt each frame)."""
+"""Least quads per static piece of the band in 3D (the piece being laid is rebuilt each frame)."""
+BAND_PIECES = 10
+"""At most about this many static pieces: each actor costs a software-GL render a few ms, more than the
+quads of the piece rebuilt per frame."""
 COLOUR_KEYS = {"circuit": "circuit", "winding angle β [deg]": "beta_deg", "λ [–]": "lam", "pull speed u": "u"}
 
 
@@ -69,10 +73,17 @@ class PlaybackMixin:
         self.circuit_spin.setPrefix("circuit ")
         self.circuit_spin.setToolTip("Jump to the start of a circuit")
         self.circuit_spin.editingFinished.connect(lambda: self.jump_to_circuit(self.circuit_spin.value()))
+        self.layer_combo = QComboBox()
+        self.layer_combo.setObjectName("view3d.layer")
+        self.layer_combo.setToolTip("Jump to the start of a layer of the laminate; playing goes on through the "
+                                    "layers in winding order")
+        self.layer_combo.activated.connect(lambda i: self.jump_to_layer(int(self.layer_combo.itemData(i))))
+        self.layer_combo.setVisible(False)
         self.frame_label = QLabel("")
         self.frame_label.setObjectName("view3d.time")
         self.frame_label.setMinimumWidth(150)
-        for w in (self.play_button, self.slider, self.frame_label, self.speed_combo, self.circuit_spin):
+        for w in (self.play_button, self.slider, self.frame_label, self.speed_combo, self.layer_combo,
+                  self.circuit_spin):
             h.addWidget(w, 1 if w is self.slider else 0)
         bar2 = QWidget()
         h2 = QHBoxLayout(bar2)
@@ -102,6 +113,13 @@ class PlaybackMixin:
         self._layout.addWidget(bar2)
         self.timeline: Timeline | None = None
         self.time_s = 0.0
+        self.layers: list[tuple[int, str, float]] = []
+        """The laminate's wound layers (job index, label, program time s at which it starts) in winding order;
+        empty for a single line."""
+        self.program_total_s: float | None = None
+        """The whole (joined) program's time when a laminate is shown, else ``None``."""
+        self.layer_index = -1
+        """The job layer whose paths are shown (-1: a single line)."""
         self._clock = QElapsedTimer()
         self._set_controls_enabled(False)
 
@@ -127,6 +145,58 @@ class PlaybackMixin:
         """Move to the first frame of ``circuit``."""
         if self.timeline is not None:
             self.set_frame(self.timeline.circuit_start(int(circuit)))
+
+    def set_layers(self, layers: list[tuple[int, str, float]], program_total_s: float | None) -> None:
+        """The laminate's wound layers (job index, label, start time in the program, s) and the program's
+        total time (s): the layer chooser, program times in the read-out and play on through the layers.
+        An empty list: a single line."""
+        self.layers = list(layers)
+        self.program_total_s = program_total_s if self.layers else None
+        self.layer_combo.blockSignals(True)
+        self.layer_combo.clear()
+        for index, label, _t0 in self.layers:
+            self.layer_combo.addItem(label, index)
+        self.layer_combo.blockSignals(False)
+        self.layer_combo.setVisible(bool(self.layers))
+        self._sync_layer_combo()
+
+    def set_layer_shown(self, index: int) -> None:
+        """The paths shown are job layer ``index``'s (the laminate presenter calls this with set_paths)."""
+        self.layer_index = int(index)
+        self._sync_layer_combo()
+        self.frame_label.setText(self._frame_text(short=True))
+
+    def _sync_layer_combo(self) -> None:
+        i = self.layer_combo.findData(self.layer_index)
+        if i >= 0 and i != self.layer_combo.currentIndex():
+            self.layer_combo.blockSignals(True)
+            self.layer_combo.setCurrentIndex(i)
+            self.layer_combo.blockSignals(False)
+
+    def layer_start_s(self) -> float:
+        """Program time (s) at which the shown layer starts (0 for a single line)."""
+        for index, _label, t0 in self.layers:
+            if index == self.layer_index:
+                return float(t0)
+        return 0.0
+
+    def program_time_s(self) -> float:
+        """The time shown in the whole program (s): the layer's start plus the time within the layer."""
+        return self.layer_start_s() + self.time_s
+
+    def jump_to_layer(self, index: int) -> None:
+        """Show job layer ``index`` (``layer_requested``: the laminate presenter swaps the paths) from its start."""
+        if index != self.layer_index:
+            self.layer_requested.emit(int(index))
+        self.set_time(0.0)
+
+    def _next_layer(self) -> int | None:
+        ids = [i for i, _l, _t in self.layers]
+        if self.layer_index in ids:
+            k = ids.index(self.layer_index)
+            if k + 1 < len(ids):
+                return ids[k + 1]
+        return None
 
     def _show(self, frame: int, t: float) -> None:
         self.frame = frame
@@ -190,8 +260,17 @@ class PlaybackMixin:
         dt = self._clock.restart() / 1000.0
         t = self.time_s + self.speed() * dt
         if t >= self.timeline.total_s:
-            self.set_time(self.timeline.total_s)
-            self.pause()
+            nxt = self._next_layer()
+            if nxt is None:
+                self.set_time(self.timeline.total_s)
+                self.pause()
+                return
+            carry = t - self.timeline.total_s  # a laminate: on into the next layer (its paths, its surface)
+            self.layer_requested.emit(nxt)
+            if self.layer_index != nxt or self.timeline is None:
+                self.pause()
+                return
+            self.set_time(min(carry, self.timeline.total_s))
             return
         self.set_time(t)
 
@@ -200,7 +279,10 @@ class PlaybackMixin:
             return ""
         tl = self.timeline
         circ = f" · circuit {int(tl.circuits[self.frame])}" if tl.circuits.size else ""
-        text = f"t {self.time_s:.1f} / {tl.total_s:.1f} s"
+        if self.program_total_s is not None and self.layer_index >= 0:
+            text = f"t {self.program_time_s():.1f} / {self.program_total_s:.1f} s"
+        else:
+            text = f"t {self.time_s:.1f} / {tl.total_s:.1f} s"
         return text if short else f"{text}{circ} (frame {self.frame + 1}/{tl.times.size})"
 
 
@@ -210,7 +292,8 @@ class SceneMixin:
     def _add_band_actor(self, p: PathsViewData, cmap: str, clim: tuple[float, float]) -> None:
         """The band of true width and the whole eye trajectory (thin).
 
-        The band is cut into chunks of :data:`BAND_CHUNK` quads in winding order, each a static actor
+        The band is cut into :data:`BAND_PIECES` chunks (of at least :data:`BAND_CHUNK` quads) in winding
+        order, each a static actor
         shown once laid; only the chunk being laid is rebuilt per frame (:meth:`_update_band`), so a
         frame re-uploads a few hundred quads, not the whole band."""
         import pyvista as pv
@@ -238,8 +321,9 @@ class SceneMixin:
             return mesh
 
         chunks = []
-        for j, a in enumerate(range(0, m - 1, BAND_CHUNK)):
-            b = min(a + BAND_CHUNK, m - 1)
+        size = max(BAND_CHUNK, -(-(m - 1) // BAND_PIECES))
+        for j, a in enumerate(range(0, m - 1, size)):
+            b = min(a + size, m - 1)
             actor = self.plotter.add_mesh(strip(a, b), name=f"band{j}", **style)
             chunks.append((a, b, actor))
         self._band = {"band": band, "strip": strip, "chunks": chunks, "style": style, "last": None}
@@ -260,10 +344,17 @@ class SceneMixin:
             actor.SetVisibility(b <= k)
             if a < k < b:
                 current = (a, k)
+        now = bd.get("now")
         if current is None:
-            self.plotter.remove_actor("band_now", render=False)
+            if now is not None:
+                now.SetVisibility(False)
+            return
+        mesh = bd["strip"](*current)
+        if now is None:  # made once per band, then given each frame's mesh (add_mesh per frame costs ~8 ms)
+            bd["now"] = self.plotter.add_mesh(mesh, name="band_now", **bd["style"])
         else:
-            self.plotter.add_mesh(bd["strip"](*current), name="band_now", **bd["style"])
+            now.mapper.SetInputData(mesh)
+            now.SetVisibility(True)
 
     def set_camera(self, preset: str) -> None:
         """Camera preset: ``iso`` (from above and the front), ``side`` (the axis across the view) or
