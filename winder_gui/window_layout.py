@@ -25,9 +25,12 @@ from winder_gui.panels.nc_panel import NCPanel, TimeLawPanel
 from winder_gui.panels.section_panel import SectionPanel, payout_panel, winding_panel
 from winder_gui.panels.steps import STEPS, StepBar
 from winder_gui.settings import app_settings
+from winder_gui.views.axes_plot import AxesPlot
+from winder_gui.views.coverage_plot import CoveragePlot
 from winder_gui.views.laminate_plot import LaminatePlots
-from winder_gui.views.plots import AxesPlot, CoveragePlot, EyePlot, PullSpeedPlot, TimeLawPlot, WindingPlots
+from winder_gui.views.plots import EyePlot, PullSpeedPlot, WindingPlots
 from winder_gui.views.profile_plot import ProfilePlot
+from winder_gui.views.timelaw_plot import TimeLawPlot
 from winder_gui.views.view3d import MandrelView3D
 
 if TYPE_CHECKING:
