@@ -115,6 +115,8 @@ def test_workflow_3d_paths_and_step_screenshots(qtbot) -> None:
         assert w.wait_idle(300000) and w.last_error == ""
         v = w.view3d
         p = v.paths
+        # framed after the run: the (grown) mandrel and the whole eye path of the layer shown inside the view
+        assert v.points_in_view(v.scene_points()[::20]).all()
         np.testing.assert_allclose(v.actor_points("paths"), p.line_xyz, rtol=1e-5, atol=1e-3)  # float32 in VTK
         # the example is a laminate: the 3D view shows the selected layer's own single-line result
         shown = w.laminate.shown_result() if hasattr(w.result, "layup") else w.result

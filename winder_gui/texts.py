@@ -22,6 +22,13 @@ CUT_MODE = {"down-cut": "down-cut (climb milling: the tool turns with the feed)"
 CUT_MODE_SHORT = {"down-cut": "down-cut", "up-cut": "up-cut", "fixed part": "fixed part"}
 
 
+def program_times(total_s: float, without_jumps_s: float) -> str:
+    """The NC step's program time (s): with every limit, and without the speed-jump limits (the paper's
+    eq. (17) times; eq. (18) adds the jumps)."""
+    return (f"Program time <b>{total_s:.2f} s</b> ({total_s / 60:.2f} min); without the speed-jump limits "
+            f"{without_jumps_s:.2f} s")
+
+
 def export_refused(reason: str) -> str:
     """Status-bar text when NC export is refused."""
     return f"Export disabled: {reason}"

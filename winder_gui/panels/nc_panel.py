@@ -26,6 +26,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from winder_gui import texts
 from winder_gui.panels.section_panel import TIMELAW_FIELDS, SectionPanel
 from winder_gui.texts import STALE_RESULTS
 
@@ -153,8 +154,7 @@ class NCPanel(QWidget):
         lines = text.count("\n") + 1
         self.summary.setText(
             f"Post <b>{res.post_name}</b> ({res.extension}) · machine {res.machine.name} · {b.n} blocks · "
-            f"{lines} lines<br>Program time <b>{b.total:.2f} s</b> ({b.total / 60:.2f} min); "
-            f"before (18): {b.total_t17:.2f} s"
+            f"{lines} lines<br>{texts.program_times(b.total, b.total_t17)}"
         )
         warns = list(warns or [])
         for w in warns:
