@@ -163,6 +163,25 @@ def dwell_points(dwell_deg: float) -> int:
     return 0 if dwell_deg <= 0 else max(2, math.ceil(dwell_deg / 2.0))
 
 
+def check_band(width_mm: float, thickness_mm: float | None, *, file: str | Path | None = None,
+               prefix: str = "") -> None:
+    """A band is at least a fibre wide and thick, and no thicker than it is wide (a thicker 'band' is a unit
+    mistake: the laminate would grow by that much per pass).  ``prefix``: the layer's field prefix."""
+    b = float(width_mm)
+    if not b >= FIBRE_DIAMETER_MM:
+        raise InputError(f"band width {b:g} mm is narrower than a single fibre ({FIBRE_DIAMETER_MM:g} mm); "
+                         "check the units", file=file, field=f"{prefix}band.width_mm")
+    if thickness_mm is None:
+        return
+    t = float(thickness_mm)
+    if not t >= FIBRE_DIAMETER_MM:
+        raise InputError(f"band thickness {t:g} mm is thinner than a single fibre "
+                         f"({FIBRE_DIAMETER_MM:g} mm); check the units", file=file, field=f"{prefix}band.thickness_mm")
+    if not t <= b:
+        raise InputError(f"band thickness {t:g} mm is more than its width {b:g} mm; check the units", file=file,
+                         field=f"{prefix}band.thickness_mm")
+
+
 def check_winding_spec(spec: Any, r_max_mm: float, band_width_mm: float, thickness_mm: float | None = None,
                        ctx: dict[str, Any] | None = None) -> Estimate:
     """Physical sanity and size of the winding line of ``spec`` (:class:`engine.job.WindingSpec`).
@@ -177,9 +196,7 @@ def check_winding_spec(spec: Any, r_max_mm: float, band_width_mm: float, thickne
     if not b >= FIBRE_DIAMETER_MM:
         raise InputError(f"band width {b:g} mm is narrower than a single fibre ({FIBRE_DIAMETER_MM:g} mm); "
                          "check the units", file=file, field="band.width_mm")
-    if thickness_mm is not None and not float(thickness_mm) >= FIBRE_DIAMETER_MM:
-        raise InputError(f"band thickness {thickness_mm:g} mm is thinner than a single fibre "
-                         f"({FIBRE_DIAMETER_MM:g} mm); check the units", file=file, field="band.thickness_mm")
+    check_band(b, thickness_mm, file=file)
     if not r_max_mm <= MAX_RADIUS_MM:
         raise InputError(f"the mandrel's largest radius {r_max_mm:g} mm is beyond any winding machine "
                          f"({MAX_RADIUS_MM:g} mm); check the units", file=file, field="mandrel")
@@ -307,9 +324,11 @@ def check_laminate(job: Any, mandrel: Any, *, file: str | Path | None = None) ->
             return fld
 
         if isinstance(layer, HoopLayer):
-            if not b >= FIBRE_DIAMETER_MM:
-                raise InputError(f"band width {b:g} mm is narrower than a single fibre ({FIBRE_DIAMETER_MM:g} mm); "
-                                 "check the units", file=file, field=where("band.width_mm"))
+            try:
+                check_band(b, float(band.thickness_mm), file=file)
+            except InputError as exc:
+                raise InputError(f"layer {i + 1}: {exc.message}", file=file,
+                                 field=where(exc.location.field or "band")) from None
             span = (float(layer.z_range_mm[1]) - float(layer.z_range_mm[0]) if layer.z_range_mm is not None
                     else length)
             pitch = b * (1.0 - float(layer.overlap))

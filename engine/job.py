@@ -38,7 +38,7 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import tomli_w
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from engine.errors import InputError
 from engine.fileio import MAX_TOML_BYTES, atomic_write_text, loads_toml
@@ -49,6 +49,31 @@ SUPPORTED_VERSIONS = (1, 2)
 PositiveMM = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNegMM = Annotated[float, Field(ge=0, allow_inf_nan=False)]
 Finite = Annotated[float, Field(allow_inf_nan=False)]
+MAX_DWELL_DEG = 1080.0
+"""Largest dwell (deg): 3 turns (= engine.budget.MAX_DWELL_DEG; the schema and the engine agree)."""
+MAX_MIN_BLOCK_TIME_S = 10.0
+"""Largest ``post.min_block_time_s`` (s) (= engine.budget.MAX_MIN_BLOCK_TIME_S)."""
+MAX_TOLERANCE_MM = 10.0
+"""Largest ``post.tolerance_mm``: a program may leave the winding line by at most this much (a larger one
+replaces the whole line by a few straight moves)."""
+
+
+def _at_most(limit: float, why: str) -> AfterValidator:
+    """A validator refusing values above ``limit`` with ``why`` (``{v}`` = the value, ``{limit}``)."""
+
+    def check(v: float) -> float:
+        if not v <= limit:
+            raise ValueError(why.format(v=v, limit=limit))
+        return v
+
+    return AfterValidator(check)
+
+
+Dwell = Annotated[float, Field(ge=0, allow_inf_nan=False),
+                  _at_most(MAX_DWELL_DEG, "a dwell of {v:g}° is more than 3 turns ({limit:g}°)")]
+Friction = Annotated[float, Field(ge=0, allow_inf_nan=False),
+                     _at_most(10.0, "a friction coefficient of {v:g} is not physical (at most {limit:g}); check "
+                                    "the value")]
 MAX_TURN_DEG = 3600.0
 """Largest mandrel rotation of a skip layer or a layer's lead-out (deg): 10 turns; more is a unit mistake
 and would be a transition of millions of blocks."""
@@ -172,8 +197,8 @@ class BandSpec(_Model):
 
     width_mm: PositiveMM = 6.0
     thickness_mm: PositiveMM = 0.25
-    friction: NonNegMM = 0.2
-    """Band-on-mandrel friction coefficient μ: a line needing |λ| > μ slips."""
+    friction: Friction = 0.2
+    """Band-on-mandrel friction coefficient μ (0..10): a line needing |λ| > μ slips."""
     material: str = "carbon/epoxy"
 
 
@@ -191,7 +216,7 @@ class WindingSpec(_Model):
     pole_c_mm: tuple[NonNegMM, NonNegMM] | None = None
     """Clairaut constants at the two poles; default: pole radius + band width / 2."""
     angles: list[AngleRequirement] = Field(default_factory=list)
-    dwell_deg: tuple[NonNegMM, NonNegMM] = (0.0, 0.0)
+    dwell_deg: tuple[Dwell, Dwell] = (0.0, 0.0)
     """Extra mandrel rotation at the left/right turnaround."""
     points_per_pass: Annotated[int, Field(ge=50, le=200_000)] = 2000
     circuits: Annotated[int, Field(ge=1)] | None = None
@@ -295,9 +320,11 @@ class TimeLawSpec(_Model):
     """M, speed levels per node (the engine packs the level index into 12 bits: at most 4096)."""
     penalty: NonNegMM = 0.5e-11
     tube_share: Annotated[float, Field(gt=0, lt=1)] = 0.1
-    stop_percent: Annotated[float, Field(gt=0)] = 0.5
-    sdot_max: PositiveMM | None = None
-    sddot_max: PositiveMM | None = None
+    stop_percent: Annotated[float, Field(gt=0, le=100)] = 0.5
+    sdot_max: Annotated[float, Field(ge=1e-3, le=1e9)] | None = None
+    """Technological path speed limit (mm/s)."""
+    sddot_max: Annotated[float, Field(ge=1e-3, le=1e12)] | None = None
+    """Technological path acceleration limit (mm/s²)."""
 
 
 class PostSpec(_Model):
@@ -305,8 +332,10 @@ class PostSpec(_Model):
 
     post: str = "linuxcnc"
     controller: str | None = None
-    tolerance_mm: PositiveMM = 0.05
-    min_block_time_s: PositiveMM = 0.004
+    tolerance_mm: Annotated[PositiveMM, _at_most(MAX_TOLERANCE_MM, "a program {v:g} mm off the winding line does "
+                                                 "not lay it (at most {limit:g} mm)")] = 0.05
+    min_block_time_s: Annotated[PositiveMM, _at_most(MAX_MIN_BLOCK_TIME_S, "a block of at least {v:g} s is not a "
+                                                     "winding program (at most {limit:g} s)")] = 0.004
     output: str | None = None
 
 
@@ -318,7 +347,7 @@ class LayerBand(_Model):
 
     width_mm: PositiveMM | None = None
     thickness_mm: PositiveMM | None = None
-    friction: NonNegMM | None = None
+    friction: Friction | None = None
     tows: Annotated[int, Field(ge=1, le=1000)] | None = None
     """Number of tows (rovings) side by side in the band; used for the fibre mass."""
     material: str | None = None
@@ -364,7 +393,7 @@ class HelicalLayer(_LayerBase):
     angle_deg: Annotated[float, Field(gt=0, lt=90)] | None = None
     """Shortcut: the winding angle on the middle parallel of the cylindrical part (or of the surface); the
     layer is then the geodesic through it (turning where r = C) unless ``mode`` says otherwise."""
-    dwell_deg: tuple[NonNegMM, NonNegMM] | None = None
+    dwell_deg: tuple[Dwell, Dwell] | None = None
     points_per_pass: Annotated[int, Field(ge=50, le=200_000)] | None = None
     circuits: Annotated[int, Field(ge=1)] | None = None
     pattern_p: Annotated[int, Field(ge=1)] | None = None
@@ -562,6 +591,8 @@ def _validation_error(exc: ValidationError, text: str, file: str | Path | None) 
         msg = f"unknown kind {first.get('ctx', {}).get('tag')!r}; expected {first.get('ctx', {}).get('expected_tags')}"
     elif first["type"] == "literal_error":
         msg = f"{msg} (got {first.get('input')!r})"
+    elif first["type"] == "value_error":
+        msg = msg.removeprefix("Value error, ")
     elif "input" in first and not isinstance(first["input"], dict | list):
         msg = f"{msg} (got {first['input']!r})"
     if len(errs) > 1:

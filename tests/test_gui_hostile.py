@@ -132,3 +132,57 @@ def test_gui_survives_fuzzed_jobs_and_profiles(window, tmp_path) -> None:
             assert w.job != before or w.job_path == f
     print(outcomes)
     assert outcomes["refused"] >= 4 and outcomes["loaded"] >= 1, outcomes
+
+
+def test_gui_survives_hostile_layered_jobs(window, tmp_path) -> None:
+    """Layered jobs with hostile layers (huge passes/repeat, absurd bands, 1e308° skips, hoop ranges off the
+    mandrel, thousands of layers) through File -> Open: each is refused with its file and field, or loads
+    and then its run is refused before any work (budget, layer checks) - the window keeps working and the
+    job shown is the one opened."""
+    import random
+
+    from fuzz_cases import SMALL_LAYERED, SMALL_LAYERED_VESSEL, mutate_layers
+
+    rng = random.Random(1919)
+    w = window
+    edited = _edited(w)
+    attacks = [("passes = 1", "passes = 1000\nrepeat = 1000"), ("angle_deg = 30.0", "angle_deg = 1e308"),
+               ('name = "outer hoop"', 'name = "outer hoop"\nz_range_mm = [-1e6, 1e6]'),
+               ('name = "outer hoop"', 'name = "outer hoop"\nband = { width_mm = 1e-9 }'),
+               ("repeat = 1", "repeat = 1000\ncircuits = 1000000000")]
+    expected = ["layer.1.repeat", "", "layer.4.z_range_mm", "layer.4.band.width_mm", "layer.2.circuits"]
+    texts = [SMALL_LAYERED.replace(a, b) for a, b in attacks]
+    texts.append(SMALL_LAYERED + '[[layer]]\nkind = "skip"\nangle_deg = 1.0\n' * 5000)
+    texts += [mutate_layers(rng.choice([SMALL_LAYERED, SMALL_LAYERED_VESSEL]), rng) for _ in range(4)]
+    outcomes = {"refused on open": 0, "run refused": 0, "ran": 0}
+    for i, text in enumerate(texts):
+        f = tmp_path / f"layered{i}.toml"
+        f.write_text(text, encoding="utf-8")
+        before = w.job
+        w.last_error = ""
+        w.open_job(f)
+        assert w.wait_idle(120000) and w.isVisible()
+        if w.last_error:
+            outcomes["refused on open"] += 1
+            assert i >= len(expected) or not expected[i], w.last_error  # the schema takes the size attacks
+            assert f.name in w.last_error and "Traceback" not in w.last_error, w.last_error
+            assert w.job == before  # the user's job (edited, unsaved) is kept
+            assert w.job == edited or i > 0
+            w.error_box.close()
+            continue
+        assert w.job_path == f
+        opened = w.job
+        w.run_pipeline_now()
+        assert w.wait_idle(180000) and w.isVisible()
+        assert w.job == opened
+        if w.last_error:
+            outcomes["run refused"] += 1
+            assert "Traceback" not in w.last_error and "Internal error" not in w.last_error, w.last_error
+            if i < len(expected):
+                assert expected[i] in w.last_error, w.last_error
+            w.error_box.close()
+        else:
+            outcomes["ran"] += 1
+        assert w.job_path == f  # the job stays the one opened
+    print(outcomes)
+    assert outcomes["refused on open"] >= 3 and outcomes["run refused"] >= 2, outcomes

@@ -79,7 +79,7 @@ def _line_of(path: Path, key: str) -> int:
     (("points_per_pass = 100", "points_per_pass = 100\npattern_p = 1000000000"), "winding.pattern_p",
      "closer than a fibre"),
     (("points_per_pass = 100", "points_per_pass = 100\nlayers = 1000000"), "winding.layers", "memory budget"),
-    (("dwell_deg = [180.0, 180.0]", "dwell_deg = [1e308, 0.0]"), "winding.dwell_deg", "turns"),
+    (("dwell_deg = [180.0, 180.0]", "dwell_deg = [1e308, 0.0]"), "winding.dwell_deg.0", "more than 3 turns"),
     (("radius_mm = 40.0", "radius_mm = 1e6"), "mandrel", "beyond any winding machine"),
     (("length_mm = 200.0", "length_mm = 1e308"), "mandrel.length_mm", "beyond any mandrel"),
     (('post = "linuxcnc"', 'post = "linuxcnc"\nmin_block_time_s = 1e308'), "post.min_block_time_s",
@@ -592,6 +592,38 @@ def test_schema_refuses_turns_and_leads_the_engine_cannot_move(tmp_path, capsys,
     rc, _, err = _cli(capsys, "layup", str(skip), "--quiet")
     last = len(skip.read_text().splitlines())  # angle_deg = 1e308 is the file's last line
     assert rc == 2 and f"line {last}, field 'layer.4.angle_deg'" in err, err
+
+
+@pytest.mark.parametrize(("edit", "field", "words"), [
+    (('post = "linuxcnc"', 'post = "linuxcnc"\ntolerance_mm = 1e308'), "post.tolerance_mm", "does not lay it"),
+    (('post = "linuxcnc"', 'post = "linuxcnc"\nmin_block_time_s = 11'), "post.min_block_time_s", "at most 10 s"),
+    (('method = "blocks"', 'method = "tube"\nsdot_max = 1e-300'), "timelaw.sdot_max", "greater than or equal"),
+    (("friction = 0.2", "friction = 1e308"), "band.friction", "not physical"),  # a report's ±μ plot overflowed
+    (("friction = 0.2", "friction = 0.2\nthickness_mm = 1e308"), "band.thickness_mm", "more than its width"),
+    (("dwell_deg = [180.0, 180.0]", "dwell_deg = [180.0, 1081.0]"), "winding.dwell_deg.1", "more than 3 turns"),
+])
+def test_the_schema_refuses_what_the_engine_would(tmp_path, capsys, edit, field, words) -> None:
+    """Values the engine cannot use are refused when the job is read (the GUI's fields validate with the
+    same schema), with the file, the line and the field; the limits are the engine's own."""
+    from engine import job as J
+
+    assert (J.MAX_DWELL_DEG, J.MAX_MIN_BLOCK_TIME_S) == (budget.MAX_DWELL_DEG, budget.MAX_MIN_BLOCK_TIME_S)
+    job = _job(tmp_path, PIPE.replace(*edit))
+    out = tmp_path / "o.ngc"
+    rc, _, err = _cli(capsys, "run", str(job), "-o", str(out), "--quiet")
+    key = field.split(".")[1]
+    line = max(i for i, ln in enumerate(job.read_text().splitlines(), 1) if ln.startswith(key))
+    assert rc == 2 and not out.exists() and f"{job}, line {line}, field '{field}'" in err and words in err, err
+
+
+@pytest.mark.parametrize("edit", ["tolerance_mm = 10", "min_block_time_s = 10", "friction = 10"])
+def test_the_largest_values_the_schema_accepts_run(tmp_path, capsys, edit) -> None:
+    sec = "[band]" if "friction" in edit else "[post]"
+    job = _job(tmp_path, PIPE.replace("friction = 0.2\n", "").replace(sec, f"{sec}\n{edit}"))
+    out = tmp_path / "o.ngc"
+    rc, _, err = _cli(capsys, "run", str(job), "-o", str(out), "--quiet")
+    assert rc in (0, 1) and "Traceback" not in err, err
+    assert out.exists() == (rc == 0)
 
 
 @pytest.mark.parametrize(("argv", "field"), [
