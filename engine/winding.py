@@ -212,6 +212,12 @@ class _Cond:
     field: str
 
 
+_SOFT_CAP = 1e-5
+"""A minimax line that would ride C = r inside a pass is held at C <= r (1 − this) there (β <= 89.74°)."""
+_TOUCH_ATTEMPTS = 4
+"""Searches with the soft cap widened to the new touching nodes before a touch is refused."""
+
+
 def _err(msg: str, fld: str | None, ctx: dict[str, Any], cls: type[InputError] = InputError) -> InputError:
     return cls(msg, file=ctx.get("file"), field=fld if ctx.get("job") else None)
 
@@ -459,16 +465,29 @@ def solve_pass(
             if (F[i0 : i1 + 1] >= -1e-12).all() and (C[inner] < rn[inner]).all():
                 continue
             lam0 = float(np.max(np.abs(lam[i0:i1]))) if i1 > i0 else 0.0
-            try:
-                lam_star, tb = wc.minimax_search(grid, lo, hi, points, lam0, state=state, i0=i0, i1=i1)
-            except ValueError as exc:
-                raise _err(f"minimax winding line: {exc}", "winding.mode", ctx, InfeasibleError) from None
-            Cp, lp = wc.tube_path(grid, tb, lam_star)
+            # The path follows the tube's envelopes, so where the geodesic continuation would cross the
+            # local radius it rides the cap C = r (β = 90°: a turnaround, not a pass).  Such nodes get a
+            # cap just below r (β <= 89.74°) and the search is repeated: the line then leans away from
+            # the parallel in time (usually at the same max |λ|).  Only a line that cannot stay below
+            # even that cap is refused.
+            hi_k = hi.copy()
+            touch = np.zeros(0, dtype=np.int64)
+            for _attempt in range(_TOUCH_ATTEMPTS):
+                try:
+                    lam_star, tb = wc.minimax_search(grid, lo, hi_k, points, lam0, state=state, i0=i0, i1=i1)
+                except ValueError as exc:
+                    raise _err(f"minimax winding line: {exc}", "winding.mode", ctx, InfeasibleError) from None
+                Cp, lp = wc.tube_path(grid, tb, lam_star)
+                # a node held on the upper bound (C = r, β = 90°) inside the pass; nodes next to a turnaround
+                # come within 1e-7·r of r by themselves at fine grids (r − C ∝ distance), they are not touches
+                touch = np.flatnonzero(Cp[inner] >= hi[inner] * (1.0 - 1e-12)) + inner.start
+                if not touch.size:
+                    break
+                near = np.unique(np.clip(touch[:, None] + np.arange(-2, 3)[None, :], inner.start,
+                                         inner.stop - 1))
+                hi_k[near] = np.minimum(hi_k[near], rn[near] * (1.0 - _SOFT_CAP))
             C[i0 : i1 + 1] = Cp[i0 : i1 + 1]
             lam[i0:i1] = lp[i0:i1]
-            # a node held on the upper bound (C = r, β = 90°) inside the pass; nodes next to a turnaround come
-            # within 1e-7·r of r by themselves at fine grids (r − C ∝ distance), they are not touches
-            touch = np.flatnonzero(C[inner] >= hi[inner] * (1.0 - 1e-12)) + inner.start
             if touch.size:
                 k = int(touch[0])
                 raise _err(

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, Phase, assume, given, settings
+from hypothesis import HealthCheck, Phase, assume, example, given, settings
 from hypothesis import strategies as st
 
 from engine.errors import InputError
@@ -127,6 +127,10 @@ def test_breakpoints_are_knots_and_curvature_extrema() -> None:
 @settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow],
           phases=[Phase.explicit, Phase.reuse, Phase.generate])
 @given(m=profiles)
+# found by CI: the path rode C = r at a neck (a refused "touch") though a line at the same |λ| stays below
+@example(m=waisted(12, [0.8333184417759113, 0.6463063829847556, 0.19459657723897075, 0.5, 0.3337503654517115,
+                        0.19248657979870418, 0.5441218715863706, 0.02, 0.020000000000000004, 0.3333333333333333],
+                   0.588309084343646, 0.55, (13.355161409111924, 16.255099469082165)))
 def test_minimax_line_clears_c_b_between_nodes_and_matches_brute_force(m: Mandrel) -> None:
     zz = np.linspace(m.z_min, m.z_max, 20_001)
     assume(bool(np.all(c_bound(m, zz) < 0.95 * m.r(zz))))  # else no line keeps the band on (a true infeasible)
