@@ -391,13 +391,17 @@ def mandrel_distance(mandrel: Any, z: np.ndarray, rho: np.ndarray, step_mm: floa
     return np.where(body, -np.where(np.isinf(d), rin - rho, d), d)
 
 
-def _segment_min_rho(c: np.ndarray, e: np.ndarray, z0: float, z1: float) -> np.ndarray:
+def _segment_min_rho(c: np.ndarray, e: np.ndarray, z0: float, z1: float,
+                     z_range: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Smallest distance from the axis of the segments c->e (N,3) within z0 <= z <= z1 (inf: none there).
 
     Only the segments whose z range meets [z0, z1] are evaluated (the others are ``inf``; the values of
-    the rest are those of :func:`_segment_min_rho_all`, bit for bit)."""
-    cz, ez = c[:, 2], e[:, 2]
-    near = np.flatnonzero((np.maximum(cz, ez) >= z0 - 1e-9) & (np.minimum(cz, ez) <= z1 + 1e-9))
+    the rest are those of :func:`_segment_min_rho_all`, bit for bit).  ``z_range``: the segments'
+    ``(min z, max z)`` when the caller has them already."""
+    if z_range is None:
+        cz, ez = c[:, 2], e[:, 2]
+        z_range = (np.minimum(cz, ez), np.maximum(cz, ez))
+    near = np.flatnonzero((z_range[1] >= z0 - 1e-9) & (z_range[0] <= z1 + 1e-9))
     out = np.full(c.shape[0], np.inf)
     if near.size:
         out[near] = _segment_min_rho_all(c[near], e[near], z0, z1)
@@ -446,6 +450,7 @@ def clearance_violations(axes: AxisPath, mandrel: Any, setup: Any, eye_clearance
     dm = mandrel_distance(mandrel, z, rho, upto_mm=2.0 * eye_gap + 1.0)
     out += violations_from_mask("clearance", None, dm < eye_gap - 1e-6, dm, eye_gap, " mm",
                                 what="gap between the eye and the mandrel")
+    z_range = (np.minimum(con[:, 2], z), np.maximum(con[:, 2], z))    # of every free fibre
     for ob in support_obstacles(mandrel, setup):
         # only points within ``gap`` of the support's box can violate (elsewhere de >= gap; the values
         # of :func:`violations_from_mask` are read inside the violating runs only)
@@ -455,7 +460,7 @@ def clearance_violations(axes: AxisPath, mandrel: Any, setup: Any, eye_clearance
         de[near] = _rect_distance(z[near], rho[near], ob)
         out += violations_from_mask("clearance", None, de < g_eye - 1e-6, de, g_eye, " mm",
                                     what=f"gap between the eye and the {ob.name}")
-        rf = _segment_min_rho(con, eye, ob.z0, ob.z1) - ob.radius
+        rf = _segment_min_rho(con, eye, ob.z0, ob.z1, z_range) - ob.radius
         out += violations_from_mask("clearance", None, rf < gap - 1e-6, rf, gap, " mm",
                                     what=f"gap between the free fibre and the {ob.name}")
     return out
