@@ -637,7 +637,8 @@ def _clean_loc(loc: tuple[Any, ...]) -> tuple[Any, ...]:
             continue
         if i == 2 and loc[0] in ("layer", "layers") and part in LAYER_KINDS:
             continue
-        if isinstance(part, str) and ("[" in part or part in {"tuple", "float", "function-after"}):
+        if isinstance(part, str) and ("[" in part or part in {"tuple", "float", "function-after"}
+                                      or part.startswith("constrained-")):  # union members: float | tuple
             continue
         out.append(part)
     return tuple(out)

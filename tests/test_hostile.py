@@ -616,6 +616,15 @@ def test_the_schema_refuses_what_the_engine_would(tmp_path, capsys, edit, field,
     assert rc == 2 and not out.exists() and f"{job}, line {line}, field '{field}'" in err and words in err, err
 
 
+def test_union_field_error_names_the_field_and_its_line(tmp_path, capsys) -> None:
+    """pole_radius_mm is a number or a pair: an error inside the union names the field, not pydantic's member
+    ('mandrel.pole_radius_mm.constrained-float', found by the fuzzer), and its line."""
+    text = (EXAMPLES / "pressure_vessel.toml").read_text()
+    job = _job(tmp_path, re.sub(r"(?m)^pole_radius_mm = .*$", "pole_radius_mm = nan", text))
+    rc, _, err = _cli(capsys, "run", str(job), "-o", str(tmp_path / "o.ngc"), "--quiet")
+    assert rc == 2 and f"line {_line_of(job, 'pole_radius_mm')}, field 'mandrel.pole_radius_mm':" in err, err
+
+
 @pytest.mark.parametrize("edit", ["tolerance_mm = 10", "min_block_time_s = 10", "friction = 10"])
 def test_the_largest_values_the_schema_accepts_run(tmp_path, capsys, edit) -> None:
     sec = "[band]" if "friction" in edit else "[post]"
