@@ -288,7 +288,13 @@ def field_line(file: str | Path, field: str) -> int | None:
         line = _segment_line(text, int(parts[2]), parts[3] if len(parts) > 3 else None)
         if line is not None:
             return line
-    return _find_line(text, tuple(x for x in parts if not x.isdigit()))
+    keys = tuple(x for x in parts if not x.isdigit())
+    while keys:  # the key's line, else the nearest enclosing table's header that the file has
+        line = _find_line(text, keys)
+        if line is not None:
+            return line
+        keys = keys[:-1]
+    return None
 
 
 def check_laminate(job: Any, mandrel: Any, *, file: str | Path | None = None) -> Estimate:

@@ -616,6 +616,18 @@ def test_the_schema_refuses_what_the_engine_would(tmp_path, capsys, edit, field,
     assert rc == 2 and not out.exists() and f"{job}, line {line}, field '{field}'" in err and words in err, err
 
 
+def test_mandrel_beyond_the_machines_swing_is_refused_before_work(tmp_path, capsys) -> None:
+    """A 3 m radius on lathe2 (eye at 160 mm): refused by the machine pre-check, naming the set-up field and,
+    as the job has no [machine.setup], the line of its [machine] table."""
+    text = PIPE.replace("radius_mm = 40.0", "radius_mm = 3000.0").replace("points_per_pass = 100",
+                                                                          "points_per_pass = 100\ncircuits = 7")
+    job = _job(tmp_path, text)
+    out = tmp_path / "o.ngc"
+    rc, _, err = _cli(capsys, "run", str(job), "-o", str(out), "--quiet")
+    assert rc == 2 and not out.exists(), err
+    assert f"line {_line_of(job, '[machine]')}, field 'machine.setup.eye_radius_mm'" in err and "3000 mm" in err, err
+
+
 def test_union_field_error_names_the_field_and_its_line(tmp_path, capsys) -> None:
     """pole_radius_mm is a number or a pair: an error inside the union names the field, not pydantic's member
     ('mandrel.pole_radius_mm.constrained-float', found by the fuzzer), and its line."""
