@@ -122,7 +122,8 @@ def build_layout(w: MainWindow) -> None:
     w.progress_bar = QProgressBar()
     w.progress_bar.setObjectName("pipelineProgress")
     w.progress_bar.setRange(0, 1000)
-    w.progress_bar.setMaximumWidth(220)
+    w.progress_bar.setMinimumWidth(240)  # its text names the stage: narrower, it wrapped onto two clipped lines
+    w.progress_bar.setMaximumWidth(360)
     w.progress_bar.setFormat("%p%")
     w.progress_bar.hide()
     w.cancel_button = QPushButton("Cancel")

@@ -307,6 +307,13 @@ class MandrelView3D(PlaybackMixin, SceneMixin, QWidget):
                          lod: np.ndarray | None) -> None:
         import pyvista as pv
 
+        finite = c[np.isfinite(c)]
+        one_value = finite.size == 0 or float(finite.min()) == float(finite.max())
+        bar = {"title": VTK_TITLES[self.colour_by], "vertical": True}
+        if self.colour_by == "circuit":  # whole circuit numbers on the bar
+            bar.update(fmt="%.0f", n_labels=int(min(5, round(clim[1] - clim[0]) + 1)))
+        for title in list(self.plotter.scalar_bars.keys()):
+            self.plotter.remove_scalar_bar(title, render=False)
         for name, idx in (("paths", None), ("paths_lod", lod)):
             if name == "paths_lod" and lod is None:
                 continue
@@ -315,8 +322,8 @@ class MandrelView3D(PlaybackMixin, SceneMixin, QWidget):
             self._path_meshes[name] = line
             actor = self.plotter.add_mesh(
                 line, name=name, scalars="c", cmap=cmap, clim=clim, line_width=PATH_LINE_WIDTH,
-                show_scalar_bar=name == "paths", reset_camera=False, render=False,
-                scalar_bar_args={"title": VTK_TITLES[self.colour_by], "vertical": True})
+                show_scalar_bar=name == "paths" and not one_value, reset_camera=False, render=False,
+                scalar_bar_args=bar)  # one value (a hoop layer's one circuit): one colour, no bar
             if name == "paths_lod":
                 actor.SetVisibility(False)
 
