@@ -440,6 +440,8 @@ class MainWindow(QMainWindow):
 
     def _on_timelaw_failed(self, exc: BaseException, tb: str) -> None:
         self.timelaw_panel.summary.setText("")
+        if not self.timelaw_plot.has_data():
+            self.timelaw_plot.set_message(texts.NO_DATA)
         self.report_dialog("Time law failed", exc, tb)
 
     # -- NC export -----------------------------------------------------------------------------------

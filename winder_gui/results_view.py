@@ -217,6 +217,8 @@ class ResultsPresenter(QObject):
         panel = self.v.timelaw_panel
         if i >= 0 and res is not None and i < len(getattr(res, "timelaw_laws", ())):
             panel.summary.setText("computing…")
+            if not self.v.timelaw_plot.has_data():
+                self.v.timelaw_plot.set_message(texts.COMPUTING_TIMELAW)
             self.ctl.compute_job_timelaw(i, res)
             self.status.emit("Computing DP and TOPP-RA on the job's time-law path…", False)
             return
@@ -224,6 +226,8 @@ class ResultsPresenter(QObject):
             self.status.emit(f"Time law: {panel.errors()}", True)
             return
         panel.summary.setText("computing…")
+        if not self.v.timelaw_plot.has_data():
+            self.v.timelaw_plot.set_message(texts.COMPUTING_TIMELAW)
         self.ctl.compute_paper_timelaw()
         self.status.emit("Computing the time law…", False)
 

@@ -13,6 +13,7 @@ STALE_RESULTS = "Out of date: the job changed since this run. Run again (F5)."
 EXPORT_NO_PROGRAM = "there is no NC program yet: run the pipeline (F5)"
 EXPORT_STALE = "the NC program is out of date: the job changed since the last run (run again, F5)"
 EXPORT_RUNNING = "the pipeline is still running on the current job"
+COMPUTING_TIMELAW = "Computing the time law (tube iterations, single DP, TOPP-RA bound) in the background…"
 NOTHING_CHANGED = "Nothing was changed: the current job is still loaded."
 
 CUT_MODE = {"down-cut": "down-cut (climb milling: the tool turns with the feed)",
