@@ -239,15 +239,37 @@ MAX_DP_WORK = 3e9
 tube method's passes took 8 s for 893 nodes × 1000² levels)."""
 
 
-def check_dp(n_nodes: int, levels: int, *, field: str = "timelaw.levels", file: str | Path | None = None) -> None:
+DP_CACHE_LEVELS = 1024
+"""Above this many speed levels an interval's M × M transition table (8 MB at 1024) no longer fits the
+processor's cache: each cell costs about M / 1024 times more (measured: 4096 levels on a 90-node path took
+200 s in the tube method, the plain n × M² model said 15 s)."""
+
+TUBE_PASSES = 3
+"""DP passes of the tube method counted before work (the examples stop after 3; the first passes are the
+full ones)."""
+
+
+def dp_work(n_nodes: int, levels: int, passes: int = 1) -> float:
+    """Work units of a time-law DP: nodes × levels² × max(1, levels / 1024) × passes (about 1e8 a second)."""
+    m = float(levels)
+    return float(n_nodes) * m * m * max(1.0, m / DP_CACHE_LEVELS) * passes
+
+
+def check_dp(n_nodes: int, levels: int, *, field: str = "timelaw.levels", file: str | Path | None = None,
+             method: str = "dp") -> None:
     """Refuse a time-law DP (engine.timeparam, methods tube and dp) too slow or too large for the budget."""
-    work = float(n_nodes) * float(levels) ** 2
+    passes = TUBE_PASSES if method == "tube" else 1
+    work = dp_work(n_nodes, levels, passes)
     if work > MAX_DP_WORK:
-        m_max = int(math.sqrt(MAX_DP_WORK / max(n_nodes, 1)))
-        raise InputError(f"too slow: the time law's DP over {n_nodes} nodes × {levels} speed levels would take "
-                         f"about {work / MAX_DP_WORK * 30:.0f} s (the work budget is about 30 s); use at most "
-                         f"{m_max} levels", file=file, line=field_line(file, field) if file is not None else None,
-                         field=field)
+        n = max(n_nodes, 1)
+        m_max = int(math.sqrt(MAX_DP_WORK / (n * passes)))
+        if m_max > DP_CACHE_LEVELS:
+            m_max = int((MAX_DP_WORK * DP_CACHE_LEVELS / (n * passes)) ** (1.0 / 3.0))
+        raise InputError(f"too slow: the time law's {method} over {n_nodes} nodes × {levels} speed levels"
+                         f"{f' × {passes} passes' if passes > 1 else ''} would take about "
+                         f"{work / MAX_DP_WORK * 30:.0f} s (the work budget is about 30 s); use at most "
+                         f"{max(m_max, 2)} levels", file=file,
+                         line=field_line(file, field) if file is not None else None, field=field)
     check(Estimate("DP cells", float(n_nodes) * float(levels), DP_BYTES_PER_CELL, field=field,
                    detail=f"{n_nodes} nodes × {levels} speed levels"), file=file)
 

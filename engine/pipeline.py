@@ -769,7 +769,7 @@ def _parametrize(method: str, nodes: tuple[np.ndarray, ...], limits: Any, state:
     from engine.timeparam import parametrize
 
     if method != "toppra":
-        check_dp(nodes[0].size, limits.levels)
+        check_dp(nodes[0].size, limits.levels, method=method)
     with np.errstate(divide="ignore", invalid="ignore"):
         return parametrize(*nodes, limits, method=method, state=_NoPartial(state))
 

@@ -150,6 +150,20 @@ def test_schema_and_engine_agree_on_levels() -> None:
         TimeLawSpec(levels=_MAX_LEVELS + 1)
 
 
+def test_many_speed_levels_are_refused_before_work_by_the_dp_work_model(tmp_path, capsys) -> None:
+    """levels = 4096 (the schema's largest) with the tube method on a small pipe: 200 s of CPU before (the
+    n × M² model ignored the transition tables leaving the cache and the tube's passes, found by probing
+    the schema's extremes); now refused before any DP, naming the field, its line and the largest M."""
+    job = _job(tmp_path, PIPE.replace('method = "blocks"', 'method = "tube"\nlevels = 4096'))
+    out = tmp_path / "o.ngc"
+    rc, _, err = _cli(capsys, "run", str(job), "-o", str(out), "--quiet")
+    assert rc == 2 and not out.exists(), err
+    assert f"line {_line_of(job, 'levels')}, field 'timelaw.levels'" in err and "too slow" in err, err
+    m = int(re.search(r"use at most (\d+) levels", err).group(1))
+    n = int(re.search(r"over (\d+) nodes", err).group(1))
+    assert budget.dp_work(n, m, budget.TUBE_PASSES) <= budget.MAX_DP_WORK < budget.dp_work(n, m + 1, budget.TUBE_PASSES)
+
+
 def test_dense_profile_is_decimated_within_the_stated_tolerance(tmp_path) -> None:
     from engine.mandrel_io import MAX_SPLINE_POINTS, load_csv
 

@@ -66,7 +66,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.method != "toppra":
         budget.check_dp(s.size, limits.levels, field="--levels" if args.levels is not None else "levels",
-                        file=None if args.levels is not None or args.example and not args.limits else args.limits)
+                        file=None if args.levels is not None or args.example and not args.limits else args.limits,
+                        method=args.method)
     try:
         law = parametrize(s, X, dX, ddX, limits, method=args.method, state=CliState(quiet=args.json))
     except InputError as exc:
