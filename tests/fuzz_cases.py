@@ -801,8 +801,16 @@ class Runner:
             paths = [a for a in argv if "/" in a]
             if not any(a in err_line for a in [*paths, str(d)]) and "field '" not in err_line:
                 res.problems["unlocated"] = err_line[:200]
-            elif re.search(r"\.toml, field '", err_line):
-                res.problems["no line"] = err_line[:200]
+            else:
+                m = re.search(r"(\S+\.toml), field '([^']+)'", err_line)
+                if m:  # a field of a file it has no line in is a default (e.g. no [machine] table): no line
+                    try:
+                        text = Path(m.group(1)).read_text(encoding="utf-8", errors="replace")
+                    except OSError:
+                        text = ""
+                    top = m.group(2).split(".")[0]
+                    if re.search(rf"(?m)^\s*(\[\[?{re.escape(top)}\b|{re.escape(top)}\s*[.=])", text):
+                        res.problems["no line"] = err_line[:200]
         left = [p.name for p in d.iterdir() if ".winder-" in p.name or re.match(r"^\..+\.\w{8}\.\w+$", p.name)]
         if left:
             res.problems["temp file"] = ", ".join(left)
