@@ -25,6 +25,7 @@ import time
 from pathlib import Path
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+os.environ.setdefault("WINDER_MAX_MEMORY", "64G")      # the big job is over the default memory budget
 _tmp = tempfile.mkdtemp(prefix="winder-bench-")
 os.environ.setdefault("WINDER_SETTINGS", str(Path(_tmp) / "settings.ini"))
 os.environ.setdefault("WINDER_AUTOSAVE_DIR", str(Path(_tmp) / "autosave"))
