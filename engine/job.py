@@ -318,7 +318,9 @@ class TimeLawSpec(_Model):
     method: Literal["blocks", "tube", "dp", "toppra"] = "tube"
     levels: Annotated[int, Field(ge=5, le=4096)] = 100
     """M, speed levels per node (the engine packs the level index into 12 bits: at most 4096)."""
-    penalty: NonNegMM = 0.5e-11
+    penalty: Annotated[float, Field(ge=0, le=1.0)] = 0.5e-11
+    """K, the acceleration penalty of the DP (s per (mm/s²)²; default 5e-12; above 1 every transition costs
+    more than any time saved)."""
     tube_share: Annotated[float, Field(gt=0, lt=1)] = 0.1
     stop_percent: Annotated[float, Field(gt=0, le=100)] = 0.5
     sdot_max: Annotated[float, Field(ge=1e-3, le=1e9)] | None = None

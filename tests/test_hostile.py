@@ -612,6 +612,7 @@ def test_schema_refuses_turns_and_leads_the_engine_cannot_move(tmp_path, capsys,
     (('post = "linuxcnc"', 'post = "linuxcnc"\ntolerance_mm = 1e308'), "post.tolerance_mm", "does not lay it"),
     (('post = "linuxcnc"', 'post = "linuxcnc"\nmin_block_time_s = 11'), "post.min_block_time_s", "at most 10 s"),
     (('method = "blocks"', 'method = "tube"\nsdot_max = 1e-300'), "timelaw.sdot_max", "greater than or equal"),
+    (('method = "blocks"', 'method = "tube"\npenalty = 1e308'), "timelaw.penalty", "less than or equal"),
     (("friction = 0.2", "friction = 1e308"), "band.friction", "not physical"),  # a report's ±μ plot overflowed
     (("friction = 0.2", "friction = 0.2\nthickness_mm = 1e308"), "band.thickness_mm", "more than its width"),
     (("dwell_deg = [180.0, 180.0]", "dwell_deg = [180.0, 1081.0]"), "winding.dwell_deg.1", "more than 3 turns"),
