@@ -517,8 +517,9 @@ def test_straight_line_bang_bang_closed_form(method) -> None:
     assert np.max(law.sdot) == pytest.approx(math.sqrt(100.0 * 10.0), rel=5e-3)   # peak at the middle
 
 
-@pytest.mark.parametrize(("v_lin", "noise"), [(1e6, 1e-16), (1e9, 0.0), (1e12, 0.0), (1e9, 1e-13), (1e9, 1e-12),
-                                             (1e6, 1e-14), (1e12, 1e-16)])
+# speed limits up to the largest the limits accept (1e9 units/s: beyond is refused as a units error)
+@pytest.mark.parametrize(("v_lin", "noise"), [(1e6, 1e-16), (1e9, 0.0), (3e8, 0.0), (1e9, 1e-13), (1e9, 1e-12),
+                                             (1e6, 1e-14), (1e9, 1e-16)])
 def test_axis_at_rest_and_linear_axis(v_lin: float, noise: float) -> None:
     """One axis constant, one linear in s (X'' = 0, maybe round-off noise on the derivatives), no sdot_max.
 
