@@ -263,11 +263,15 @@ def test_pipe_workflow(pipe_window, tmp_path, monkeypatch) -> None:
     assert out.read_text() == w.result.nc_text
     assert str(out) in w.status_msg.text()
 
-    # a program that violates a limit asks "write anyway?"
-    w.machine_panel.set_cell("X", "max", "1000")
-    assert w.job.machine.axes["X"].max == 1000.0
+    # a program that violates a limit asks "write anyway?" (a carriage range that cannot fit is refused
+    # before any work by the set-up pre-check; a chuck wider than the eye's radius is found along the path)
+    w.machine_panel.setup_edits["chuck_radius_mm"].setText("170")
+    w.machine_panel._on_edited()
+    assert w.job.machine.setup.chuck_radius_mm == 170.0
     assert w.wait_idle(180000)
-    assert w.run_violations
+    if w.doc.is_stale():
+        _run(w)
+    assert w.run_violations and any(v.kind == "clearance" for v in w.run_violations)
     asked: list[str] = []
     monkeypatch.setattr(QMessageBox, "question", lambda *a, **k: asked.append(a[1]) or QMessageBox.StandardButton.No)
     bad = tmp_path / "bad.ngc"
