@@ -171,6 +171,7 @@ class PipelineResult:
             rep["max_speed_ratio"] = _speed_ratios(b, self.machine)
             rep["max_accel_ratio"] = _accel_ratios(b, self.machine)
             rep["max_jump_ratio"] = _jump_ratios(b, self.machine)
+            rep["block_accel_ratio"] = _block_accel_ratios(b, self.machine)
             rep["max_error_mm"] = float(np.max(b.max_error)) if b.n else 0.0
         if self.timelaw is not None:
             rep["timelaw"] = dict(self.timelaw)
@@ -247,6 +248,18 @@ def _accel_ratios(blocks: Any, machine: Any) -> dict[str, float]:
     dv, tm = _corner_steps(blocks)
     p = machine.limits("max_jump")
     a = np.maximum(dv - p, 0.0) / tm[:, None]
+    lim = machine.limits("max_accel")
+    return {name: float(a[:, k].max() / lim[k]) for k, name in enumerate(machine.axis_names)}
+
+
+def _block_accel_ratios(blocks: Any, machine: Any) -> dict[str, float]:
+    """Speed step at a block boundary spread over the mean duration of its two blocks, per axis, /
+    max_accel (a smoothness figure of the block program: how hard a controller that blends the corners
+    over the blocks would accelerate; docs/timeparam.md's "block accelerations")."""
+    if blocks.n < 2:
+        return {name: 0.0 for name in machine.axis_names}
+    dv, tm = _corner_steps(blocks)
+    a = dv / tm[:, None]
     lim = machine.limits("max_accel")
     return {name: float(a[:, k].max() / lim[k]) for k, name in enumerate(machine.axis_names)}
 
