@@ -530,13 +530,35 @@ DXF_TANGENCY_TOL_RAD = 1e-6
 """Largest angle between drawn segments at a joint that still counts as tangent (exact DXF import)."""
 
 
+MIN_BULGE = 1e-9
+"""Polyline bulges smaller than this (tan of a quarter of the arc angle) are straight segments: an arc of
+radius ~ chord / (4 bulge) beyond 1e9 chords is a line drawn with noise (ezdxf turned a bulge of 1e-110
+into an arc of no length, or overflowed)."""
+
+
+def _dxf_parts(e: Any) -> list[Any]:
+    """The LINE/ARC parts of a LINE, ARC, LWPOLYLINE or POLYLINE entity; negligible bulges straightened."""
+    t = e.dxftype()
+    if t == "LWPOLYLINE":
+        with e.points("xyseb") as pts:
+            for i, p in enumerate(pts):
+                if abs(p[4]) < MIN_BULGE:
+                    pts[i] = (p[0], p[1], p[2], p[3], 0.0)
+    elif t == "POLYLINE":
+        for v in e.vertices:
+            if abs(float(v.dxf.get("bulge", 0.0))) < MIN_BULGE:
+                v.dxf.bulge = 0.0
+    else:
+        return [e]
+    return list(e.virtual_entities())
+
+
 def _dxf_exact_segments(curves: list[Any], scale: float) -> tuple[list[Segment] | None, str]:
     """The profile as exact line and arc segments, if it is drawn only with LINE, ARC and (bulged)
     polylines, joined end to end and tangentially; else (None, why) and the caller fits a spline."""
     raw: list[tuple[str, FloatArray, FloatArray, Any]] = []  # kind, start, end (z increasing), extra
     for e in curves:
-        t = e.dxftype()
-        parts = list(e.virtual_entities()) if t in ("LWPOLYLINE", "POLYLINE") else [e]
+        parts = _dxf_parts(e)
         for part in parts:
             pt = part.dxftype()
             if pt == "LINE":
@@ -739,8 +761,7 @@ def _dxf_pieces(entities: list[Any], scale: float) -> tuple[list[_Piece], list[A
     for e in curves:
         label = _entity_label(e)
         try:
-            t = e.dxftype()
-            parts = list(e.virtual_entities()) if t in ("LWPOLYLINE", "POLYLINE") else [e]
+            parts = _dxf_parts(e)
             for part in parts:
                 pt = part.dxftype()
                 if pt == "LINE":

@@ -637,3 +637,14 @@ def test_load_mandrel_file_dispatch(tmp_path: Path, examples_dir: Path) -> None:
 def test_samples_are_small(examples_dir: Path) -> None:
     for name in ("bottle_profile.csv", "vessel_profile.dxf", "vessel.step"):
         assert (examples_dir / name).stat().st_size < 1_000_000
+
+
+def test_dxf_negligible_bulge_is_a_straight_segment(tmp_path: Path) -> None:
+    """A bulge of 1e-110 (hypothesis found it: an overflow warning inside the arc conversion, or an arc of no
+    length) is a straight segment: the profile comes in exact, r on the line equals the drawn line."""
+    doc, msp = _new_dxf()
+    msp.add_lwpolyline([(0.0, 10.0, -1.1e-110), (100.0, 30.0, 0.0)], format="xyb")
+    m = load_dxf(_save(doc, tmp_path, "bulge.dxf"))
+    assert m.meta["dxf_exact"] is True
+    z = np.linspace(0.0, 100.0, 11)
+    np.testing.assert_allclose(m.r(z), 10.0 + 0.2 * z, rtol=0, atol=1e-9)
