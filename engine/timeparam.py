@@ -98,6 +98,9 @@ __all__ = [
 METHODS = ("tube", "dp", "toppra")
 _N_SUB = 16  # sub-points per interval for the reported limit ratios
 _MAX_LEVELS = 4096  # the DP packs the level index into 12 bits
+MIN_USER_LEVELS = 5
+"""Fewest speed levels a job, a limits file or ``--levels`` may ask for (the job schema's minimum: with fewer
+the DP has no speed between rest and the cap and finds no law)."""
 
 
 # --------------------------------------------------------------------------------------------------
@@ -322,8 +325,9 @@ def limits_from_mapping(d: Mapping[str, Any], file: str | None = None) -> TimeLi
         raise InputError(f"v_max has {len(vecs['v_max'])} items but a_max has {len(vecs['a_max'])}",
                          file=file, field="a_max")
     levels = d.get("levels", 100)
-    if isinstance(levels, bool) or not isinstance(levels, int) or not 2 <= levels <= _MAX_LEVELS:
-        raise InputError(f"must be an integer in 2..{_MAX_LEVELS}, got {levels!r}", file=file, field="levels")
+    if isinstance(levels, bool) or not isinstance(levels, int) or not MIN_USER_LEVELS <= levels <= _MAX_LEVELS:
+        raise InputError(f"must be an integer in {MIN_USER_LEVELS}..{_MAX_LEVELS}, got {levels!r}", file=file,
+                         field="levels")
     maxit = d.get("max_iterations", 60)
     if isinstance(maxit, bool) or not isinstance(maxit, int) or maxit < 1:
         raise InputError(f"must be an integer >= 1, got {maxit!r}", file=file, field="max_iterations")

@@ -540,3 +540,22 @@ def test_axis_at_rest_and_linear_axis(v_lin: float, noise: float) -> None:
     T = 2.0 * math.sqrt(20.0 / 100.0)
     assert T * (1 - 1e-9) <= law.total_time_s <= T * 1.005
     assert law.max_accel_ratio <= 1.0 + 1e-9
+
+
+def test_user_levels_below_the_schema_minimum_are_refused(tmp_path) -> None:  # noqa: ANN001
+    """``--levels`` and a limits file ask for at least as many levels as a job may (5): with 2 the DP had no
+    speed between rest and the cap and failed with 'no admissible law' against a file with no line."""
+    import subprocess
+    import sys
+
+    from engine.job import TimeLawSpec
+    from engine.timeparam import MIN_USER_LEVELS, limits_from_toml
+
+    assert min(m.ge for m in TimeLawSpec.model_fields["levels"].metadata if hasattr(m, "ge")) == MIN_USER_LEVELS
+    out = subprocess.run([sys.executable, "-m", "engine", "timeparam", "--example", "--levels", "2"],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2 and "--levels" in out.stderr and "Traceback" not in out.stderr
+    lim = tmp_path / "lim.toml"
+    lim.write_text("v_max = [1.0]\na_max = [1.0]\nlevels = 3\n")
+    with pytest.raises(InputError, match="levels"):
+        limits_from_toml(lim)

@@ -59,8 +59,10 @@ def run(args: argparse.Namespace) -> int:
         s, X, dX, ddX = load_path_npz(args.path)
         limits = limits_from_toml(args.limits)
     if args.levels is not None:
-        if not 2 <= args.levels <= 4096:
-            raise InputError(f"must be in 2..4096, got {args.levels}", field="--levels")
+        from engine.timeparam import _MAX_LEVELS, MIN_USER_LEVELS
+
+        if not MIN_USER_LEVELS <= args.levels <= _MAX_LEVELS:
+            raise InputError(f"must be in {MIN_USER_LEVELS}..{_MAX_LEVELS}, got {args.levels}", field="--levels")
         limits = replace(limits, levels=args.levels)
     from engine import budget
 
