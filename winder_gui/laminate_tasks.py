@@ -103,7 +103,8 @@ def layer_view(lr: Any, surface_data: Any = None) -> LayerView:
     res = lr.result
     if res is not None and res.line is not None:
         line = res.line
-        paths = paths_view_data(line, res.eye, MAX_DISPLAY_POINTS, MAX_FRAMES, blocks=res.blocks)  # layer time
+        paths = paths_view_data(line, res.eye, MAX_DISPLAY_POINTS, MAX_FRAMES, blocks=res.blocks,
+                                 axes=res.axes, machine=res.machine)  # layer time
         sel = (line.pass_id == line.pass_id[0]) & ~line.dwell
         if int(sel.sum()) < 2:
             sel = np.ones(line.z.size, dtype=bool)

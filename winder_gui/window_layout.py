@@ -42,6 +42,9 @@ def build_layout(w: MainWindow) -> None:
     properties stack and the status bar)."""
     w.steps = StepBar()
     w.view3d = MandrelView3D()
+    acts = getattr(w, "actions", None)
+    if isinstance(acts, dict) and "show_machine" in acts:   # View -> Show the machine follows the 3D view's box
+        w.view3d.machine_check.toggled.connect(acts["show_machine"].setChecked)
     w.plot = ProfilePlot()
     w.plot_tabs = QTabWidget()
     w.plot_tabs.setDocumentMode(True)

@@ -79,6 +79,12 @@ def build_menus(w: MainWindow) -> None:
         add(w.menu_view, f"step_{key}", f"&{i + 1} {title}", lambda _c=False, k=key: w.go_to_step(k), f"Ctrl+{i + 1}")
     w.menu_view.addSeparator()
     add(w.menu_view, "play", "&Play / pause the winding", w._toggle_play, "Space")
+    machine = add(w.menu_view, "show_machine", "Show the &machine in 3D (carriage, head)",
+                  lambda on: w.view3d.set_machine_visible(on))
+    machine.setCheckable(True)
+    machine.setChecked(True)
+    if getattr(w, "view3d", None) is not None:   # the action follows the 3D view's box
+        w.view3d.machine_check.toggled.connect(machine.setChecked)
 
     w.menu_tools = mb.addMenu("&Tools")
     add(w.menu_tools, "turning", "&Turning optimiser…",

@@ -214,6 +214,10 @@ class PathsViewData:
     """:class:`winder_gui.views.playback.BandStrip`: the band of true width along a thinned line."""
     band_scalars: dict[str, FloatArray] | None = None
     """Colour arrays per band centre point (keys as :attr:`scalars`)."""
+    frame_q: FloatArray | None = None
+    """Controller axis values at each animation frame (rows of the engine's axis path), or ``None``."""
+    machine: Any = None
+    """The :class:`engine.kinematics.MachineTemplate` of :attr:`frame_q` (the result's, with its set-up)."""
 
 
 def feature_indices(xyz: FloatArray, circuit: NDArray | None = None, rel_tol: float = 1e-9) -> NDArray[np.int64]:
@@ -282,11 +286,13 @@ def decimate_indices(xyz: FloatArray, max_points: int, circuit: NDArray | None =
 
 def paths_view_data(line: object, eye: object, max_points: int = 200_000, max_frames: int = 1500,
                     lift: float | None = None, lod_points: int = LOD_POINTS, blocks: object = None,
-                    band_points: int | None = None) -> PathsViewData:
+                    band_points: int | None = None, axes: object = None, machine: object = None) -> PathsViewData:
     """Thin the engine's winding ``line`` and full-line ``eye`` path for the 3D view (no new maths).
 
     ``max_points`` bounds the line drawn at rest, ``lod_points`` the coarse copy drawn while the view
-    moves, ``max_frames`` the animation frames; see :func:`decimate_indices`.
+    moves, ``max_frames`` the animation frames; see :func:`decimate_indices`.  ``axes`` and ``machine``:
+    the result's :class:`engine.kinematics.AxisPath` (one row per eye point) and template, so the 3D view
+    can draw the machine at each frame (:mod:`winder_gui.views.machine3d`).
     """
     z = np.asarray(line.z)  # type: ignore[attr-defined]
     n = z.size
@@ -334,5 +340,11 @@ def paths_view_data(line: object, eye: object, max_points: int = 200_000, max_fr
         band_scalars = {"circuit": np.asarray(circuit_all, dtype=float)[bidx],
                         "beta_deg": np.degrees(np.asarray(line.beta))[bidx],  # type: ignore[attr-defined]
                         "lam": np.asarray(line.lam, dtype=float)[bidx], "u": u_b}  # type: ignore[attr-defined]
+    frame_q = None
+    if axes is not None and machine is not None and fidx.size:
+        q_all = np.asarray(axes.q, dtype=float)  # type: ignore[attr-defined]
+        if q_all.ndim == 2 and q_all.shape[0] > int(fidx[-1]):
+            frame_q = q_all[fidx]
     return PathsViewData(idx, stride, to_view(xyz), scalars, float(lift), fidx, exyz, cxyz, n, lod,
-                         frame_time, frame_circuit, band, band_scalars)
+                         frame_time, frame_circuit, band, band_scalars, frame_q,
+                         machine if frame_q is not None else None)

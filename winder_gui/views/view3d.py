@@ -37,6 +37,7 @@ from PySide6.QtWidgets import (
 
 from winder_gui.views.geometry import MandrelViewData, PathsViewData
 from winder_gui.views.playback import Timeline
+from winder_gui.views.view3d_machine import MachineMixin
 from winder_gui.views.view3d_playback import COLOUR_KEYS, FRAME_MS, SLIDER_STEPS_PER_S, PlaybackMixin, SceneMixin
 from winder_gui.views.vtk_widget import _preload_vtk, interactor_class
 from winder_gui.workers import JobRunner
@@ -79,7 +80,7 @@ def gl_available() -> bool:
     return QGuiApplication.platformName() not in HEADLESS_PLATFORMS
 
 
-class MandrelView3D(PlaybackMixin, SceneMixin, QWidget):
+class MandrelView3D(PlaybackMixin, SceneMixin, MachineMixin, QWidget):
     """Container for the 3D view; :attr:`backend` is ``"pending"``, ``"vtk"`` or ``"placeholder"``.
 
     Signals: ``layer_requested(int)`` — show job layer ``index`` of the laminate (the layer chooser, or the
@@ -118,6 +119,7 @@ class MandrelView3D(PlaybackMixin, SceneMixin, QWidget):
         self._anim = QTimer(self)
         self._anim.setInterval(FRAME_MS)
         self._anim.timeout.connect(self._tick)
+        self._machine_init()
         self._build_controls()
         self._label = QLabel("3D view: loading…")
         self._label.setAlignment(Qt.AlignmentFlag.AlignCenter)
@@ -278,6 +280,7 @@ class MandrelView3D(PlaybackMixin, SceneMixin, QWidget):
                      *(f"band{j}" for j in range(len(self._band["chunks"]) if self._band else 0))):
             self.plotter.remove_actor(name, render=False)
         self._band = None
+        self._remove_machine()
         self._eye_meshes.clear()
         self._path_meshes.clear()
         p = self.paths
@@ -370,6 +373,7 @@ class MandrelView3D(PlaybackMixin, SceneMixin, QWidget):
         if at is None or self.plotter is None:
             return
         self._update_band()
+        self._update_machine()
         eye, contact = at
         actors = self.plotter.actors
         meshes = self._eye_meshes

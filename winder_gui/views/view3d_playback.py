@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 from PySide6.QtCore import QElapsedTimer, Qt
 from PySide6.QtWidgets import (
+    QCheckBox,
     QComboBox,
     QHBoxLayout,
     QLabel,
@@ -96,6 +97,13 @@ class PlaybackMixin:
         h2.addWidget(QLabel("colour:"))
         h2.addWidget(self.colour_combo)
         h2.addStretch(1)
+        self.machine_check = QCheckBox("machine")
+        self.machine_check.setObjectName("view3d.machine")
+        self.machine_check.setChecked(True)
+        self.machine_check.setToolTip("Show the carriage, cross-slide / robot links and payout head, posed by the "
+                                      "machine's forward kinematics at the current time")
+        self.machine_check.toggled.connect(self.set_machine_visible)
+        h2.addWidget(self.machine_check)
         h2.addWidget(QLabel("view:"))
         self.camera_buttons: dict[str, QToolButton] = {}
         for key, text, tip in (("iso", "Iso", "Isometric view"), ("side", "Side", "Side view (the axis across)"),

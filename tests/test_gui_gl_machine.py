@@ -1,0 +1,100 @@
+"""The machine (carriage, cross-slide / robot links, payout head) in the real 3D view, posed by the
+engine's forward kinematics (issue 18) - the head's tip must be the eye FK gives for the axis values of
+the frame shown, for every template.  Needs OpenGL: run under xvfb with QT_QPA_PLATFORM=xcb (see
+tests/test_gui_gl.py); the numpy part (machine_frames against FK) runs everywhere."""
+
+from __future__ import annotations
+
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from engine.job import MachineSpec, load_job
+from engine.kinematics import forward_kinematics
+from engine.pipeline import run_pipeline
+from winder_gui.views.geometry import paths_view_data, to_view
+from winder_gui.views.machine3d import machine_frames
+
+ROOT = Path(__file__).resolve().parents[1]
+TEMPLATES = ("lathe2", "lathe3", "lathe4", "gantry6", "robot_cell")
+
+
+@cache
+def _result(template: str):
+    """The pipe example up to the axes on ``template`` (about a second each)."""
+    job = load_job(ROOT / "resources/examples/pipe.toml")
+    job = job.model_copy(update={"machine": MachineSpec(template=template)})
+    res = run_pipeline(job, None, upto="axes")
+    return res, paths_view_data(res.line, res.eye, 20_000, 300, axes=res.axes, machine=res.machine)
+
+
+def _fk_eye_view(res, q: np.ndarray) -> np.ndarray:
+    """The engine's eye by forward kinematics, view frame (mm)."""
+    return to_view(forward_kinematics(res.machine, np.atleast_2d(q), fibre=False)[0])
+
+
+@pytest.mark.parametrize("template", TEMPLATES)
+def test_machine_frames_end_at_the_fk_eye(template: str) -> None:
+    res, paths = _result(template)
+    # the frames' axis values are the engine's axis path rows at the frame indices
+    np.testing.assert_array_equal(paths.frame_q, np.asarray(res.axes.q)[paths.frame_index])
+    fr = machine_frames(res.machine, paths.frame_q, margin_mm=10.0)
+    fk = _fk_eye_view(res, paths.frame_q)
+    np.testing.assert_allclose(fr.eye, fk, atol=1e-6, rtol=0)
+    np.testing.assert_allclose(fr.links[:, -1], fk, atol=1e-6, rtol=0)
+    # and the eye the axes realise is the eye path's (what the red eye of the view shows)
+    np.testing.assert_allclose(fk, to_view(np.asarray(res.axes.eye_xyz)[paths.frame_index]), atol=1e-6)
+    if res.machine.kind == "cartesian":
+        # the carriage rides along the mandrel axis with the eye, outside every eye position
+        np.testing.assert_allclose(fr.carriage[:, 0], fk[:, 0], atol=1e-9)
+        rho_c, rho_e = np.hypot(fr.carriage[:, 1], fr.carriage[:, 2]), np.hypot(fk[:, 1], fk[:, 2])
+        assert np.all(rho_c >= rho_e.max() + 10.0 - 1e-9)
+    else:
+        # the robot's base rides the track (parallel to the mandrel axis) with the track axis
+        k = res.machine.axis_index("track")
+        track = res.machine.to_internal(paths.frame_q)[:, k]
+        np.testing.assert_allclose(fr.carriage[:, 0] - track, fr.carriage[0, 0] - track[0], atol=1e-9)
+
+
+@pytest.mark.gl
+def test_drawn_head_sits_at_the_fk_eye_for_every_template(qtbot) -> None:
+    from PySide6.QtGui import QGuiApplication
+
+    if QGuiApplication.platformName() in ("offscreen", "minimal"):
+        pytest.skip("needs a real display (xvfb-run with QT_QPA_PLATFORM=xcb)")
+    from winder_gui.views.view3d import MandrelView3D
+
+    v = MandrelView3D()
+    qtbot.addWidget(v)
+    v.resize(640, 480)
+    v.show()
+    assert v.ensure_backend() == "vtk"
+    for template in TEMPLATES:
+        res, paths = _result(template)
+        v.set_paths(paths)
+        n = paths.frame_index.size
+        for i in (0, n // 7, n // 3, n // 2, n - 1):
+            v.set_frame(i)
+            fk = _fk_eye_view(res, paths.frame_q[i])[0]
+            np.testing.assert_allclose(v.machine_head_eye(), fk, atol=1e-6, rtol=0, err_msg=f"{template} frame {i}")
+            links = v.actor_points("machine_links")
+            np.testing.assert_allclose(links[-1], fk, atol=1e-6, rtol=0)
+            assert v.plotter.actors["machine_head"].GetVisibility()
+        # scrubbing by time poses the machine at that time's frame
+        t = 0.4 * v.timeline.total_s
+        v.set_time(t)
+        fk = _fk_eye_view(res, paths.frame_q[v.timeline.frame_at(t)])[0]
+        np.testing.assert_allclose(v.machine_head_eye(), fk, atol=1e-6, rtol=0)
+        # the machine's actors are made once per path set and moved, not re-added per frame
+        head = v.plotter.actors["machine_head"]
+        v.set_frame(1)
+        assert v.plotter.actors["machine_head"] is head
+    # hidden and shown again (View -> Show the machine / the 3D view's box)
+    v.machine_check.setChecked(False)
+    assert not any(v.plotter.actors[a].GetVisibility() for a in ("machine_head", "machine_links", "machine_carriage"))
+    v.set_frame(3)
+    v.machine_check.setChecked(True)
+    assert v.plotter.actors["machine_head"].GetVisibility()
+    np.testing.assert_allclose(v.machine_head_eye(), _fk_eye_view(res, paths.frame_q[3])[0], atol=1e-6)
