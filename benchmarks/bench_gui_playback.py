@@ -6,8 +6,9 @@ Run under a virtual screen (software OpenGL):
 
 Prints, for the pressure-vessel example (a laminate of 4 layers) at 1280x800: the program time, the wall
 time to play the whole program (every layer, from the first layer's start) at x1000 (and x100), the
-renders per second (and per second of the process's CPU time: the machine may be shared), and the time
-of one render with the band half laid.
+renders per second (and per second of the process's CPU time: the machine may be shared), the time
+of one render with the band half laid, and a render and a frame update with the machine (carriage, links,
+head) shown and hidden.
 """
 
 from __future__ import annotations
@@ -58,6 +59,23 @@ def main() -> int:
     print(f"{job.name}: program {v.timeline.total_s:.1f} s, {v.paths.frame_index.size} frames, "
           f"band {v.paths.band.m if v.paths.band is not None else 0} points; "
           f"one render (band half laid) {1000 * min(one):.0f} ms (median {1000 * sorted(one)[2]:.0f} ms)")
+    # the machine (carriage, links, head) drawn or not: renders and frame updates interleaved (a shared machine)
+    cost: dict[bool, dict[str, list[float]]] = {True: {"render": [], "frame": []}, False: {"render": [], "frame": []}}
+    half = 0.5 * v.timeline.total_s
+    for k in range(14):
+        shown = k % 2 == 0
+        v.set_machine_visible(shown)
+        t = time.perf_counter()
+        v.plotter.render()
+        cost[shown]["render"].append(time.perf_counter() - t)
+        t = time.perf_counter()
+        v.set_time(half + (k + 1) * 1e-3 * v.timeline.total_s)   # the eye, band and machine moved, one render
+        cost[shown]["frame"].append(time.perf_counter() - t)
+    v.set_machine_visible(True)
+    med = {s: {key: 1000 * sorted(x)[len(x) // 2] for key, x in c.items()} for s, c in cost.items()}
+    print(f"machine shown / hidden: one render {med[True]['render']:.1f} / {med[False]['render']:.1f} ms, "
+          f"one frame (set_time: eye, band, machine, render) {med[True]['frame']:.1f} / {med[False]['frame']:.1f} ms "
+          "(medians of 7)")
     total = v.program_total_s if v.program_total_s is not None else v.timeline.total_s
     print(f"whole program {total:.1f} s; layers shown in turn: {[label for _i, label, _t in v.layers] or 'one line'}")
     for speed in (1000, 100):
