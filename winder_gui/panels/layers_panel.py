@@ -360,13 +360,19 @@ class LayersPanel(QWidget):
                            Qt.CheckState.Checked if on else Qt.CheckState.Unchecked, Qt.ItemDataRole.CheckStateRole)
 
     # -- internals ---------------------------------------------------------------------------------------
-    def _apply_layers(self, layers: list[Any], text: str, select: int) -> None:
+    def _job_with(self, layers: list[Any]) -> Any:
+        """The job with ``layers``, or ``None`` (no job, or the layers do not validate: said in the status)."""
         if self.job is None:
-            return
+            return None
         try:
-            job = self.job.replace(layers=[lay.model_dump() for lay in layers])
+            return self.job.replace(layers=[lay.model_dump() for lay in layers])
         except ValidationError as exc:
             self._set_status(f"not applied: {exc.errors()[0].get('msg', exc)}")
+            return None
+
+    def _apply_layers(self, layers: list[Any], text: str, select: int) -> None:
+        job = self._job_with(layers)
+        if job is None:
             return
         self._selected = select
         self.set_job(job)
@@ -521,12 +527,8 @@ class LayersPanel(QWidget):
 
     def _apply_layers_keep_editor(self, layers: list[Any], text: str, select: int) -> None:
         """Like :meth:`_apply_layers` but keeps the field editors (what the user is typing)."""
-        if self.job is None:
-            return
-        try:
-            job = self.job.replace(layers=[lay.model_dump() for lay in layers])
-        except ValidationError as exc:
-            self._set_status(f"not applied: {exc.errors()[0].get('msg', exc)}")
+        job = self._job_with(layers)
+        if job is None:
             return
         from engine.laminate import layer_keys
 
