@@ -825,8 +825,9 @@ class _Problem:
         _, _, V, _ = self.geo.eye(l)
         return {"no_sag": np.diff(self.geo.line.s + l) / self.dx, "no_reverse_rotation": np.diff(V) / self.dx}
 
-    def cut_rows(self, mu: FloatArray) -> tuple[Any, FloatArray]:
-        """Linearised rows G·μ >= h of the kept nonlinear constraints, at μ."""
+    def cut_rows(self, mu: FloatArray, slack: float = 0.0) -> tuple[Any, FloatArray]:
+        """Linearised rows G·μ >= h of the kept nonlinear constraints, at μ; ``slack`` admits the exact
+        violation :meth:`nonlinear_values` may show (per unit x, as the exact check counts it)."""
         import scipy.sparse as sp
 
         l = self.l_of(mu)
@@ -846,7 +847,7 @@ class _Problem:
             rr = np.concatenate([np.arange(m), np.arange(m)])
             G = sp.csr_matrix((data, (rr, cols)), shape=(m, self.n))
             # f(i+1) − f(i) + g(i+1)(μ' − μ(i+1)) − g(i)(μ' − μ(i)) >= 0
-            h = -(f[i + 1] - f[i]) + g[i + 1] * mu[i + 1] - g[i] * mu[i]
+            h = -(f[i + 1] - f[i]) + g[i + 1] * mu[i + 1] - g[i] * mu[i] - slack * self.dx[i]
             blocks.append(G)
             rhs.append(h)
         if not blocks:
@@ -1133,11 +1134,11 @@ def _solve_qp_stage(prob: _Problem, u_lo: float, u_hi: float, mu0: FloatArray, s
     def objective(m: FloatArray) -> float:
         return float(0.5 * m @ (Q @ m) + c @ m) + const
 
-    def cutting_planes(mu: FloatArray) -> tuple[FloatArray, int, bool, str]:
+    def cutting_planes(mu: FloatArray, slack: float = 0.0) -> tuple[FloatArray, int, bool, str]:
         backend, it, worst = "", 0, np.inf
         for it in range(1, max_iter + 1):  # noqa: B007 - returned below
             check_cancel(state)
-            G, h = prob.cut_rows(mu)
+            G, h = prob.cut_rows(mu, slack)
             cyc, e = prob.cyclic_row(mu)
             A = sp.vstack([D, G, sp.csr_matrix(cyc[None, :])], format="csc")
             row_lo = np.concatenate([u_lo * prob.dx - prob.ds, h, [e]])
@@ -1149,6 +1150,10 @@ def _solve_qp_stage(prob: _Problem, u_lo: float, u_hi: float, mu0: FloatArray, s
                     sol = _qp_trust_constr(Q, c, A, row_lo, row_hi, prob.mu_lo, prob.mu_hi, mu)
                     backend = "trust-constr"
                 elif "nfeasible" in status:
+                    # the band stage's answer sits on the boundary of the rows it made tight, inside the exact
+                    # check's tolerance: the cuts are then re-tried with that tolerance as slack
+                    if slack == 0.0 and _fast_check(prob, mu0, u_lo, u_hi, tol):
+                        return cutting_planes(mu0, slack=tol)
                     raise _diagnose_infeasible(prob)
                 else:  # time limit / numerical trouble: keep the (14) answer (it satisfies every constraint)
                     return mu, it, False, backend + f" ({status}: jerk not minimised, (14) answer kept)"
@@ -1696,11 +1701,11 @@ def _fast_qp_stage(prob: _Problem, u_lo: float, u_hi: float, mu0: FloatArray, st
     def objective(m: FloatArray) -> float:
         return float(0.5 * m @ (Qf @ m) + cf @ m) + const
 
-    def cutting_planes(mu: FloatArray, iters: int) -> tuple[FloatArray, int, bool]:
+    def cutting_planes(mu: FloatArray, iters: int, slack: float = 0.0) -> tuple[FloatArray, int, bool]:
         it, worst = 0, np.inf
         for it in range(1, iters + 1):  # noqa: B007 - returned below
             check_cancel(state)
-            G, h = prob.cut_rows(mu)
+            G, h = prob.cut_rows(mu, slack)
             A = sp.vstack([I, -I, DP, -DP, (G @ P).tocsr()], format="csr")
             b = np.concatenate([lo, -hi, u_lo * prob.dx - prob.ds, prob.ds - u_hi * prob.dx, h])
             try:
@@ -1716,7 +1721,15 @@ def _fast_qp_stage(prob: _Problem, u_lo: float, u_hi: float, mu0: FloatArray, st
                 break
         return mu, it, worst <= tol
 
-    mu, it, ok = cutting_planes(mu, max_iter)
+    try:
+        mu, it, ok = cutting_planes(mu, max_iter)
+    except _FastFail:
+        # the band stage's answer sits on the boundary of the rows it made tight, inside the exact check's
+        # tolerance: with the u band as tight, the cuts (exact at μ) can leave no interior; re-try with
+        # that tolerance as slack
+        if not _fast_check(prob, mu0, u_lo, u_hi, tol):
+            raise
+        mu, it, ok = cutting_planes(mu0, max_iter, slack=tol)
     val = objective(mu)
     if ok:
         mu, val, it2 = _polish_cuts(prob, mu, val, lambda m: cutting_planes(m, max_iter), objective, tol)

@@ -472,6 +472,8 @@ def solve_pass(
             # even that cap is refused.
             hi_k = hi.copy()
             touch = np.zeros(0, dtype=np.int64)
+            turn_r = [float(rn[i]) for i, kind in ((0, left_kind), (grid.n - 1, right_kind))
+                      if kind == wc.TURN and i0 <= i <= i1]
             for _attempt in range(_TOUCH_ATTEMPTS):
                 try:
                     lam_star, tb = wc.minimax_search(grid, lo, hi_k, points, lam0, state=state, i0=i0, i1=i1)
@@ -485,7 +487,13 @@ def solve_pass(
                     break
                 near = np.unique(np.clip(touch[:, None] + np.arange(-2, 3)[None, :], inner.start,
                                          inner.stop - 1))
-                hi_k[near] = np.minimum(hi_k[near], rn[near] * (1.0 - _SOFT_CAP))
+                cap = rn[near] * (1.0 - _SOFT_CAP)
+                # next to a turnaround (C = r_t there) r has grown by less than the soft cap: hold such nodes
+                # half-way between r_t and r instead (the geodesic continuation C = r_t stays admitted)
+                for r_t in turn_r:
+                    gap = rn[near] - r_t
+                    cap = np.where(gap > 0.0, np.maximum(cap, r_t + 0.5 * gap), cap)
+                hi_k[near] = np.minimum(hi_k[near], cap)
             C[i0 : i1 + 1] = Cp[i0 : i1 + 1]
             lam[i0:i1] = lp[i0:i1]
             if touch.size:

@@ -131,6 +131,12 @@ def test_breakpoints_are_knots_and_curvature_extrema() -> None:
 @example(m=waisted(12, [0.8333184417759113, 0.6463063829847556, 0.19459657723897075, 0.5, 0.3337503654517115,
                         0.19248657979870418, 0.5441218715863706, 0.02, 0.020000000000000004, 0.3333333333333333],
                    0.588309084343646, 0.55, (13.355161409111924, 16.255099469082165)))
+# found by the explore profile: a soft cap r(1 − 1e-5) next to the turnaround (where r has grown by less)
+# forced λ 1.14 against the optimum 0.434
+@example(m=Mandrel.from_points(
+    [0.0, 189.466, 200.379, 222.616, 249.386, 249.655, 294.0, 300.0],
+    [18.617999086611462, 56.45684612123397, 55.805629709215836, 52.10148275573829, 45.19354902370538,
+     45.11201840623487, 26.61811286615766, 13.335789191386297]))
 def test_minimax_line_clears_c_b_between_nodes_and_matches_brute_force(m: Mandrel) -> None:
     zz = np.linspace(m.z_min, m.z_max, 20_001)
     assume(bool(np.all(c_bound(m, zz) < 0.95 * m.r(zz))))  # else no line keeps the band on (a true infeasible)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis import HealthCheck, Phase, example, given, settings
 from hypothesis import strategies as st
 
 from engine.errors import InfeasibleError
@@ -74,6 +74,9 @@ def test_pipe_issue_numbers_at_the_default_grid() -> None:
           phases=[Phase.explicit, Phase.reuse, Phase.generate])
 @given(radius=st.floats(40.0, 120.0), length=st.floats(200.0, 800.0), angle=st.floats(25.0, 70.0),
        clearance=st.floats(5.0, 40.0), k=st.sampled_from([0, 1]))
+# found by the explore profile: the (15) QP's cuts, exact at the band's answer, left no interior where that
+# answer is 1e-7 inside the exact check; min-range was refused although equidistant passes the checks
+@example(radius=106.98552246066244, length=422.3473174833926, angle=43.46558812556574, clearance=6.0, k=1)
 def test_random_pipes(radius: float, length: float, angle: float, clearance: float, k: int) -> None:
     m = Mandrel.pipe(radius, length)
     wl = winding_line(m, 8.0, 0.2, WindingSpec(mode="geodesic", angles=[{"z_mm": length / 2, "angle_deg": angle}],
