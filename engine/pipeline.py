@@ -482,34 +482,13 @@ def _run_stage(res: PipelineResult, stage: str, state: State | None) -> Pipeline
         check_cancel(state)
         return replace(res, eye_circuit=eye1, eye=extend_to_line(eye1, res.line))
     if stage == "axes":
-        from engine.kinematics import inverse_kinematics
-        from engine.machine_setup import (
-            clearance_violations,
-            fit_eye_radius,
-            hold_back_turns,
-            monotone_eye_azimuth,
-            place_on_machine,
-        )
+        from engine.periodic import replicate_axes
 
-        setup = job.machine.setup
-        eye = res.eye
-        machine, note = fit_eye_radius(setup_machine_for_job(job, jp), eye, res.mandrel, setup)
-        # an eye-azimuth machine: where the eye path would turn the mandrel back, the eye slides along its fibre
-        e_xyz, slid = monotone_eye_azimuth(machine, eye.eye_xyz, eye.fibre_dir, eye.contact_xyz,
-                                           float(setup.back_turn_tol_deg))
-        axes = inverse_kinematics(machine, e_xyz, eye.fibre_dir, eye.contact_xyz, state=state, x=eye.x)
-        if slid.any():
-            sh = np.ascontiguousarray(np.asarray(axes.eye_shift) + slid)
-            sh.flags.writeable = False
-            axes = replace(axes, eye_shift=sh)
-        axes = hold_back_turns(machine, axes, float(setup.back_turn_tol_deg))
-        machine, axes, placement = place_on_machine(machine, axes, setup)
-        if placement is not None and note:
-            placement = replace(placement, note=note)
-        clear = clearance_violations(axes, res.mandrel, setup)
-        if clear:
-            axes = replace(axes, violations=tuple(axes.violations) + tuple(clear))
-        return replace(res, machine=machine, axes=axes, placement=placement)
+        def run_axes(eye: Any) -> tuple[Any, Any, Any]:
+            return _axes_stage(job, jp, res.mandrel, eye, state)
+
+        out = replicate_axes(res.line, res.eye, run_axes) or run_axes(res.eye)
+        return replace(res, machine=out[0], axes=out[1], placement=out[2])
     if stage == "blocks":
         from engine.blocks import make_blocks, optimise_block_times
         from engine.budget import check_post
@@ -540,6 +519,37 @@ def _run_stage(res: PipelineResult, stage: str, state: State | None) -> Pipeline
         text = post.render(res.blocks, res.machine, profile)
         return replace(res, nc_text=text, post_name=post.name, extension=post.extension)
     raise AssertionError(stage)  # pragma: no cover
+
+
+def _axes_stage(job: Job, jp: str | None, mandrel: Any, eye: Any, state: State | None) -> tuple[Any, Any, Any]:
+    """The axes stage on the eye path ``eye``: ``(machine, AxisPath, placement)`` (every point computed)."""
+    from engine.kinematics import inverse_kinematics
+    from engine.machine_setup import (
+        clearance_violations,
+        fit_eye_radius,
+        hold_back_turns,
+        monotone_eye_azimuth,
+        place_on_machine,
+    )
+
+    setup = job.machine.setup
+    machine, note = fit_eye_radius(setup_machine_for_job(job, jp), eye, mandrel, setup)
+    # an eye-azimuth machine: where the eye path would turn the mandrel back, the eye slides along its fibre
+    e_xyz, slid = monotone_eye_azimuth(machine, eye.eye_xyz, eye.fibre_dir, eye.contact_xyz,
+                                       float(setup.back_turn_tol_deg))
+    axes = inverse_kinematics(machine, e_xyz, eye.fibre_dir, eye.contact_xyz, state=state, x=eye.x)
+    if slid.any():
+        sh = np.ascontiguousarray(np.asarray(axes.eye_shift) + slid)
+        sh.flags.writeable = False
+        axes = replace(axes, eye_shift=sh)
+    axes = hold_back_turns(machine, axes, float(setup.back_turn_tol_deg))
+    machine, axes, placement = place_on_machine(machine, axes, setup)
+    if placement is not None and note:
+        placement = replace(placement, note=note)
+    clear = clearance_violations(axes, mandrel, setup)
+    if clear:
+        axes = replace(axes, violations=tuple(axes.violations) + tuple(clear))
+    return machine, axes, placement
 
 
 # --------------------------------------------------------------------------------------------------

@@ -1,0 +1,144 @@
+"""Programs whose circuits repeat: compute a few circuits, replicate the rest (issue 16, docs/speed.md).
+
+The winding line of a program is circuit 0 turned by k·Δv about the mandrel axis
+(:func:`engine.winding._assemble`) and the payout stage turns circuit 0's eye path the same way
+(:func:`engine.payout.extend_to_line`, from :data:`engine.payout.REPLICATE_MIN_CIRCUITS` circuits on).
+The machine sees the same motion every circuit then: every axis repeats, the mandrel axis advanced by a
+constant angle per circuit.  :func:`replicate_axes` runs the axes stage on the first three circuits
+only, checks that circuits 1 and 2 repeat (every axis equal, the mandrel advanced by one constant)
+and builds the whole axis path from them; whenever the check fails (or the short path reports any
+violation, slides the eye, ...) it returns None and the caller computes every point.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+#: relative tolerance of the periodicity check of the axis path (of 1 + the axis' largest |value|)
+PERIODIC_RTOL = 1e-9
+
+#: the short path: this many circuits (circuit 0 may differ from the others by its start; 1 and 2 are compared)
+_SHORT_CIRCUITS = 3
+
+
+def replicated_circuits(line: Any, eye: Any) -> tuple[int, int] | None:
+    """``(circuits, points_per_circuit)`` when ``eye`` is the payout stage's replicated eye path of
+    ``line`` (circuit 0 turned by k·Δv, one path point per line point), else None."""
+    if eye is None or line is None:
+        return None
+    report = getattr(eye, "report", None) or {}
+    nc = int(getattr(line, "circuits", 1) or 1)
+    m = int(getattr(line, "points_per_circuit", 0) or 0)
+    if report.get("replicated_circuits") != nc or nc < _SHORT_CIRCUITS + 2 or m < 2:
+        return None
+    n = nc * m + 1
+    if np.shape(eye.s) != (n,) or np.shape(eye.eye_xyz) != (n, 3):
+        return None
+    return nc, m
+
+
+def eye_head(eye: Any, npts: int) -> Any:
+    """The first ``npts`` points of an :class:`engine.payout.EyePath` (views where possible)."""
+    per_point = ("x", "index", "l", "Z", "R", "V", "eye_xyz", "contact_xyz", "fibre_dir", "s", "lam_pulled")
+    per_step = ("u", "x_mid")
+    kw: dict[str, Any] = {f: getattr(eye, f)[:npts] for f in per_point}
+    kw.update({f: getattr(eye, f)[:npts - 1] for f in per_step})
+    for f in ("l_min", "l_max"):
+        a = getattr(eye, f, None)
+        if a is not None and np.shape(a)[:1] == np.shape(eye.s):
+            kw[f] = a[:npts]
+    return replace(eye, **kw)
+
+
+def tile_circuits(head: np.ndarray, nc: int, m: int, step: np.ndarray | float | None = None) -> np.ndarray:
+    """The whole path of ``nc`` circuits of ``m`` points (+ the closing point) from the first three
+    circuits ``head`` (``3m + 1`` rows): circuit 0 as it is, circuit k >= 1 = circuit 1 + (k-1)·``step``
+    (per column; None = no step), the closing point = ``head[m] + (nc-1)·step``."""
+    head = np.asarray(head)
+    out = np.empty((nc * m + 1,) + head.shape[1:], dtype=head.dtype)
+    out[:m] = head[:m]
+    body = out[m:nc * m].reshape((nc - 1, m) + head.shape[1:])
+    body[:] = head[m:2 * m]
+    if step is not None:
+        k = np.arange(nc - 1, dtype=float)
+        st = np.asarray(step, dtype=float)
+        if st.ndim == 0:
+            body += k[:, None] * st
+        else:
+            nz = np.flatnonzero(st)                      # add only to the columns that advance
+            for j in nz.tolist():
+                body[..., j] += k[:, None] * st[j]
+        out[-1] = head[m] + (nc - 1) * st
+    else:
+        out[-1] = head[m]
+    return out
+
+
+def repeats(head: np.ndarray, m: int, rtol: float = PERIODIC_RTOL) -> np.ndarray | None:
+    """The per-circuit step of every column of ``head`` (3m + 1 rows) when circuit 2 is circuit 1 plus
+    a constant per column (to ``rtol`` of 1 + the column's largest |value|), else None."""
+    a = np.asarray(head, dtype=float)
+    if a.shape[0] != _SHORT_CIRCUITS * m + 1:
+        return None
+    c1, c2 = a[m:2 * m + 1], a[2 * m:3 * m + 1]
+    step = c2[0] - c1[0]
+    scale = 1.0 + np.abs(a).max(axis=0)
+    if np.any(np.abs(c2 - c1 - step) > rtol * scale):
+        return None
+    return step
+
+
+def replicate_axes(line: Any, eye: Any, run_axes: Callable[[Any], tuple[Any, Any, Any]]
+                   ) -> tuple[Any, Any, Any] | None:
+    """The axes stage of a program whose circuits repeat, from its first three circuits.
+
+    ``run_axes(eye_path)`` is the axes stage (``-> (machine, AxisPath, placement)``).  It is run on the
+    first three circuits of ``eye``; the result is used when that short path has no violation, the
+    placement fits and circuit 2 repeats circuit 1 (to :data:`PERIODIC_RTOL`) with only the mandrel axis
+    advanced by a constant (:func:`repeats`) and the eye slid along its fibre by the same amounts
+    (``eye_shift``).  The whole axis path is then circuit 0 and circuit 1 advanced by k times that
+    constant (:func:`tile_circuits`); ``fibre_dir`` and ``contact_xyz`` are the eye path's own arrays
+    (no copy), ``eye_xyz`` too where the eye was not slid.  Returns None (compute every point) otherwise.
+    """
+    rc = replicated_circuits(line, eye)
+    if rc is None:
+        return None
+    nc, m = rc
+    machine, axes, placement = run_axes(eye_head(eye, _SHORT_CIRCUITS * m + 1))
+    if axes.violations:
+        return None
+    if placement is not None and not placement.fits:
+        return None
+    step = repeats(axes.q, m)
+    k_mandrel = machine.axis_index("mandrel")
+    if step is None or k_mandrel is None:
+        return None
+    others = np.delete(step, k_mandrel)
+    q_scale = 1.0 + np.abs(np.asarray(axes.q)).max(axis=0)
+    if np.any(np.abs(others) > PERIODIC_RTOL * np.delete(q_scale, k_mandrel)):
+        return None
+    step = np.where(np.arange(step.size) == k_mandrel, step, 0.0)
+    q = tile_circuits(axes.q, nc, m, step)
+    # the eye slid along its fibre (engine.machine_setup.monotone_eye_azimuth) by the same amount every circuit
+    sh = np.asarray(axes.eye_shift, dtype=float)
+    sh_step = repeats(sh[:, None], m)
+    if sh_step is None or abs(float(sh_step[0])) > PERIODIC_RTOL * (1.0 + float(np.abs(sh).max())):
+        return None
+    shift = tile_circuits(sh, nc, m)
+    vec = [np.ascontiguousarray(np.asarray(getattr(eye, f), dtype=float)) for f in ("eye_xyz", "fibre_dir",
+                                                                                     "contact_xyz")]
+    rows = np.flatnonzero(shift)
+    if rows.size:       # the eye moved along its (unit) fibre direction: the same arithmetic as the slide
+        e = vec[0].copy()
+        e[rows] += shift[rows, None] * vec[1][rows]
+        vec[0] = e
+        e.flags.writeable = False
+    q.flags.writeable = shift.flags.writeable = False
+    x = None if axes.x is None else np.asarray(eye.x, dtype=float)
+    full = replace(axes, q=q, eye_xyz=vec[0], fibre_dir=vec[1], contact_xyz=vec[2], eye_shift=shift, x=x)
+    # the placement (carriage range) is the short path's: the carriage axis repeats circuit by circuit
+    return machine, full, placement

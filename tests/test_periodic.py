@@ -1,0 +1,130 @@
+"""Programs whose circuits repeat: the axes stage computed on three circuits and replicated equals the
+point-by-point computation (engine.periodic, docs/speed.md)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from engine.job import build_mandrel, load_job
+from engine.payout import REPLICATE_MIN_CIRCUITS, extend_to_line, payout_for_job
+from engine.periodic import repeats, replicate_axes, tile_circuits
+from engine.pipeline import _axes_stage
+from engine.winding import winding_line_for_job
+
+ROOT = Path(__file__).resolve().parents[1]
+EX = ROOT / "resources" / "examples"
+
+
+def test_tile_and_repeats_roundtrip() -> None:
+    """tile_circuits builds circuit k = circuit 1 + (k-1)·step; repeats recovers the step."""
+    m, nc = 5, 7
+    rng = np.random.default_rng(1)
+    c1 = rng.normal(size=(m, 2))
+    step = np.array([2.5, 0.0])
+    full = np.concatenate([rng.normal(size=(m, 2))] + [c1 + k * step for k in range(nc - 1)]
+                          + [(c1[0] + (nc - 1) * step)[None]])
+    head = full[:3 * m + 1]
+    assert np.allclose(repeats(head, m), step)
+    assert np.allclose(tile_circuits(head, nc, m, step), full, rtol=0, atol=1e-12)
+    bad = head.copy()
+    bad[2 * m + 2, 1] += 1e-3
+    assert repeats(bad, m) is None
+
+
+def _program(name: str, machine: str | None = None, points: int = 120):
+    job = load_job(EX / f"{name}.toml")
+    job = job.replace(winding={**job.winding.model_dump(), "circuits": REPLICATE_MIN_CIRCUITS + 3,
+                               "points_per_pass": points},
+                      payout=job.payout.model_copy(update={"grid_points": 200}))
+    if machine is not None:
+        job = job.replace(machine={**job.machine.model_dump(), "template": machine})
+    path = str(EX / f"{name}.toml")
+    mandrel = build_mandrel(job, path)
+    line = winding_line_for_job(job, path)
+    eye = extend_to_line(payout_for_job(job, line, mandrel), line)
+    return job, path, mandrel, line, eye
+
+
+@pytest.mark.parametrize(("name", "machine"), [("pressure_vessel", None), ("pressure_vessel", "lathe3"),
+                                               ("pipe", None)])
+def test_replicated_axes_equal_pointwise(name: str, machine: str | None) -> None:
+    """The replicated axis path equals the point-by-point inverse kinematics to 1e-9 of each axis' scale,
+    with the same machine and placement."""
+    job, path, mandrel, line, eye = _program(name, machine)
+    assert eye.report.get("replicated_circuits") == line.circuits
+
+    def run(e):  # noqa: ANN001, ANN202
+        return _axes_stage(job, path, mandrel, e, None)
+
+    rep = replicate_axes(line, eye, run)
+    assert rep is not None, "the program's circuits repeat: the axes stage must be replicated"
+    m_ref, ref, pl_ref = run(eye)
+    m_rep, axes, pl_rep = rep
+    assert m_rep == m_ref
+    # the same placement (its carriage range to rounding: the minimum of three circuits vs of all)
+    assert (pl_rep.axis, pl_rep.mode, pl_rep.z0, pl_rep.lo, pl_rep.hi) == (pl_ref.axis, pl_ref.mode, pl_ref.z0,
+                                                                          pl_ref.lo, pl_ref.hi)
+    assert np.allclose([pl_rep.q_min, pl_rep.q_max, *pl_rep.z0_fit], [pl_ref.q_min, pl_ref.q_max, *pl_ref.z0_fit],
+                       rtol=1e-12, atol=1e-9)
+    assert not ref.violations and not axes.violations
+    q, qr = np.asarray(axes.q), np.asarray(ref.q)
+    assert q.shape == qr.shape == (line.z.size, len(m_ref.axes))
+    scale = 1.0 + np.abs(qr).max(axis=0)
+    assert np.all(np.abs(q - qr).max(axis=0) <= 1e-9 * scale), np.abs(q - qr).max(axis=0) / scale
+    for f in ("eye_xyz", "fibre_dir", "contact_xyz", "eye_shift", "x"):
+        a, b = np.asarray(getattr(axes, f)), np.asarray(getattr(ref, f))
+        assert a.shape == b.shape and np.abs(a - b).max() <= 1e-9 * (1.0 + np.abs(b).max()), f
+
+
+def test_not_replicated_when_circuits_differ() -> None:
+    """A path whose circuits do not repeat (a perturbed eye) is computed point by point (None)."""
+    from dataclasses import replace
+
+    job, path, mandrel, line, eye = _program("pressure_vessel")
+    m = line.points_per_circuit
+    e = np.array(eye.eye_xyz)
+    e[2 * m + m // 2, 2] += 0.5          # circuit 2 differs from circuit 1
+    bad = replace(eye, eye_xyz=e)
+    assert replicate_axes(line, bad, lambda ep: _axes_stage(job, path, mandrel, ep, None)) is None
+    # fewer circuits than the payout replicates: no replication either
+    assert replicate_axes(line.take_circuit(0), eye, lambda ep: _axes_stage(job, path, mandrel, ep, None)) is None
+
+
+def _run_big(monkeypatch: pytest.MonkeyPatch, replicate: bool, circuits: int = 120, points: int = 400):
+    import engine.payout
+    import engine.periodic
+    from engine.pipeline import run_pipeline
+
+    if not replicate:    # every stage computes every point
+        monkeypatch.setattr(engine.payout, "REPLICATE_MIN_CIRCUITS", 10**9)
+        monkeypatch.setattr(engine.periodic, "replicated_circuits", lambda line, eye: None)
+    job = load_job(EX / "pressure_vessel.toml")
+    job = job.replace(winding={**job.winding.model_dump(), "circuits": circuits, "points_per_pass": points})
+    res = run_pipeline(job, str(EX / "pressure_vessel.toml"))
+    monkeypatch.undo()
+    return res
+
+
+def test_replicated_program_equals_materialised(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A 120-circuit program computed by circuit replication (payout, axes) and point by point:
+    the same block count, the same largest block error (1e-6 relative) and axis ranges, the program
+    time to 1e-5 relative (the tube law's DP sees inputs that differ by rounding), no violations in
+    either; the NC text has the same number of lines."""
+    rep = _run_big(monkeypatch, True)
+    ref = _run_big(monkeypatch, False)
+    assert rep.eye.report.get("replicated_circuits") == rep.line.circuits == 120
+    assert "replicated_circuits" not in ref.eye.report
+    assert np.abs(np.asarray(rep.axes.q) - np.asarray(ref.axes.q)).max() <= 1e-9 * (
+        1.0 + np.abs(np.asarray(ref.axes.q)).max())
+    a, b = rep.report(), ref.report()
+    assert a["blocks"] == b["blocks"]
+    assert a["program_time_s"] == pytest.approx(b["program_time_s"], rel=1e-5)
+    assert a["max_error_mm"] == pytest.approx(b["max_error_mm"], rel=1e-6, abs=1e-9)
+    assert a["max_error_mm"] <= rep.job.post.tolerance_mm * (1 + 1e-9)
+    for k, (lo, hi) in b["axis_ranges"].items():
+        assert a["axis_ranges"][k] == pytest.approx([lo, hi], rel=1e-9, abs=1e-9)
+    assert a["violations"] == b["violations"] == []
+    assert rep.nc_text.count("\n") == ref.nc_text.count("\n")
