@@ -1154,6 +1154,18 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
         from engine import timeparam_jit
 
         L = prob.rq.size // max(n - 1, 1)
+        h = prob.h
+        fused = timeparam_jit.dp_pass(lev, xall, prob.xn, (prob.rq, prob.rk, prob.lq, prob.lk), L, prob.xjb,
+                                      prob.xjt, degenerate, plo, sp_p, t_lo, t_hi, nb, 2.0 * h,
+                                      (K / 4.0) / (h * h), bool(np.ptp(h) <= 1e-12 * h.max()), _CHUNK, K > 0,
+                                      int(_LOMASK), int(_HIMASK))
+        if fused is not None:                # windows, forward and backward pass in one call: the same bits
+            _STATS["candidates"], bad_node, final_ok, jidx, sdot = fused
+            if bad_node >= 0:
+                raise _infeasible(prob, bad_node, "every transition into this node breaks a limit")
+            if not final_ok:
+                raise _infeasible(prob, n - 1, "the final speed cannot be reached")
+            return sdot, jidx
         win = timeparam_jit.windows(lev, xall, prob.xn, (prob.rq, prob.rk, prob.lq, prob.lk), L, prob.xjb,
                                     prob.xjt, degenerate, plo, sp_p, t_lo, t_hi, nb)
     if win is not None:                      # the compiled windows: the same integers

@@ -202,6 +202,236 @@ def windows(lev: np.ndarray, xall: np.ndarray, xn: np.ndarray, ch: tuple[np.ndar
     return klo, cnt, bad
 
 
+_FUSED: list[Any] = []
+
+
+def _build_fused() -> Any:
+    import numba
+
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
+    def _dp_pass(lev, xall, xn, rq, rk, lq, lk, L, xjb, xjt, degenerate, plo, sp_p, t_lo, t_hi, nb,
+                 two_h, kq_h, uniform_h, chunk, use_k, lomask, himask, Jraw, jidx, sdot):  # pragma: no cover
+        # One whole DP pass: per interval the windows (as _windows), the chunk bookkeeping of the numpy
+        # pass (a uniform-spacing pass costs every interval of a chunk with its first interval's 2h and
+        # K/4h², as the numpy pass does), the candidates (as _forward), then the reach checks and the
+        # backward pass.  Returns (candidates, node that cannot be reached or -1, final level reached).
+        n, M = lev.shape
+        n1 = n - 1
+        levf = lev.reshape(-1)
+        Jf = Jraw.view(np.float64)
+        for q0 in range(n * M):
+            Jf[q0] = np.inf
+        Jf[0] = 0.0
+        fb = np.empty(1)
+        ib = fb.view(np.int64)
+        klo = np.empty(M, np.int64)
+        cnt = np.empty(M, np.int64)
+        bad = np.empty(M, np.bool_)
+        pm = np.empty(M)                 # prefix minima of J at the departure node
+        pmi = pm.view(np.int64)
+        infbits = np.int64(0x7FF0000000000000)
+        total = 0
+        acc = 0
+        first = 0
+        for i in range(n1):
+            # --- windows of interval i (the same arithmetic as _windows) -------------------------
+            s0 = i * L
+            ar = s0
+            al = s0
+            off = 3.0 * i
+            lo_p = plo[i]
+            spi = sp_p[i]
+            degp = degenerate[i]
+            per = 0
+            for j in range(M):
+                xj = xall[i + 1, j]
+                good = xj >= xjb[i] and xj <= xjt[i] and not (degenerate[i + 1] and j >= 1)
+                ub = 0.0
+                lb = 0.0
+                if good:
+                    q = xj / xn[i]
+                    q += off
+                    e = s0 + L - 1
+                    if q >= rq[e]:
+                        ub = rk[e]
+                    else:
+                        while rq[ar + 1] <= q:
+                            ar += 1
+                        if rq[ar] == q:
+                            ub = rk[ar]
+                        else:
+                            slope = (rk[ar + 1] - rk[ar]) / (rq[ar + 1] - rq[ar])
+                            ub = slope * (q - rq[ar]) + rk[ar]
+                            if ub != ub:
+                                ub = slope * (q - rq[ar + 1]) + rk[ar + 1]
+                                if ub != ub and rk[ar] == rk[ar + 1]:
+                                    ub = rk[ar]
+                    if q >= lq[e]:
+                        lb = lk[e]
+                    else:
+                        while lq[al + 1] <= q:
+                            al += 1
+                        if lq[al] == q:
+                            lb = lk[al]
+                        else:
+                            slope = (lk[al + 1] - lk[al]) / (lq[al + 1] - lq[al])
+                            lb = slope * (q - lq[al]) + lk[al]
+                            if lb != lb:
+                                lb = slope * (q - lq[al + 1]) + lk[al + 1]
+                                if lb != lb and lk[al] == lk[al + 1]:
+                                    lb = lk[al]
+                    good = ub >= lb and ub >= 0
+                if not good:
+                    klo[j] = 0
+                    cnt[j] = 1
+                    bad[j] = True
+                    per += 1
+                    continue
+                pk_lo = np.sqrt(lb if lb > 0.0 else 0.0)
+                pk_hi = np.sqrt(ub if ub > 0.0 else 0.0)
+                if degp:
+                    kl = 0
+                    kh = 0 if (lo_p >= pk_lo and lo_p <= pk_hi) else -1
+                else:
+                    y = pk_lo - lo_p
+                    y /= spi
+                    y *= nb
+                    yi = 0 if y < 0 else (nb - 1 if y >= nb - 1 else int(y))
+                    kl = t_lo[yi]
+                    y = pk_hi - lo_p
+                    y /= spi
+                    y *= nb
+                    yi = 0 if y < 0 else (nb - 1 if y >= nb - 1 else int(y))
+                    kh = t_hi[yi]
+                    kix = kl if kl < M - 1 else M - 1
+                    if kl <= M - 1 and lev[i, kix] < pk_lo:
+                        kl += 1
+                    kix = kh if kh > 0 else 0
+                    if kh >= 0 and lev[i, kix] > pk_hi:
+                        kh -= 1
+                c = kh - kl + 1
+                if c <= 0:
+                    klo[j] = 0
+                    cnt[j] = 1
+                    bad[j] = True
+                    per += 1
+                else:
+                    klo[j] = kl
+                    cnt[j] = c
+                    bad[j] = False
+                    per += c
+            total += per
+            # --- the numpy pass's chunks (whole intervals of <= chunk candidates) ----------------
+            if acc and acc + per > chunk:
+                first = i
+                acc = 0
+            acc += per
+            if uniform_h:
+                th = two_h[first]
+                kqi = kq_h[first]
+            else:
+                th = two_h[i]
+                kqi = kq_h[i]
+            # --- candidates (the same arithmetic and integer minimum as _forward) ---------------
+            # Each window is scanned from its fastest departure level down, and the scan stops
+            # once no slower level can win: for k' <= k, J_k' + cost(k') >= min_{k'' <= k} J_k'' +
+            # 2h/(v_k + v_j) (the levels do not decrease with k, the penalty term is >= 0, and
+            # rounding is monotone), so when that bound's key exceeds the best key found (a finite
+            # one) every remaining candidate's key does too: the same minimum, fewer candidates.
+            base = i * M
+            m = Jraw[base]
+            for k in range(M):
+                x = Jraw[base + k]
+                if x < m:
+                    m = x
+                pmi[k] = m
+            for j in range(M):
+                vj = levf[base + M + j]
+                best = np.int64(0x7FFFFFFFFFFFFFFF)
+                if bad[j]:
+                    g = base
+                    fb[0] = Jf[g] + np.inf
+                    best = (ib[0] & himask) | (g & lomask)
+                else:
+                    k0 = klo[j]
+                    for w in range(cnt[j] - 1, -1, -1):
+                        k = k0 + w
+                        g = base + k
+                        vk = levf[g]
+                        ssum = vk + vj
+                        cost = th / ssum
+                        if best < infbits:
+                            fb[0] = pm[k] + cost
+                            if (ib[0] & himask) > best:
+                                break
+                        if use_k:
+                            diff = vj - vk
+                            diff *= ssum
+                            diff *= diff
+                            diff *= kqi
+                            cost += diff
+                        fb[0] = Jf[g] + cost
+                        ci = (ib[0] & himask) | (g & lomask)
+                        if ci < best:
+                            best = ci
+                Jraw[base + M + j] = best
+        # --- reach checks on J without its low bits, then the backward pass ------------------------
+        for i in range(1, n):
+            any_fin = False
+            for j in range(M):
+                ib[0] = Jraw[i * M + j] & himask
+                if np.isfinite(fb[0]):
+                    any_fin = True
+                    break
+            if not any_fin:
+                return total, i, False
+        ib[0] = Jraw[n1 * M] & himask
+        if not np.isfinite(fb[0]):
+            return total, -1, False
+        j = 0
+        jidx[n1] = 0
+        sdot[n1] = lev[n1, 0]
+        for i in range(n1 - 1, -1, -1):
+            k = Jraw[(i + 1) * M + j] & lomask
+            k -= i * M
+            k &= lomask
+            j = k
+            jidx[i] = j
+            sdot[i] = lev[i, j]
+        return total, -1, True
+
+    return _dp_pass
+
+
+def dp_pass(lev: np.ndarray, xall: np.ndarray, xn: np.ndarray, ch: tuple[np.ndarray, ...], L: int,
+            xjb: np.ndarray, xjt: np.ndarray, degenerate: np.ndarray, plo: np.ndarray, sp_p: np.ndarray,
+            t_lo: np.ndarray, t_hi: np.ndarray, nb: int, two_h: np.ndarray, kq_h: np.ndarray, uniform_h: bool,
+            chunk: int, use_k: bool, lomask: int, himask: int) -> tuple[int, int, bool, np.ndarray, np.ndarray] | None:
+    """One whole DP pass of :func:`engine.timeparam._dp` (levels uniform in ṡ) in one compiled call:
+    the windows, the forward pass and the backward pass, bit for bit the numpy code's.
+
+    Returns ``(candidates, unreachable node or -1, final speed reached, jidx, sdot)`` (``jidx``, ``sdot``
+    valid only when the pass succeeded: node -1 and final reached), or ``None`` without numba."""
+    if not _FUSED:
+        if kernel(0) is None:
+            return None
+        try:
+            _FUSED.append(_build_fused())
+        except Exception:  # noqa: BLE001 - see kernel()
+            _FUSED.append(None)
+    if _FUSED[0] is None:
+        return None
+    n, M = lev.shape
+    Jraw = np.empty(n * M, np.int64)
+    jidx = np.empty(n, np.int64)
+    sdot = np.empty(n)
+    rq, rk, lq, lk = ch
+    total, bad_node, final_ok = _FUSED[0](lev, xall, xn, rq, rk, lq, lk, int(L), xjb, xjt, degenerate, plo, sp_p,
+                                          t_lo, t_hi, int(nb), two_h, kq_h, bool(uniform_h), int(chunk),
+                                          bool(use_k), np.int64(lomask), np.int64(himask), Jraw, jidx, sdot)
+    return int(total), int(bad_node), bool(final_ok), jidx, sdot
+
+
 _HULL: list[Any] = []
 
 
@@ -344,4 +574,4 @@ def warm() -> bool:
     return True
 
 
-__all__ = ["IMPORT_THRESHOLD", "forward_pass", "hulls", "kernel", "warm", "windows"]
+__all__ = ["IMPORT_THRESHOLD", "dp_pass", "forward_pass", "hulls", "kernel", "warm", "windows"]
