@@ -129,3 +129,35 @@ def test_compiled_hull_matches_qhull() -> None:
         assert np.all(d.min(1) <= 1e-12 * np.abs(ref).max())
         area = 0.5 * np.sum(ours[:, 0] * np.roll(ours[:, 1], -1) - np.roll(ours[:, 0], -1) * ours[:, 1])
         assert area > 0
+
+
+def test_compiled_pass_reports_infeasibility_as_the_numpy_pass() -> None:
+    """The fused compiled pass finds the same unreachable node (its reach checks and backward pass
+    are compiled too): the same error text with and without numba."""
+    from engine.errors import InfeasibleError
+    from engine.timeparam import TechPoint, TimeLimits
+
+    s = np.linspace(0, 10, 11)
+    X = s[:, None] * 1.0
+    one = np.ones_like(X)
+    lim = TimeLimits(v_max=(1e6,), a_max=(100.0,), sdot_start=300.0, sdot_end=0.0,
+                     points=(TechPoint(10.0, s=3.0, label="feed"),))
+    msgs = []
+    for flag in (False, True):
+        with pytest.raises(InfeasibleError) as err:
+            _law(flag, s, X, one, 0 * one, lim, method="dp")
+        msgs.append(str(err.value))
+    assert msgs[0] == msgs[1] and "'feed'" in msgs[0]
+
+
+def test_compiled_pass_bit_identical_on_the_long_path() -> None:
+    """The paper's spacing on a path three times as long (the benchmark's long case, shorter): every
+    tube iteration the same bits with the compiled pass (pruned windows) and the numpy pass."""
+    from engine.timeparam_example import N_PAPER, S_N_PAPER
+
+    s, X, dX, ddX = example_path((N_PAPER - 1) * 3 + 1, 3 * S_N_PAPER, S_N_PAPER)
+    lim = replace(example_limits(), levels=100)
+    ref = _law(False, s, X, dX, ddX, lim)
+    new = _law(True, s, X, dX, ddX, lim)
+    assert np.array_equal(ref.sdot, new.sdot)
+    assert [it.total_time_s for it in ref.iterations] == [it.total_time_s for it in new.iterations]
