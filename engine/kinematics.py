@@ -1069,10 +1069,54 @@ def _ik_robot(machine: MachineTemplate, pw: np.ndarray, dw: np.ndarray, cw: np.n
     viol = violations_from_mask("ik", None, err > 1e-7, err, 1e-7, " mm",
                                 what="no joint solution (pose error)")
     jump = np.abs(np.diff(sol, axis=0)).max(axis=1)
-    viol += violations_from_mask("ik", None, np.concatenate(([False], jump > 0.5)),
-                                 np.concatenate(([0.0], jump)), 0.5, " rad",
+    big = np.flatnonzero(jump > _BRANCH_STEP_RAD)
+    if big.size:
+        # a big joint step is a branch switch only when continuation through the in-between poses
+        # (eye point on the chord, eye frame turned about one axis) reaches a different solution
+        end, worst = _continue_steps(machine, track, pw, R, sol, big)
+        same = (np.abs(end - sol[big + 1]).max(axis=1) < 1e-6) & (worst <= _BRANCH_STEP_RAD)
+        jump[big[same]] = 0.0
+    viol += violations_from_mask("ik", None, np.concatenate(([False], jump > _BRANCH_STEP_RAD)),
+                                 np.concatenate(([0.0], jump)), _BRANCH_STEP_RAD, " rad",
                                  what="joint branch switch; joint step")
     return viol
+
+
+_BRANCH_STEP_RAD = 0.5      # a joint step above this between two path points is checked by continuation
+_CONTINUE_STEP_RAD = 0.05   # joint change per in-between pose of the continuation (about)
+
+
+def _slerp_frames(Ra: np.ndarray, Rb: np.ndarray, t: float) -> np.ndarray:
+    """Frames (N,3,3) a fraction ``t`` of the way from ``Ra`` to ``Rb`` (rotation about one fixed axis)."""
+    from scipy.spatial.transform import Rotation
+
+    rel = Rotation.from_matrix(Ra.transpose(0, 2, 1) @ Rb).as_rotvec()
+    return Ra @ Rotation.from_rotvec(t * rel).as_matrix()
+
+
+def _continue_steps(machine: MachineTemplate, track: np.ndarray, pw: np.ndarray, R: np.ndarray,
+                    sol: np.ndarray, ks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Joints reached at point ``k + 1`` by Newton continuation from ``sol[k]`` (every ``k`` in ``ks``).
+
+    The eye pose moves from point k to k + 1 through in-between poses: the eye point along the chord,
+    the eye frame turned about one axis (slerp), the track along its chord; each pose's Newton starts from
+    the previous pose's joints, in steps of about :data:`_CONTINUE_STEP_RAD` of the largest joint.
+
+    Returns the joints at ``k + 1`` (len(ks), 6) and the largest joint change between in-between poses
+    (rad) - above :data:`_BRANCH_STEP_RAD` the continuation itself jumped branch.
+    """
+    step = np.abs(sol[ks + 1] - sol[ks]).max(axis=1)
+    m = int(min(400, max(2, np.ceil(step.max() / _CONTINUE_STEP_RAD))))
+    j = sol[ks].copy()
+    worst = np.zeros(ks.size)
+    for i in range(1, m + 1):
+        t = i / m
+        p = (1 - t) * pw[ks] + t * pw[ks + 1]
+        tr = (1 - t) * track[ks] + t * track[ks + 1]
+        jn, _, _ = _newton(machine, tr, p, _slerp_frames(R[ks], R[ks + 1], t), j, iters=60)
+        worst = np.maximum(worst, np.abs(jn - j).max(axis=1))
+        j = jn
+    return j, worst
 
 
 # --------------------------------------------------------------------------------------------------

@@ -13,7 +13,9 @@ with ``L`` the Euclidean length of the move over all axes in controller units (t
 winder's Marlin post); G0 - the slowest axis at its ``max_speed`` (reported apart, ``rapid_time_s``).
 ``time_with_limits_s`` is what a controller keeping the template's limits needs: each move no faster
 than any axis' ``max_speed``, and at each corner the part of an axis' speed step above ``max_jump``
-bled off at ``max_accel``.  For a program that keeps every limit the two are equal.
+bled off at ``max_accel``.  For a program that keeps every limit the two are equal.  The program's
+numbers are rounded (positions and F words to the profile's decimals): a speed is checked against its
+limit within what those roundings leave open.
 
 With the job's winding line (``line``), the eye positions (forward kinematics) are matched to the
 contact points they lay: the eye sits on the free fibre, the tangent of the winding line at the
@@ -70,6 +72,9 @@ class NcProgram:
     """The machine as the program places it (carriage offset from its set-up header line)."""
     resolution: np.ndarray | None = None
     """Per axis: the smallest step the program's numbers resolve (10^-decimals of the profile)."""
+    time_resolution: np.ndarray | None = None
+    """Per move: the relative uncertainty of its duration from the rounding of its F word (or time column):
+    10^-decimals_feed / F (both feed modes: the time is 60 / F or 60·L / F)."""
 
     @property
     def n(self) -> int:
@@ -125,6 +130,8 @@ def read_nc(text: str, machine: MachineTemplate, profile: Any | None = None, fil
     vmax = machine.limits("max_speed")
     qs: list[np.ndarray] = []
     ts: list[float] = []
+    trs: list[float] = []
+    feed_res = 10.0 ** -profile.decimals_feed if profile is not None else 0.0
     lines: list[int] = []
     first_pos: np.ndarray | None = None
     mode_abs, inverse, inch = True, False, False
@@ -264,6 +271,7 @@ def read_nc(text: str, machine: MachineTemplate, profile: Any | None = None, fil
             t = 60.0 * float(np.linalg.norm(d)) / f_mm
         qs.append(target.copy())
         ts.append(t)
+        trs.append(feed_res / feed if feed else 0.0)
         lines.append(ln)
         pos = target
     if not qs:
@@ -275,7 +283,7 @@ def read_nc(text: str, machine: MachineTemplate, profile: Any | None = None, fil
     q = np.vstack([first_pos] + qs)
     return NcProgram(machine.axis_names, q, np.asarray(ts), np.asarray(lines, dtype=np.int64), rapid_t, dwell,
                      "inverse_time" if inverse else "units_per_min", ended, src or "", machine,
-                     _resolution(machine, profile))
+                     _resolution(machine, profile), np.asarray(trs))
 
 
 def _read_csv(text: str, machine: MachineTemplate, profile: Any | None, src: str | None) -> NcProgram:
@@ -312,8 +320,12 @@ def _read_csv(text: str, machine: MachineTemplate, profile: Any | None, src: str
         ln.append(i)
     if len(q) < 2:
         raise InputError("the table has no moves", file=src)
-    return NcProgram(machine.axis_names, np.asarray(q), np.asarray(t[1:]), np.asarray(ln[1:], dtype=np.int64),
-                     feed_mode="table", file=src or "", machine=machine, resolution=_resolution(machine, profile))
+    tt = np.asarray(t[1:])
+    t_res = (10.0 ** -(profile.decimals_feed + 2) / np.maximum(tt, 1e-12) if profile is not None
+             else np.zeros(tt.size))     # the csv post writes time_s with decimals_feed + 2 decimals
+    return NcProgram(machine.axis_names, np.asarray(q), tt, np.asarray(ln[1:], dtype=np.int64),
+                     feed_mode="table", file=src or "", machine=machine, resolution=_resolution(machine, profile),
+                     time_resolution=t_res)
 
 
 def _resolution(machine: MachineTemplate, profile: Any | None) -> np.ndarray:
@@ -356,8 +368,11 @@ def simulate(prog: NcProgram, machine: MachineTemplate, line: Any | None = None,
     vmax, p, amax = machine.limits("max_speed"), machine.limits("max_jump"), machine.limits("max_accel")
     viol: list[Violation] = []
     # the numbers of the program are rounded: a speed is known within (position step) / (move time)
+    # plus |speed| x (relative time step of the rounded F word)
     res = prog.resolution if prog.resolution is not None else np.zeros(len(machine.axes))
     dv = res[None, :] / t[:, None]
+    if prog.time_resolution is not None and prog.time_resolution.shape == t.shape:
+        dv = dv + np.abs(v) * prog.time_resolution[:, None]
     for k, ax in enumerate(machine.axes):
         u = " " + ax.units
         col = q[1:, k]

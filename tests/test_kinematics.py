@@ -356,3 +356,55 @@ def test_unwrap_angles_is_numpy_unwrap_bit_for_bit():
         got, ref = unwrap_angles(w), np.unwrap(w)
         assert np.array_equal(got, ref, equal_nan=True)
     assert np.array_equal(unwrap_angles(np.zeros((3, 4))), np.unwrap(np.zeros((3, 4))))
+
+
+def _robot_big_step_path():
+    """The demo helix with a stretch of points cut out: one path step where the joints move > 0.5 rad."""
+    m = load_machine("robot_cell")
+    p = _path("helix", n=1500, circuits=1)
+    dense = inverse_kinematics(m, p.eye_xyz, p.fibre_dir, p.contact_xyz)
+    qd = m.to_internal(dense.q)
+    jc = [m.axis_index(f"joint{k}") for k in range(1, 7)]
+    step = np.abs(np.diff(qd[:, jc], axis=0)).max(axis=1)
+    k0 = int(np.argmax(step))                       # cut around the fastest wrist motion
+    keep = np.ones(p.x.size, bool)
+    cut = np.arange(k0 + 1, min(p.x.size - 2, k0 + 1 + 200))
+    keep[cut] = False
+    while np.abs(qd[cut[-1] + 1, jc] - qd[k0, jc]).max() < 0.6:      # make the step big enough
+        cut = np.arange(k0 + 1, cut[-1] + 50)
+        keep[cut] = False
+    return m, p, keep, qd, jc
+
+
+def test_robot_big_joint_step_on_one_branch_is_not_a_switch():
+    """A joint step above 0.5 rad between two path points is checked by continuation through the
+    in-between poses: on the same branch it is no violation, and the joints equal those of the dense
+    path (solved point by point, the independent reference)."""
+    m, p, keep, qd, jc = _robot_big_step_path()
+    ap = inverse_kinematics(m, p.eye_xyz[keep], p.fibre_dir[keep], p.contact_xyz[keep])
+    qs = m.to_internal(ap.q)
+    assert np.abs(np.diff(qs[:, jc], axis=0)).max() > 0.5            # the case is exercised
+    assert not [v for v in ap.violations if v.kind == "ik"], [v.message for v in ap.violations]
+    assert np.abs(qs[:, jc] - qd[keep][:, jc]).max() < 1e-6
+
+
+def test_robot_branch_switch_found_by_continuation():
+    """The wrist flip (j4 + pi, -j5, j6 + pi) puts the eye in the same pose: continuation from the point
+    before does not reach it, so a path that jumps to it is a branch switch."""
+    from engine.kinematics import _continue_steps, _robot_chain
+
+    m, p, keep, qd, jc = _robot_big_step_path()
+    i = np.flatnonzero(~keep)
+    a, b = int(i[0] - 1), int(i[-1] + 1)
+    track = qd[[a, b], m.axis_index("track")]
+    j = qd[[a, b]][:, jc]
+    R, pw, _, _ = _robot_chain(m, track, j)
+    flipped = j.copy()
+    flipped[1, 3:] += (np.pi, 0.0, np.pi)
+    flipped[1, 4] = -j[1, 4]
+    R2, pw2, _, _ = _robot_chain(m, track, flipped)
+    assert np.abs(pw2 - pw).max() < 1e-9 and np.abs(R2 - R).max() < 1e-9     # the same eye pose
+    end, worst = _continue_steps(m, track, pw, R, j, np.array([0]))
+    assert np.abs(end[0] - j[1]).max() < 1e-6 and worst[0] < 0.5        # reaches its own branch
+    end2, _ = _continue_steps(m, track, pw, R, flipped, np.array([0]))
+    assert np.abs(end2[0] - flipped[1]).max() > 1.0                      # not the flipped one

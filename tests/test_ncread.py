@@ -293,3 +293,20 @@ def test_jump_and_acceleration_used_by_hand() -> None:
     assert r["time_with_limits_s"] - r["program_time_s"] == pytest.approx(30.0 / 2000.0)
     jumps = [v for v in r["violations"] if v["kind"] == "jump"]
     assert len(jumps) == 1 and jumps[0]["nc_line"] == 3 and jumps[0]["value"] == pytest.approx(90.0)
+
+
+def test_rounded_feed_words_are_within_the_limits_by_their_resolution() -> None:
+    """An F word is rounded to the profile's decimals_feed: a speed is known only within |speed| x
+    10^-decimals / F. X at 1 mm/s, then 610 mm at F 6.0001 (61.00102 mm/s: a jump of 60.00102 against
+    max_jump 60) is within one unit of the F word's last place; at F 6.0002 (two units) it is a jump
+    violation."""
+    m = load_machine("lathe2")
+    prof = load_controller("linuxcnc")
+
+    def jumps(f: str) -> list[dict]:
+        text = "\n".join(["G21 G90 G93", "G92 X0", "G1 X10 F6", f"G1 X620 F{f}", "G94", "M2"])
+        return [v for v in simulate(read_nc(text, m, prof), m).report["violations"] if v["kind"] == "jump"]
+
+    assert jumps("6.0001") == []
+    bad = jumps("6.0002")
+    assert len(bad) == 1 and bad[0]["value"] == pytest.approx(610 * 6.0002 / 60 - 1.0)
