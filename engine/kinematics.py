@@ -623,6 +623,9 @@ class AxisPath:
     eye_shift: (N,) how far the eye was slid along the fibre, mm (0 when the machine reaches it).
     violations: located limit/workspace violations (empty when the path is feasible).
     x: (N,) the payout stage's process parameter, passed through (None when not given).
+    circuits: ``(circuits, points_per_circuit)`` when the path is circuit 0, then circuit 1 repeated
+        with only the mandrel axis advanced by a constant per circuit (built so by
+        :func:`engine.periodic.replicate_axes`; the later stages use it); None otherwise.
     """
 
     machine: str
@@ -634,6 +637,7 @@ class AxisPath:
     eye_shift: np.ndarray
     violations: tuple[Violation, ...] = field(default_factory=tuple)
     x: np.ndarray | None = None
+    circuits: tuple[int, int] | None = None
 
     @property
     def ok(self) -> bool:

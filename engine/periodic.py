@@ -139,6 +139,28 @@ def replicate_axes(line: Any, eye: Any, run_axes: Callable[[Any], tuple[Any, Any
         e.flags.writeable = False
     q.flags.writeable = shift.flags.writeable = False
     x = None if axes.x is None else np.asarray(eye.x, dtype=float)
-    full = replace(axes, q=q, eye_xyz=vec[0], fibre_dir=vec[1], contact_xyz=vec[2], eye_shift=shift, x=x)
+    full = replace(axes, q=q, eye_xyz=vec[0], fibre_dir=vec[1], contact_xyz=vec[2], eye_shift=shift, x=x,
+                   circuits=(nc, m))
     # the placement (carriage range) is the short path's: the carriage axis repeats circuit by circuit
     return machine, full, placement
+
+
+def circuit_pieces(axes: Any, s: Any, rtol: float = 1e-7) -> list[tuple[int, int]] | None:
+    """Path-index ranges ``(start, end)`` (inclusive) of the circuits of an axis path built by
+    :func:`replicate_axes` (``axes.circuits`` set), when the path length ``s`` (mm, one value per path
+    point) also repeats circuit 1 from circuit 1 on (to ``rtol`` of the program's length); else None."""
+    per = getattr(axes, "circuits", None)
+    if per is None:
+        return None
+    nc, m = per
+    n = nc * m + 1
+    s = np.asarray(s, dtype=float)
+    if s.shape != (n,) or np.shape(axes.q)[0] != n:
+        return None
+    ref = s[m:2 * m + 1] - s[m]
+    tol = rtol * (1.0 + abs(float(s[-1])))
+    for k in range(2, nc):
+        a = k * m
+        if np.any(np.abs(s[a:a + m + 1] - s[a] - ref) > tol):
+            return None
+    return [(k * m, (k + 1) * m) for k in range(nc)]

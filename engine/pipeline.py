@@ -495,9 +495,10 @@ def _run_stage(res: PipelineResult, stage: str, state: State | None) -> Pipeline
 
         check_post(job.post.min_block_time_s, file=jp)
 
-        # internal axis positions, once for the circuit plan and the time law (an (N, axes) array)
-        X = (res.machine.to_internal(np.asarray(res.axes.q, dtype=float)) if job.timelaw.method != "blocks"
-             else None)
+        # internal axis positions, once for the circuit plan and the time law (an (N, axes) array); a
+        # replicated axis path (engine.periodic) needs them on three circuits only
+        X = (res.machine.to_internal(np.asarray(res.axes.q, dtype=float))
+             if job.timelaw.method != "blocks" and _periodic_pieces(res) is None else None)
         blocks = make_blocks(
             res.machine, res.axes, tol_mm=job.post.tolerance_mm, min_block_time=job.post.min_block_time_s,
             state=SubState(state, 0.0, 0.5) if state is not None else None, pieces=_block_pieces(res, X),
@@ -706,6 +707,21 @@ def _abs_max(X: np.ndarray) -> np.ndarray:
     return np.maximum(X.max(axis=0), -X.min(axis=0))
 
 
+def _periodic_pieces(res: PipelineResult) -> list[tuple[int, int]] | None:
+    """The circuits of an axis path replicated by :func:`engine.periodic.replicate_axes` (circuits 1 ..
+    n-1 are circuit 1 with the mandrel advanced by a constant: nothing to check point by point), when the
+    eye path maps line points to path points one to one; else None."""
+    from engine.periodic import circuit_pieces
+
+    if res.axes is None or res.eye is None or getattr(res.axes, "circuits", None) is None:
+        return None
+    idx = getattr(res.eye, "index", None)
+    n = np.shape(res.axes.q)[0]
+    if idx is None or len(idx) != n or int(idx[0]) != 0 or int(idx[-1]) != n - 1:
+        return None
+    return circuit_pieces(res.axes, res.eye.s)
+
+
 def _circuit_plan(res: PipelineResult, s: np.ndarray, X: np.ndarray) -> list[tuple[int, int]]:
     """Path-index ranges ``(start, end)`` (inclusive) of the pieces that get a law each: the circuits
     when the middle ones repeat the same motion (up to constant axis offsets, e.g. the mandrel angle),
@@ -747,6 +763,9 @@ def _block_pieces(res: PipelineResult, X: np.ndarray | None = None) -> list[tupl
     as a whole, as before."""
     if int(getattr(res.line, "circuits", 1) or 1) < _BLOCKS_REPLICATE_MIN or res.eye is None:
         return None
+    periodic = _periodic_pieces(res)
+    if periodic is not None:
+        return periodic
     machine = res.machine
     if X is None:
         X = machine.to_internal(np.asarray(res.axes.q, dtype=float))
@@ -881,7 +900,8 @@ def _time_law_blocks(res: PipelineResult, blocks: Any, state: State | None,
     q = np.asarray(axes.q, dtype=float)
     if s.shape[0] != q.shape[0]:
         raise InputError(f"the eye path has {s.shape[0]} points but the axis path {q.shape[0]}", field="timelaw")
-    if X is None:
+    pieces = _periodic_pieces(res)
+    if X is None and pieces is None:
         X = machine.to_internal(q)
     scales = np.abs(machine.scales)
     V = machine.limits("max_speed") / scales
@@ -895,13 +915,20 @@ def _time_law_blocks(res: PipelineResult, blocks: Any, state: State | None,
         sddot_max=float(spec.sddot_max) if spec.sddot_max is not None else float("inf"),
         levels=int(spec.levels), penalty=float(spec.penalty), tube_share=float(spec.tube_share),
         stop_percent=float(spec.stop_percent), sdot_start=0.0, sdot_end=0.0)
-    pieces = _circuit_plan(res, s, X)
+    if pieces is None:
+        pieces = _circuit_plan(res, s, X)
     check_cancel(state)
+
+    def piece(a: int, b: int) -> tuple[np.ndarray, ...]:
+        if X is not None:
+            return _piece_arrays(s, X, a, b, V, A)
+        return _piece_arrays(s[a:b + 1], machine.to_internal(q[a:b + 1]), 0, b - a, V, A)
+
     t_nodes = 0.0
     laws: list[Any] = []
     v_b = 0.0
     if len(pieces) == 1:
-        nodes = _piece_arrays(s, X, *pieces[0], V, A)
+        nodes = piece(*pieces[0])
         t_nodes = time.perf_counter() - t_start
         laws = [_parametrize(spec.method, nodes, limits, state)]
         n_nodes = nodes[0].size
@@ -909,9 +936,7 @@ def _time_law_blocks(res: PipelineResult, blocks: Any, state: State | None,
         if keep is not None:
             keep.append((LAW_WHOLE, laws[0], TimeLawPath(*nodes, limits)))
     else:
-        first = _piece_arrays(s, X, *pieces[0], V, A)
-        mid = _piece_arrays(s, X, *pieces[1], V, A)
-        last = _piece_arrays(s, X, *pieces[-1], V, A)
+        first, mid, last = piece(*pieces[0]), piece(*pieces[1]), piece(*pieces[-1])
         n_nodes = first[0].size + mid[0].size + last[0].size
         t_nodes = time.perf_counter() - t_start
         v_b = _TL_VB_SHARE * _junction_cap((first, mid, last), np.asarray(limits.v_max), np.asarray(limits.a_max))
@@ -1069,7 +1094,39 @@ def timelaw_block_check(machine: Any, blocks: Any) -> tuple[list[Any], list[str]
 def _block_errors(machine: Any, axes: Any, idx: np.ndarray, sel: np.ndarray | None = None) -> np.ndarray:
     """Largest eye-position error of the linear interpolation inside every block (as make_blocks
     measures it: a path point is compared at its (17) time fraction of the block), mm; with ``sel``
-    (a mask over the blocks) only those blocks are measured (the others get 0)."""
+    (a mask over the blocks) only those blocks are measured (the others get 0).
+
+    On an axis path replicated circuit by circuit (``axes.circuits``, :mod:`engine.periodic`) a block
+    of a middle circuit (2 .. n-2) that spans the same points of its circuit as a measured block of
+    circuit 1 gets that block's error (the error does not see the mandrel angle, the only axis that
+    differs); the (17) metric is then summed within each measured block."""
+    q = np.asarray(axes.q, dtype=float)
+    nb = idx.size - 1
+    chosen = np.arange(nb) if sel is None else np.flatnonzero(sel)
+    per = getattr(axes, "circuits", None)
+    if per is None or per[0] < 4 or q.shape[0] != per[0] * per[1] + 1:
+        return _block_errors_of(machine, axes, idx, chosen, local_metric=False)
+    nc, m = per
+    c = idx[chosen] // m
+    key = (idx[chosen] - c * m) * (m + 1) + (idx[chosen + 1] - c * m)
+    mid = (c >= 2) & (c <= nc - 2)
+    ref_blocks, ref_key = chosen[c == 1], key[c == 1]
+    order = np.argsort(ref_key, kind="stable")
+    sk = ref_key[order]
+    pos = np.clip(np.searchsorted(sk, key[mid]), 0, max(sk.size - 1, 0))
+    found = np.zeros(int(mid.sum()), bool) if sk.size == 0 else sk[pos] == key[mid]
+    copy_to = chosen[mid][found]
+    compute = np.setdiff1d(chosen, copy_to, assume_unique=True)
+    out = _block_errors_of(machine, axes, idx, compute, local_metric=True)
+    if copy_to.size:
+        out[copy_to] = out[ref_blocks[order][pos[found]]]
+    return out
+
+
+def _block_errors_of(machine: Any, axes: Any, idx: np.ndarray, chosen: np.ndarray, local_metric: bool
+                     ) -> np.ndarray:
+    """:func:`_block_errors` of the blocks ``chosen`` (sorted); the (17) metric of the whole path
+    (``local_metric`` False) or summed within each chosen block (the same up to rounding)."""
     from engine.blocks import time_metric
     from engine.kinematics import forward_kinematics
 
@@ -1077,7 +1134,6 @@ def _block_errors(machine: Any, axes: Any, idx: np.ndarray, sel: np.ndarray | No
     eye = np.asarray(axes.eye_xyz, dtype=float)
     fmax = machine.limits("max_speed")
     nb = idx.size - 1
-    chosen = np.arange(nb) if sel is None else np.flatnonzero(sel)
     # inner points of each chosen block; the last block also counts the program's end point (as the
     # make_blocks measure does: its FK residual)
     lengths = idx[chosen + 1] - idx[chosen] - 1 + (chosen == nb - 1)
@@ -1088,17 +1144,38 @@ def _block_errors(machine: Any, axes: Any, idx: np.ndarray, sel: np.ndarray | No
     blk = np.repeat(chosen, lengths)
     first = np.concatenate([[0], np.cumsum(lengths)[:-1]])
     pts = np.arange(int(lengths.sum())) - np.repeat(first - idx[chosen] - 1, lengths)
-    # the (17) time metric w at the points used (a cumulative sum over the path)
-    w = time_metric(q, fmax)
     a, b = idx[blk], idx[blk + 1]
-    span = w[b] - w[a]
-    u = np.where(span > 0, (w[pts] - w[a]) / np.where(span > 0, span, 1.0), (pts - a) / (b - a))
+    if local_metric:
+        # the metric from each block's start: the steps a..b-1 of every chosen block, summed per block
+        steps = idx[chosen + 1] - idx[chosen]
+        s0 = np.concatenate([[0], np.cumsum(steps)[:-1]])
+        j = np.arange(int(steps.sum())) - np.repeat(s0 - idx[chosen], steps)      # step j: point j -> j+1
+        cs = np.concatenate([[0.0], np.cumsum(_step_metric(q, j, fmax))])
+        base = np.repeat(cs[s0], lengths)                      # metric at each block's start
+        off = np.repeat(s0 - idx[chosen], lengths)             # point p of a block sits at cs[p + off]
+        wp = cs[pts + off] - base
+        span = cs[np.repeat(s0 + steps, lengths)] - base
+        u = np.where(span > 0, wp / np.where(span > 0, span, 1.0), (pts - a) / (b - a))
+    else:
+        # the (17) time metric w at the points used (a cumulative sum over the path)
+        w = time_metric(q, fmax)
+        span = w[b] - w[a]
+        u = np.where(span > 0, (w[pts] - w[a]) / np.where(span > 0, span, 1.0), (pts - a) / (b - a))
     qi = q[a] + u[:, None] * (q[b] - q[a])
     e_fk, _ = forward_kinematics(machine, qi, fibre=False)
     e_fk -= eye[pts]
     err = np.linalg.norm(e_fk, axis=1)
     out[chosen] = np.maximum.reduceat(err, first)            # blk is sorted: one reduceat per block
     return out
+
+
+def _step_metric(q: np.ndarray, j: np.ndarray, fmax: np.ndarray) -> np.ndarray:
+    """The (17) metric of the steps ``j -> j+1``: ``max_k |q[j+1,k] - q[j,k]| / fmax_k`` (s)."""
+    m = None
+    for k in range(q.shape[1]):
+        c = np.abs(q[j + 1, k] - q[j, k]) / fmax[k]
+        m = c if m is None else np.maximum(m, c, out=m)
+    return m if m is not None else np.zeros(j.size)
 
 
 def write_program(result: PipelineResult, path: str | Path, force: bool = False) -> Path:
