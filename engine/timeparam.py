@@ -427,6 +427,7 @@ class _Problem:
     hull_rows: np.ndarray | None = None   # rows with the provably redundant ones zeroed (for the hull)
     ipos: np.ndarray | None = None        # the ± pairs of rows: rows[:, ineg] == -rows[:, ipos]
     ineg: np.ndarray | None = None
+    slopes: tuple[np.ndarray, np.ndarray] | None = None   # segment slopes of the chains (compiled pass)
 
 
 MAX_PATH_VALUE = 1e9
@@ -1040,7 +1041,7 @@ def _with_chains(prob: _Problem) -> _Problem:
 
     xn, cap_dp, ch = _polygons(prob.cap, prob.h, prob.hull_rows, prob.ipos, prob.ineg, prob.limits, True,
                                compiled=True)
-    return dc_replace(prob, xn=xn[1:], cap_dp=cap_dp, **ch)
+    return dc_replace(prob, xn=xn[1:], cap_dp=cap_dp, slopes=None, **ch)
 
 
 def _refine_to_nodes(s: np.ndarray, idx: np.ndarray, sdot_c: np.ndarray) -> np.ndarray:
@@ -1155,7 +1156,11 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
 
         L = prob.rq.size // max(n - 1, 1)
         h = prob.h
-        fused = timeparam_jit.dp_pass(lev, xall, prob.xn, (prob.rq, prob.rk, prob.lq, prob.lk), L, prob.xjb,
+        if prob.slopes is None:              # the chains' segment slopes, once per problem
+            with np.errstate(divide="ignore", invalid="ignore"):
+                prob.slopes = (np.diff(prob.rk) / np.diff(prob.rq), np.diff(prob.lk) / np.diff(prob.lq))
+        fused = timeparam_jit.dp_pass(lev, xall, prob.xn, (prob.rq, prob.rk, prob.lq, prob.lk, *prob.slopes), L,
+                                      prob.xjb,
                                       prob.xjt, degenerate, plo, sp_p, t_lo, t_hi, nb, 2.0 * h,
                                       (K / 4.0) / (h * h), bool(np.ptp(h) <= 1e-12 * h.max()), _CHUNK, K > 0,
                                       int(_LOMASK), int(_HIMASK))

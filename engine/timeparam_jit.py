@@ -209,7 +209,7 @@ def _build_fused() -> Any:
     import numba
 
     @numba.njit(cache=True, nogil=True, error_model="numpy")
-    def _dp_pass(lev, xall, xn, rq, rk, lq, lk, L, xjb, xjt, degenerate, plo, sp_p, t_lo, t_hi, nb,
+    def _dp_pass(lev, xall, xn, rq, rk, lq, lk, rs, ls, L, xjb, xjt, degenerate, plo, sp_p, t_lo, t_hi, nb,
                  two_h, kq_h, uniform_h, chunk, use_k, lomask, himask, Jraw, jidx, sdot):  # pragma: no cover
         # One whole DP pass: per interval the windows (as _windows), the chunk bookkeeping of the numpy
         # pass (a uniform-spacing pass costs every interval of a chunk with its first interval's 2h and
@@ -227,6 +227,14 @@ def _build_fused() -> Any:
         klo = np.empty(M, np.int64)
         cnt = np.empty(M, np.int64)
         bad = np.empty(M, np.bool_)
+        qq = np.empty(M)
+        okj = np.empty(M, np.bool_)
+        lbv = np.empty(M)
+        ubv = np.empty(M)
+        pkl = np.empty(M)
+        pkh = np.empty(M)
+        yl = np.empty(M)
+        yh = np.empty(M)
         pm = np.empty(M)                 # prefix minima of J at the departure node
         pmi = pm.view(np.int64)
         infbits = np.int64(0x7FF0000000000000)
@@ -243,15 +251,21 @@ def _build_fused() -> Any:
             spi = sp_p[i]
             degp = degenerate[i]
             per = 0
-            for j in range(M):
+            xni = xn[i]
+            xlo = xjb[i]
+            xhi = xjt[i]
+            degn = degenerate[i + 1]
+            for j in range(M):                      # vectorisable: abscissae of the chain queries
                 xj = xall[i + 1, j]
-                good = xj >= xjb[i] and xj <= xjt[i] and not (degenerate[i + 1] and j >= 1)
+                qq[j] = xj / xni + off
+            e = s0 + L - 1
+            for j in range(M):                      # the chain walks (np.interp's arithmetic)
+                xj = xall[i + 1, j]
+                good = xj >= xlo and xj <= xhi and not (degn and j >= 1)
                 ub = 0.0
                 lb = 0.0
                 if good:
-                    q = xj / xn[i]
-                    q += off
-                    e = s0 + L - 1
+                    q = qq[j]
                     if q >= rq[e]:
                         ub = rk[e]
                     else:
@@ -260,7 +274,7 @@ def _build_fused() -> Any:
                         if rq[ar] == q:
                             ub = rk[ar]
                         else:
-                            slope = (rk[ar + 1] - rk[ar]) / (rq[ar + 1] - rq[ar])
+                            slope = rs[ar]
                             ub = slope * (q - rq[ar]) + rk[ar]
                             if ub != ub:
                                 ub = slope * (q - rq[ar + 1]) + rk[ar + 1]
@@ -274,33 +288,46 @@ def _build_fused() -> Any:
                         if lq[al] == q:
                             lb = lk[al]
                         else:
-                            slope = (lk[al + 1] - lk[al]) / (lq[al + 1] - lq[al])
+                            slope = ls[al]
                             lb = slope * (q - lq[al]) + lk[al]
                             if lb != lb:
                                 lb = slope * (q - lq[al + 1]) + lk[al + 1]
                                 if lb != lb and lk[al] == lk[al + 1]:
                                     lb = lk[al]
                     good = ub >= lb and ub >= 0
-                if not good:
+                okj[j] = good
+                lbv[j] = lb if lb > 0.0 else 0.0
+                ubv[j] = ub if ub > 0.0 else 0.0
+            for j in range(M):                      # vectorisable: square roots, fractions of the span
+                pl = np.sqrt(lbv[j])
+                ph = np.sqrt(ubv[j])
+                pkl[j] = pl
+                pkh[j] = ph
+                y = pl - lo_p
+                y /= spi
+                y *= nb
+                yl[j] = y
+                y = ph - lo_p
+                y /= spi
+                y *= nb
+                yh[j] = y
+            for j in range(M):
+                if not okj[j]:
                     klo[j] = 0
                     cnt[j] = 1
                     bad[j] = True
                     per += 1
                     continue
-                pk_lo = np.sqrt(lb if lb > 0.0 else 0.0)
-                pk_hi = np.sqrt(ub if ub > 0.0 else 0.0)
+                pk_lo = pkl[j]
+                pk_hi = pkh[j]
                 if degp:
                     kl = 0
                     kh = 0 if (lo_p >= pk_lo and lo_p <= pk_hi) else -1
                 else:
-                    y = pk_lo - lo_p
-                    y /= spi
-                    y *= nb
+                    y = yl[j]
                     yi = 0 if y < 0 else (nb - 1 if y >= nb - 1 else int(y))
                     kl = t_lo[yi]
-                    y = pk_hi - lo_p
-                    y /= spi
-                    y *= nb
+                    y = yh[j]
                     yi = 0 if y < 0 else (nb - 1 if y >= nb - 1 else int(y))
                     kh = t_hi[yi]
                     kix = kl if kl < M - 1 else M - 1
@@ -408,7 +435,9 @@ def dp_pass(lev: np.ndarray, xall: np.ndarray, xn: np.ndarray, ch: tuple[np.ndar
             t_lo: np.ndarray, t_hi: np.ndarray, nb: int, two_h: np.ndarray, kq_h: np.ndarray, uniform_h: bool,
             chunk: int, use_k: bool, lomask: int, himask: int) -> tuple[int, int, bool, np.ndarray, np.ndarray] | None:
     """One whole DP pass of :func:`engine.timeparam._dp` (levels uniform in ṡ) in one compiled call:
-    the windows, the forward pass and the backward pass, bit for bit the numpy code's.
+    the windows, the forward pass and the backward pass, bit for bit the numpy code's.  ``ch`` =
+    ``(rq, rk, lq, lk, rs, ls)``: the chains and their segment slopes ``diff(rk)/diff(rq)``,
+    ``diff(lk)/diff(lq)`` (numpy's ``interp`` computes the same quotients).
 
     Returns ``(candidates, unreachable node or -1, final speed reached, jidx, sdot)`` (``jidx``, ``sdot``
     valid only when the pass succeeded: node -1 and final reached), or ``None`` without numba."""
@@ -425,9 +454,9 @@ def dp_pass(lev: np.ndarray, xall: np.ndarray, xn: np.ndarray, ch: tuple[np.ndar
     Jraw = np.empty(n * M, np.int64)
     jidx = np.empty(n, np.int64)
     sdot = np.empty(n)
-    rq, rk, lq, lk = ch
-    total, bad_node, final_ok = _FUSED[0](lev, xall, xn, rq, rk, lq, lk, int(L), xjb, xjt, degenerate, plo, sp_p,
-                                          t_lo, t_hi, int(nb), two_h, kq_h, bool(uniform_h), int(chunk),
+    rq, rk, lq, lk, rs, ls = ch
+    total, bad_node, final_ok = _FUSED[0](lev, xall, xn, rq, rk, lq, lk, rs, ls, int(L), xjb, xjt, degenerate, plo,
+                                          sp_p, t_lo, t_hi, int(nb), two_h, kq_h, bool(uniform_h), int(chunk),
                                           bool(use_k), np.int64(lomask), np.int64(himask), Jraw, jidx, sdot)
     return int(total), int(bad_node), bool(final_ok), jidx, sdot
 
@@ -445,6 +474,7 @@ def _build_hull() -> Any:
         ys = np.empty(R)
         ids = np.empty(R, np.int64)
         st = np.empty(2 * R + 1, np.int64)
+        srt = np.empty(R, np.int64)
         for b in range(B):
             sx = 0.0
             sy = 0.0
@@ -465,10 +495,18 @@ def _build_hull() -> Any:
                     order[b, q] = ids[q]
                 m[b] = c
                 continue
-            # sort by x, then y (a stable sort by y, then by x)
-            o1 = np.argsort(ys[:c], kind="mergesort")
-            o2 = np.argsort(xs[:c][o1], kind="mergesort")
-            srt = o1[o2]
+            # sort by x, then y, equal points in input order (a stable insertion sort: few points)
+            for q in range(c):
+                srt[q] = q
+            for q in range(1, c):
+                v = srt[q]
+                vx = xs[v]
+                vy = ys[v]
+                r = q - 1
+                while r >= 0 and (xs[srt[r]] > vx or (xs[srt[r]] == vx and ys[srt[r]] > vy)):
+                    srt[r + 1] = srt[r]
+                    r -= 1
+                srt[r + 1] = v
             # Andrew's monotone chain, counter-clockwise; a point that does not turn strictly left
             # (within round-off of the two edges' lengths, and by more than 1e-15 of the unit box) is
             # dropped: collinear, duplicate and near-duplicate points
