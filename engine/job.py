@@ -295,6 +295,10 @@ class SetupSpec(_Model):
     head_radius_mm: NonNegMM = 0.0
     """Radius of the payout head's body around the eye (a sphere: roller, guide, its bracket): the gaps of
     the eye to the mandrel and the supports are measured from that body (the clearance plus this radius)."""
+    head_length_mm: NonNegMM = 0.0
+    """Length of the payout head's body along its roll axis, from the eye back into the head (cartesian
+    machines: the roll axis, away from the mandrel axis; robot cell: from the eye towards the flange): the body is
+    a capsule of ``head_radius_mm`` around that segment; 0 = a sphere around the eye."""
     back_turn_tol_deg: NonNegMM = 0.01
     """Mandrel back-turns up to this angle are numerical noise: the mandrel angle is held instead."""
 

@@ -372,6 +372,11 @@ def mandrel_distance(mandrel: Any, z: np.ndarray, rho: np.ndarray, step_mm: floa
     The generatrix is sampled every ``step_mm`` of arc length (a k-d tree finds the nearest sample), so
     the distance is exact within ``step_mm / 2``; points farther than ``upto_mm`` get ``inf``.
     """
+    return mandrel_distance_fn(mandrel, step_mm, upto_mm)(z, rho)
+
+
+def mandrel_distance_fn(mandrel: Any, step_mm: float = 0.05, upto_mm: float = np.inf) -> Any:
+    """:func:`mandrel_distance` as a function ``(z, rho) -> distance`` (the sampled generatrix built once)."""
     from scipy.spatial import cKDTree
 
     zs = np.linspace(mandrel.z_min, mandrel.z_max, 2001)
@@ -384,11 +389,89 @@ def mandrel_distance(mandrel: Any, z: np.ndarray, rho: np.ndarray, step_mm: floa
     ends = [np.stack([np.full(m, zz), np.linspace(0.0, rr, m)], axis=1)
             for zz, rr in ((prof[0, 0], prof[0, 1]), (prof[-1, 0], prof[-1, 1]))
             for m in (max(int(rr / step_mm) + 2, 2),)]
-    d, _ = cKDTree(np.vstack([prof, *ends])).query(np.stack([z, rho], axis=1), distance_upper_bound=upto_mm)
-    inside = (z >= mandrel.z_min) & (z <= mandrel.z_max)
-    rin = np.interp(z, zd, prof[:, 1])
-    body = inside & (rho < rin)
-    return np.where(body, -np.where(np.isinf(d), rin - rho, d), d)
+    tree = cKDTree(np.vstack([prof, *ends]))
+    zlo, zhi = float(mandrel.z_min), float(mandrel.z_max)
+
+    def dist(z: np.ndarray, rho: np.ndarray) -> np.ndarray:
+        d, _ = tree.query(np.stack([z, rho], axis=1), distance_upper_bound=upto_mm)
+        inside = (z >= zlo) & (z <= zhi)
+        rin = np.interp(z, zd, prof[:, 1])
+        body = inside & (rho < rin)
+        return np.where(body, -np.where(np.isinf(d), rin - rho, d), d)
+
+    return dist
+
+
+def head_axis(machine: MachineTemplate, axes: AxisPath) -> np.ndarray:
+    """Unit vectors (N,3), mandrel frame: from the eye along the payout head's body.
+
+    Cartesian machines: the roll axis (machine x, turned by the yaw axis where there is one), pointing
+    away from the mandrel axis; robot cell: from the eye towards the flange (the tool's body)."""
+    return head_axis_q(machine, np.asarray(axes.q, dtype=float))
+
+
+def head_axis_q(machine: MachineTemplate, q: np.ndarray) -> np.ndarray:
+    """:func:`head_axis` for controller axis values ``q`` (N, n_axes)."""
+    from engine.kinematics import _robot_chain, eye_pose
+
+    qi = machine.to_internal(np.atleast_2d(np.asarray(q, dtype=float)))
+    n = qi.shape[0]
+    if machine.kind == "cartesian":
+        u = np.zeros((n, 3))
+        u[:, 0] = 1.0
+        k = machine.axis_index("yaw")
+        if k is not None:
+            u[:, 0], u[:, 2] = np.cos(qi[:, k]), -np.sin(qi[:, k])
+        p_w, _ = eye_pose(machine, qi, axis=False)
+        side = np.where(u[:, 0] * p_w[:, 0] + u[:, 1] * p_w[:, 1] < 0.0, -1.0, 1.0)
+        u *= side[:, None]
+    else:
+        track = qi[:, machine.axis_index("track")]
+        joints = qi[:, [machine.axis_index(f"joint{k + 1}") for k in range(6)]]
+        R, p_w, _, _ = _robot_chain(machine, track, joints)
+        flange = p_w - np.einsum("nij,j->ni", R @ machine.tool[:3, :3].T, machine.tool[:3, 3])
+        u = flange - p_w
+        u /= np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-300)
+    th = qi[:, machine.axis_index("mandrel")]
+    c, s = np.cos(th), np.sin(th)             # p_M = Rz(-theta) p_W
+    return np.stack([c * u[:, 0] + s * u[:, 1], -s * u[:, 0] + c * u[:, 1], u[:, 2]], axis=1)
+
+
+def capsule_min_distance(dist: Any, a: np.ndarray, u: np.ndarray, length_mm: float, need_mm: np.ndarray | float,
+                         tol_mm: float = 0.05) -> np.ndarray:
+    """Smallest ``dist(z, rho)`` over the segments ``a + t u``, ``0 <= t <= length_mm`` (N,), mm.
+
+    ``dist`` is a distance in the (z, rho) half-plane of an axisymmetric body (1-Lipschitz in space, as
+    :func:`mandrel_distance`).  Branch and bound on ``t``: an interval of half width h whose centre is at
+    distance d cannot come nearer than d - h; intervals that could still come below ``need_mm`` (or below
+    the best value found) are halved until h <= ``tol_mm``.  The answer is a distance the segment reaches;
+    where it is below ``need_mm`` it is the minimum within ``tol_mm``, elsewhere the minimum is at least
+    ``need_mm - tol_mm``."""
+    a = np.asarray(a, dtype=float)
+    n = a.shape[0]
+    need = np.broadcast_to(np.asarray(need_mm, dtype=float), (n,))
+
+    def at(i: np.ndarray, t: np.ndarray) -> np.ndarray:
+        p = a[i] + t[:, None] * u[i]
+        return dist(p[:, 2], np.hypot(p[:, 0], p[:, 1]))
+
+    every = np.arange(n)
+    best = np.minimum(at(every, np.zeros(n)), at(every, np.full(n, float(length_mm))))
+    if length_mm <= 0.0 or n == 0:
+        return best
+    k0 = max(1, int(np.ceil(length_mm / max(min(length_mm, 10.0), 4.0 * tol_mm))))
+    half = 0.5 * length_mm / k0
+    idx = np.repeat(every, k0)
+    tc = np.tile((np.arange(k0) + 0.5) * (2.0 * half), n)
+    while idx.size:
+        d = at(idx, tc)
+        np.minimum.at(best, idx, d)
+        keep = (d - half < np.minimum(best[idx], need[idx])) & (half > tol_mm)
+        idx, tc = idx[keep], tc[keep]
+        half *= 0.5
+        idx = np.repeat(idx, 2)
+        tc = np.stack([tc - half, tc + half], axis=1).ravel()
+    return best
 
 
 def _segment_min_rho(c: np.ndarray, e: np.ndarray, z0: float, z1: float,
@@ -431,35 +514,54 @@ def _segment_min_rho_all(c: np.ndarray, e: np.ndarray, z0: float, z1: float) -> 
     return np.where(empty, np.inf, np.hypot(p[:, 0], p[:, 1]))
 
 
-def clearance_violations(axes: AxisPath, mandrel: Any, setup: Any, eye_clearance_mm: float | None = None
-                         ) -> list[Violation]:
-    """The eye against the mandrel and the supports, the free fibre against the supports, at every point.
+def clearance_violations(axes: AxisPath, mandrel: Any, setup: Any, eye_clearance_mm: float | None = None,
+                         machine: MachineTemplate | None = None) -> list[Violation]:
+    """The eye (the head) against the mandrel and the supports, the free fibre against the supports, at
+    every point.
 
     ``eye_clearance_mm`` (default ``setup.clearance_mm``) is the smallest gap between the eye and the
     mandrel; the supports keep ``setup.clearance_mm`` from the eye and from the free fibre.  The eye's gaps
-    are measured from the head's body around it: ``setup.head_radius_mm`` is added to them.
+    are measured from the head's body around it: ``setup.head_radius_mm`` is added to them.  With
+    ``setup.head_length_mm`` > 0 and the ``machine`` given, the body is a capsule of that radius around the
+    segment of that length from the eye along :func:`head_axis` (:func:`capsule_min_distance`).
     Violations have kind ``"clearance"``, ``axis`` None, ``amount`` = the missing gap (mm).
     """
     gap = float(setup.clearance_mm)
     head = float(getattr(setup, "head_radius_mm", 0.0))
+    length = float(getattr(setup, "head_length_mm", 0.0) or 0.0)
     eye_gap = (gap if eye_clearance_mm is None else float(eye_clearance_mm)) + head
     eye = np.asarray(axes.eye_xyz, dtype=float)
     con = np.asarray(axes.contact_xyz, dtype=float)
     z, rho = eye[:, 2], np.hypot(eye[:, 0], eye[:, 1])
+    capsule = length > 0.0 and machine is not None
+    u = head_axis(machine, axes) if capsule else None
+    body = "head" if capsule else "eye"
     out: list[Violation] = []
-    dm = mandrel_distance(mandrel, z, rho, upto_mm=2.0 * eye_gap + 1.0)
+    if capsule:
+        fn = mandrel_distance_fn(mandrel, upto_mm=2.0 * eye_gap + length + 1.0)
+        dm = fn(z, rho)
+        near = np.flatnonzero(dm - length < eye_gap)          # the capsule's axis stays within ``length``
+        if near.size:
+            dm[near] = capsule_min_distance(fn, eye[near], u[near], length, eye_gap)
+    else:
+        dm = mandrel_distance(mandrel, z, rho, upto_mm=2.0 * eye_gap + 1.0)
     out += violations_from_mask("clearance", None, dm < eye_gap - 1e-6, dm, eye_gap, " mm",
-                                what="gap between the eye and the mandrel")
+                                what=f"gap between the {body} and the mandrel")
     z_range = (np.minimum(con[:, 2], z), np.maximum(con[:, 2], z))    # of every free fibre
     for ob in support_obstacles(mandrel, setup):
         # only points within ``gap`` of the support's box can violate (elsewhere de >= gap; the values
         # of :func:`violations_from_mask` are read inside the violating runs only)
         g_eye = gap + head
-        near = np.flatnonzero((z > ob.z0 - g_eye) & (z < ob.z1 + g_eye) & (rho < ob.radius + g_eye))
+        reach = g_eye + length
+        near = np.flatnonzero((z > ob.z0 - reach) & (z < ob.z1 + reach) & (rho < ob.radius + reach))
         de = np.full(z.size, np.inf)
-        de[near] = _rect_distance(z[near], rho[near], ob)
+        if capsule and near.size:
+            de[near] = capsule_min_distance(lambda zz, rr, ob=ob: _rect_distance(zz, rr, ob), eye[near], u[near],
+                                            length, g_eye)
+        else:
+            de[near] = _rect_distance(z[near], rho[near], ob)
         out += violations_from_mask("clearance", None, de < g_eye - 1e-6, de, g_eye, " mm",
-                                    what=f"gap between the eye and the {ob.name}")
+                                    what=f"gap between the {body} and the {ob.name}")
         rf = _segment_min_rho(con, eye, ob.z0, ob.z1, z_range) - ob.radius
         out += violations_from_mask("clearance", None, rf < gap - 1e-6, rf, gap, " mm",
                                     what=f"gap between the free fibre and the {ob.name}")
@@ -854,7 +956,8 @@ def _precheck_carriage(job: Any, machine: MachineTemplate, mandrel: Any, line: A
         f"(or remove mandrel_z0_mm to centre the mandrel on the machine)", field="machine.setup.mandrel_z0_mm")
 
 
-__all__ = ["Locator", "Obstacle", "Placement", "ViolationGroup", "apply_setup", "carriage_index", "carriage_need",
-           "clearance_violations", "compatible_posts", "controller_for", "fit_eye_radius", "group_violations",
-           "hold_back_turns", "limit_speed_steps", "monotone_eye_azimuth", "nc_move_lines", "place_on_machine",
+__all__ = ["Locator", "Obstacle", "Placement", "ViolationGroup", "apply_setup", "capsule_min_distance",
+           "carriage_index", "carriage_need", "clearance_violations", "compatible_posts", "controller_for",
+           "fit_eye_radius", "group_violations", "head_axis", "head_axis_q", "hold_back_turns", "limit_speed_steps",
+           "mandrel_distance_fn", "monotone_eye_azimuth", "nc_move_lines", "place_on_machine",
            "placement_report", "post_mismatch", "precheck", "support_obstacles"]

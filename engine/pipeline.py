@@ -547,7 +547,7 @@ def _axes_stage(job: Job, jp: str | None, mandrel: Any, eye: Any, state: State |
     machine, axes, placement = place_on_machine(machine, axes, setup)
     if placement is not None and note:
         placement = replace(placement, note=note)
-    clear = clearance_violations(axes, mandrel, setup)
+    clear = clearance_violations(axes, mandrel, setup, machine=machine)
     if clear:
         axes = replace(axes, violations=tuple(axes.violations) + tuple(clear))
     return machine, axes, placement

@@ -56,6 +56,16 @@ def test_machine_frames_end_at_the_fk_eye(template: str) -> None:
         k = res.machine.axis_index("track")
         track = res.machine.to_internal(paths.frame_q)[:, k]
         np.testing.assert_allclose(fr.carriage[:, 0] - track, fr.carriage[0, 0] - track[0], atol=1e-9)
+    # the head's body runs from the eye along its roll axis: unit vectors; on a cartesian machine across the
+    # mandrel axis (view x) and away from it; on the robot from the eye towards the flange (the last link)
+    u = fr.head_axis
+    np.testing.assert_allclose(np.linalg.norm(u, axis=1), 1.0, atol=1e-12)
+    if res.machine.kind == "cartesian" and res.machine.axis_index("yaw") is None:
+        assert np.abs(u[:, 0]).max() < 1e-12
+        assert np.all(u[:, 1] * fk[:, 1] + u[:, 2] * fk[:, 2] > 0.0)
+    else:
+        back = fr.links[:, -2] - fk
+        assert np.all(np.einsum("ij,ij->i", u, back) > 0.0)
 
 
 @pytest.mark.gl
@@ -98,3 +108,37 @@ def test_drawn_head_sits_at_the_fk_eye_for_every_template(qtbot) -> None:
     v.machine_check.setChecked(True)
     assert v.plotter.actors["machine_head"].GetVisibility()
     np.testing.assert_allclose(v.machine_head_eye(), _fk_eye_view(res, paths.frame_q[3])[0], atol=1e-6)
+
+
+@pytest.mark.gl
+def test_drawn_head_body_is_the_set_up_capsule(qtbot) -> None:
+    """With [machine.setup] head_radius_mm / head_length_mm the drawn head is that body: its tip at the
+    eye, its far end head_length_mm along the engine's roll axis, its radius the set-up's."""
+    from PySide6.QtGui import QGuiApplication
+
+    if QGuiApplication.platformName() in ("offscreen", "minimal"):
+        pytest.skip("needs a real display (xvfb-run with QT_QPA_PLATFORM=xcb)")
+    from engine.machine_setup import head_axis_q
+    from winder_gui.views.view3d import MandrelView3D
+
+    res, _ = _result("lathe3")
+    paths = paths_view_data(res.line, res.eye, 20_000, 300, axes=res.axes, machine=res.machine,
+                            head_mm=(8.0, 120.0))
+    v = MandrelView3D()
+    qtbot.addWidget(v)
+    v.resize(640, 480)
+    v.show()
+    assert v.ensure_backend() == "vtk"
+    v.set_paths(paths)
+    for i in (0, paths.frame_index.size // 3):
+        v.set_frame(i)
+        fk = _fk_eye_view(res, paths.frame_q[i])[0]
+        np.testing.assert_allclose(v.machine_head_eye(), fk, atol=1e-6, rtol=0)
+        m = v.plotter.actors["machine_head"].GetMatrix()
+        M = np.array([[m.GetElement(r, c) for c in range(4)] for r in range(4)])
+        far = (M @ np.array([-120.0, 0.0, 0.0, 1.0]))[:3]
+        u = to_view(head_axis_q(res.machine, paths.frame_q[i]))[0]
+        np.testing.assert_allclose(far, fk + 120.0 * u, atol=1e-6)
+    pts = v.actor_points("machine_head")     # its own frame: the axis on x from -120 to 0, radius 8, round ends
+    assert pts[:, 0].min() == pytest.approx(-128.0, abs=0.05) and pts[:, 0].max() == pytest.approx(8.0, abs=0.05)
+    assert np.hypot(pts[:, 1], pts[:, 2]).max() == pytest.approx(8.0, abs=0.05)   # (tessellated spheres)

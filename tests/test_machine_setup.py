@@ -439,3 +439,67 @@ def test_head_body_radius_widens_the_eye_gaps() -> None:
     vt = [x for x in clearance_violations(ap2, pipe, base.model_copy(update={"head_radius_mm": 10.0}))
           if "eye and the tailstock" in x.message]
     assert vt and vt[0].value == pytest.approx(12.0) and vt[0].limit == 15.0
+
+
+def _dense_capsule_min(mandrel_fn, a, u, length, step=0.02):
+    """The independent reference: the distance at points every ``step`` mm along each segment."""
+    t = np.linspace(0.0, length, int(length / step) + 1)
+    out = np.empty(a.shape[0])
+    for i in range(a.shape[0]):
+        p = a[i] + t[:, None] * u[i]
+        out[i] = mandrel_fn(p[:, 2], np.hypot(p[:, 0], p[:, 1])).min()
+    return out
+
+
+def test_capsule_distance_against_dense_sampling_of_its_axis() -> None:
+    """Branch and bound on the head's axis segment (capsule_min_distance) against the distance sampled
+    every 0.02 mm along it: equal within the 0.05 mm tolerance, for segments tilted every way around a
+    cone (some ending inside it, some passing its end faces)."""
+    from engine.machine_setup import capsule_min_distance, mandrel_distance_fn
+
+    ves = Mandrel.cone(60.0, 90.0, 300.0)
+    fn = mandrel_distance_fn(ves)
+    rng = np.random.default_rng(7)
+    n = 60
+    phi = rng.uniform(0, 2 * np.pi, n)
+    rr = rng.uniform(70.0, 160.0, n)
+    a = np.stack([rr * np.cos(phi), rr * np.sin(phi), rng.uniform(-60.0, 360.0, n)], axis=1)
+    u = rng.normal(size=(n, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    got = capsule_min_distance(fn, a, u, 120.0, np.inf)
+    ref = _dense_capsule_min(fn, a, u, 120.0)
+    assert np.abs(got - ref).max() <= 0.05 + 1e-9
+    assert (got < fn(a[:, 2], np.hypot(a[:, 0], a[:, 1])) - 1.0).sum() >= 10     # the axis matters
+    # with a needed gap, values below it are exact within the tolerance, the rest stay above it
+    need = 15.0
+    g2 = capsule_min_distance(fn, a, u, 120.0, need)
+    low = ref < need - 0.05
+    assert np.abs(g2[low] - ref[low]).max() <= 0.05 + 1e-9 and np.all(g2[ref > need + 0.05] >= need - 0.05)
+
+
+def test_head_axis_of_a_lathe_is_radial_and_the_capsule_is_checked(monkeypatch) -> None:
+    """On a fixed-radius lathe the head's roll axis is machine x, away from the mandrel: in the mandrel
+    frame the eye's radial unit vector (closed form).  With head_length_mm the head is a capsule: a head
+    whose axis leans over the mandrel violates where the sphere about the eye does not, by the amount
+    dense sampling of its axis gives."""
+    import engine.machine_setup as ms
+
+    m = load_machine("lathe3")
+    p = demo_eye_path("helix", n=400, circuits=1)
+    ap = inverse_kinematics(m, p.eye_xyz, p.fibre_dir, p.contact_xyz)
+    u = ms.head_axis(m, ap)
+    radial = ap.eye_xyz * np.array([1.0, 1.0, 0.0])
+    radial /= np.linalg.norm(radial, axis=1, keepdims=True)
+    assert np.abs(u - radial).max() < 1e-12
+    pipe = Mandrel.pipe(50.0, 300.0)
+    eye = np.array([[75.0, 0.0, 150.0], [0.0, 90.0, 20.0]])
+    ap2 = AxisPath("lathe3", ("A", "X", "Y"), np.zeros((2, 3)), eye, np.zeros((2, 3)), eye.copy(), np.zeros(2))
+    setup = SetupSpec(clearance_mm=5.0, head_radius_mm=4.0, shaft_length_mm=0.0)
+    assert clearance_violations(ap2, pipe, setup, machine=m) == []        # sphere: 25 and 40 mm > 9 mm
+    lean = np.array([[-0.6, 0.0, 0.8], [0.0, 0.6, 0.8]])                    # over the pipe, away from it
+    monkeypatch.setattr(ms, "head_axis", lambda machine, axes: lean)
+    v = clearance_violations(ap2, pipe, setup.model_copy(update={"head_length_mm": 60.0}), machine=m)
+    hit = [x for x in v if "head and the mandrel" in x.message]
+    ref = _dense_capsule_min(ms.mandrel_distance_fn(pipe), eye, lean, 60.0)
+    assert ref[0] < 9.0 < ref[1] and [(x.index, x.count) for x in hit] == [(0, 1)]
+    assert hit[0].value == pytest.approx(ref[0], abs=0.05) and hit[0].limit == 9.0

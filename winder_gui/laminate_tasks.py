@@ -103,8 +103,10 @@ def layer_view(lr: Any, surface_data: Any = None) -> LayerView:
     res = lr.result
     if res is not None and res.line is not None:
         line = res.line
+        setup = res.job.machine.setup
         paths = paths_view_data(line, res.eye, MAX_DISPLAY_POINTS, MAX_FRAMES, blocks=res.blocks,
-                                 axes=res.axes, machine=res.machine)  # layer time
+                                axes=res.axes, machine=res.machine,
+                                head_mm=(setup.head_radius_mm, setup.head_length_mm))  # layer time
         sel = (line.pass_id == line.pass_id[0]) & ~line.dwell
         if int(sel.sum()) < 2:
             sel = np.ones(line.z.size, dtype=bool)

@@ -46,8 +46,10 @@ def pipeline_task(job: Job, job_path: Path | None, previous: Any, upto: str, *, 
 
     res = run_pipeline(job, job_path, upto=upto, previous=previous, state=state)
     check_cancel(state)
+    setup = job.machine.setup
     paths = (paths_view_data(res.line, res.eye, MAX_DISPLAY_POINTS, MAX_FRAMES, blocks=res.blocks,
-                             axes=res.axes, machine=res.machine)
+                             axes=res.axes, machine=res.machine,
+                             head_mm=(setup.head_radius_mm, setup.head_length_mm))
              if res.line is not None else None)
     cov = None
     if res.line is not None and (previous is None or getattr(previous, "line", None) is not res.line):

@@ -62,6 +62,7 @@ SETUP_FIELDS: tuple[tuple[str, str, bool], ...] = (
     ("tailstock_length_mm", "Tailstock length [mm]", False),
     ("clearance_mm", "Clearance to supports [mm]", False),
     ("head_radius_mm", "Head body radius around the eye [mm]", False),
+    ("head_length_mm", "Head body length along the roll axis [mm]", False),
     ("back_turn_tol_deg", "Back-turn tolerance [deg]", False),
 )
 SETUP_DEFAULT_TEXT = {"mandrel_z0_mm": "centred", "eye_radius_mm": "template's",

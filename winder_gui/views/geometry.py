@@ -218,6 +218,9 @@ class PathsViewData:
     """Controller axis values at each animation frame (rows of the engine's axis path), or ``None``."""
     machine: Any = None
     """The :class:`engine.kinematics.MachineTemplate` of :attr:`frame_q` (the result's, with its set-up)."""
+    head_mm: tuple[float, float] = (0.0, 0.0)
+    """The payout head's body from ``[machine.setup]``: radius and length along its roll axis (mm); (0, 0):
+    no body given (the view draws a head of its own size)."""
 
 
 def feature_indices(xyz: FloatArray, circuit: NDArray | None = None, rel_tol: float = 1e-9) -> NDArray[np.int64]:
@@ -286,13 +289,15 @@ def decimate_indices(xyz: FloatArray, max_points: int, circuit: NDArray | None =
 
 def paths_view_data(line: object, eye: object, max_points: int = 200_000, max_frames: int = 1500,
                     lift: float | None = None, lod_points: int = LOD_POINTS, blocks: object = None,
-                    band_points: int | None = None, axes: object = None, machine: object = None) -> PathsViewData:
+                    band_points: int | None = None, axes: object = None, machine: object = None,
+                    head_mm: tuple[float, float] = (0.0, 0.0)) -> PathsViewData:
     """Thin the engine's winding ``line`` and full-line ``eye`` path for the 3D view (no new maths).
 
     ``max_points`` bounds the line drawn at rest, ``lod_points`` the coarse copy drawn while the view
     moves, ``max_frames`` the animation frames; see :func:`decimate_indices`.  ``axes`` and ``machine``:
     the result's :class:`engine.kinematics.AxisPath` (one row per eye point) and template, so the 3D view
-    can draw the machine at each frame (:mod:`winder_gui.views.machine3d`).
+    can draw the machine at each frame (:mod:`winder_gui.views.machine3d`); ``head_mm``: the head body's
+    radius and length from the job's ``[machine.setup]``.
     """
     z = np.asarray(line.z)  # type: ignore[attr-defined]
     n = z.size
@@ -347,4 +352,4 @@ def paths_view_data(line: object, eye: object, max_points: int = 200_000, max_fr
             frame_q = q_all[fidx]
     return PathsViewData(idx, stride, to_view(xyz), scalars, float(lift), fidx, exyz, cxyz, n, lod,
                          frame_time, frame_circuit, band, band_scalars, frame_q,
-                         machine if frame_q is not None else None)
+                         machine if frame_q is not None else None, (float(head_mm[0]), float(head_mm[1])))

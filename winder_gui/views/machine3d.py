@@ -36,6 +36,9 @@ class MachineFrames:
     links: np.ndarray
     eye: np.ndarray
     carriage: np.ndarray
+    head_axis: np.ndarray | None = None
+    """(N, 3) unit vectors, view frame: from the eye along the payout head's body (its roll axis,
+    :func:`engine.machine_setup.head_axis_q`)."""
 
 
 def _to_mandrel(v: np.ndarray, theta: np.ndarray) -> np.ndarray:
@@ -83,4 +86,6 @@ def machine_frames(machine: Any, q: np.ndarray, margin_mm: float = 0.0) -> Machi
         links_w = np.stack([carriage_w, elbow, eye_w], axis=1)
     links = _view(_to_mandrel(links_w, theta))
     carriage = _view(_to_mandrel(carriage_w[:, None, :], theta)[:, 0])
-    return MachineFrames(links, links[:, -1].copy(), carriage)
+    from engine.machine_setup import head_axis_q
+
+    return MachineFrames(links, links[:, -1].copy(), carriage, _view(head_axis_q(machine, q)))

@@ -107,9 +107,19 @@ class MachineMixin:
             box = pv.Box(bounds=(-6.0 * h, 6.0 * h, -2.0 * h, 2.0 * h, -4.0 * h, 4.0 * h))
             st["machine_carriage"] = self.plotter.add_mesh(box, name="machine_carriage", color=MACHINE_COLOUR,
                                                            reset_camera=False, render=False)
-            # the head: a cylinder behind its tip, the local origin, which is placed at the eye
-            head = pv.Cylinder(center=(-5.0 * h, 0.0, 0.0), direction=(1.0, 0.0, 0.0), radius=1.5 * h,
-                               height=10.0 * h, resolution=24)
+            # the head: a cylinder behind its tip, the local origin, which is placed at the eye; the set-up's
+            # body (a capsule of head_radius_mm about head_length_mm of the roll axis) where one is given
+            rad, length = self.paths.head_mm if self.paths is not None else (0.0, 0.0)
+            if length > 0.0 or rad > 0.0:
+                rad = rad if rad > 0.0 else 1.5 * h
+                length = max(length, 1e-3 * h)
+                head = pv.Cylinder(center=(-0.5 * length, 0.0, 0.0), direction=(1.0, 0.0, 0.0), radius=rad,
+                                   height=length, resolution=24)
+                head = head.merge(pv.Sphere(radius=rad, center=(0.0, 0.0, 0.0))).merge(
+                    pv.Sphere(radius=rad, center=(-length, 0.0, 0.0)))
+            else:
+                head = pv.Cylinder(center=(-5.0 * h, 0.0, 0.0), direction=(1.0, 0.0, 0.0), radius=1.5 * h,
+                                   height=10.0 * h, resolution=24)
             st["machine_head"] = self.plotter.add_mesh(head, name="machine_head", color=HEAD_COLOUR,
                                                        reset_camera=False, render=False)
         else:
@@ -124,7 +134,8 @@ class MachineMixin:
         c = fr.carriage[i]
         place("machine_carriage", _frame_matrix(np.array([1.0, 0.0, 0.0]), np.array([0.0, c[1], c[2]]), c))
         eye = fr.eye[i]
-        into = eye - links[-2]     # the last link points into the eye
+        # from the head's body into its tip: against the head's roll axis (the last link where none is known)
+        into = -fr.head_axis[i] if fr.head_axis is not None else eye - links[-2]
         place("machine_head", _frame_matrix(into, np.array([1.0, 0.0, 0.0]), eye))
 
     def machine_head_eye(self) -> np.ndarray | None:
