@@ -376,7 +376,8 @@ def mandrel_distance(mandrel: Any, z: np.ndarray, rho: np.ndarray, step_mm: floa
 
 
 def mandrel_distance_fn(mandrel: Any, step_mm: float = 0.05, upto_mm: float = np.inf) -> Any:
-    """:func:`mandrel_distance` as a function ``(z, rho) -> distance`` (the sampled generatrix built once)."""
+    """:func:`mandrel_distance` as a function ``(z, rho, upto=upto_mm) -> distance`` (the sampled generatrix
+    built once; a smaller ``upto`` makes the k-d tree queries cheaper)."""
     from scipy.spatial import cKDTree
 
     zs = np.linspace(mandrel.z_min, mandrel.z_max, 2001)
@@ -392,8 +393,8 @@ def mandrel_distance_fn(mandrel: Any, step_mm: float = 0.05, upto_mm: float = np
     tree = cKDTree(np.vstack([prof, *ends]))
     zlo, zhi = float(mandrel.z_min), float(mandrel.z_max)
 
-    def dist(z: np.ndarray, rho: np.ndarray) -> np.ndarray:
-        d, _ = tree.query(np.stack([z, rho], axis=1), distance_upper_bound=upto_mm)
+    def dist(z: np.ndarray, rho: np.ndarray, upto: float | None = None) -> np.ndarray:
+        d, _ = tree.query(np.stack([z, rho], axis=1), distance_upper_bound=upto_mm if upto is None else upto)
         inside = (z >= zlo) & (z <= zhi)
         rin = np.interp(z, zd, prof[:, 1])
         body = inside & (rho < rin)
@@ -441,8 +442,9 @@ def capsule_min_distance(dist: Any, a: np.ndarray, u: np.ndarray, length_mm: flo
                          tol_mm: float = 0.05) -> np.ndarray:
     """Smallest ``dist(z, rho)`` over the segments ``a + t u``, ``0 <= t <= length_mm`` (N,), mm.
 
-    ``dist`` is a distance in the (z, rho) half-plane of an axisymmetric body (1-Lipschitz in space, as
-    :func:`mandrel_distance`).  Branch and bound on ``t``: an interval of half width h whose centre is at
+    ``dist(z, rho, upto)`` is a distance in the (z, rho) half-plane of an axisymmetric body (1-Lipschitz in
+    space, as :func:`mandrel_distance_fn`; values beyond ``upto`` may be returned as ``inf``; negative
+    inside the body).  Branch and bound on ``t``: an interval of half width h whose centre is at
     distance d cannot come nearer than d - h; intervals that could still come below ``need_mm`` (or below
     the best value found) are halved until h <= ``tol_mm``.  The answer is a distance the segment reaches;
     where it is below ``need_mm`` it is the minimum within ``tol_mm``, elsewhere the minimum is at least
@@ -451,20 +453,22 @@ def capsule_min_distance(dist: Any, a: np.ndarray, u: np.ndarray, length_mm: flo
     n = a.shape[0]
     need = np.broadcast_to(np.asarray(need_mm, dtype=float), (n,))
 
-    def at(i: np.ndarray, t: np.ndarray) -> np.ndarray:
+    top = float(np.max(need)) if n else 0.0
+    top = top if np.isfinite(top) else np.inf
+
+    def at(i: np.ndarray, t: np.ndarray, upto: float) -> np.ndarray:
         p = a[i] + t[:, None] * u[i]
-        return dist(p[:, 2], np.hypot(p[:, 0], p[:, 1]))
+        return dist(p[:, 2], np.hypot(p[:, 0], p[:, 1]), upto)
 
     every = np.arange(n)
-    best = np.minimum(at(every, np.zeros(n)), at(every, np.full(n, float(length_mm))))
+    best = np.minimum(at(every, np.zeros(n), top + 1.0), at(every, np.full(n, float(length_mm)), top + 1.0))
     if length_mm <= 0.0 or n == 0:
         return best
-    k0 = max(1, int(np.ceil(length_mm / max(min(length_mm, 10.0), 4.0 * tol_mm))))
-    half = 0.5 * length_mm / k0
-    idx = np.repeat(every, k0)
-    tc = np.tile((np.arange(k0) + 0.5) * (2.0 * half), n)
+    half = 0.5 * length_mm               # one interval per segment to start: most are cut at once
+    idx = every
+    tc = np.full(n, half)
     while idx.size:
-        d = at(idx, tc)
+        d = at(idx, tc, top + half + 1.0)         # farther centres are cut whatever their distance
         np.minimum.at(best, idx, d)
         keep = (d - half < np.minimum(best[idx], need[idx])) & (half > tol_mm)
         idx, tc = idx[keep], tc[keep]
@@ -538,8 +542,8 @@ def clearance_violations(axes: AxisPath, mandrel: Any, setup: Any, eye_clearance
     body = "head" if capsule else "eye"
     out: list[Violation] = []
     if capsule:
-        fn = mandrel_distance_fn(mandrel, upto_mm=2.0 * eye_gap + length + 1.0)
-        dm = fn(z, rho)
+        fn = mandrel_distance_fn(mandrel, upto_mm=2.0 * eye_gap + 1.0)
+        dm = fn(z, rho, eye_gap + length + 1.0)
         near = np.flatnonzero(dm - length < eye_gap)          # the capsule's axis stays within ``length``
         if near.size:
             dm[near] = capsule_min_distance(fn, eye[near], u[near], length, eye_gap)
@@ -556,7 +560,7 @@ def clearance_violations(axes: AxisPath, mandrel: Any, setup: Any, eye_clearance
         near = np.flatnonzero((z > ob.z0 - reach) & (z < ob.z1 + reach) & (rho < ob.radius + reach))
         de = np.full(z.size, np.inf)
         if capsule and near.size:
-            de[near] = capsule_min_distance(lambda zz, rr, ob=ob: _rect_distance(zz, rr, ob), eye[near], u[near],
+            de[near] = capsule_min_distance(lambda zz, rr, _up, ob=ob: _rect_distance(zz, rr, ob), eye[near], u[near],
                                             length, g_eye)
         else:
             de[near] = _rect_distance(z[near], rho[near], ob)
