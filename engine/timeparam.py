@@ -721,6 +721,12 @@ def _chains(rows: np.ndarray, h: np.ndarray, xn_prev: np.ndarray, xn_cur: np.nda
     B = rows.shape[0]
     allr, ip2, in2 = _box_rows(rows, h, xn_prev, xn_cur, ipos, ineg)
     order, m = _hulls(allr, ip2, in2, compiled)
+    if compiled and _NUMBA:
+        from engine import timeparam_jit
+
+        out = timeparam_jit.chains(allr, order, m, h, xn_cur)     # the same bits, one compiled loop
+        if out is not None:
+            return out
     V = int(m.max())
     order = order[:, :V]
     br = np.arange(B)[:, None]

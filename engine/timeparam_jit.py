@@ -461,6 +461,103 @@ def dp_pass(lev: np.ndarray, xall: np.ndarray, xn: np.ndarray, ch: tuple[np.ndar
     return int(total), int(bad_node), bool(final_ok), jidx, sdot
 
 
+_CHAINS: list[Any] = []
+
+
+def _build_chains() -> Any:
+    import numba
+
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
+    def _chains_k(allr, order, m, V, h, xn_cur, rq, rk, lq, lk, xjb, xjt, uhi, ulo, xkt):  # pragma: no cover
+        # The numpy code of engine.timeparam._chains, element by element (the same operations in the
+        # same order).  Returns False (nothing usable) where that code would take another branch: a
+        # non-positive vertex determinant (parallel normals) or a NaN vertex.
+        B = order.shape[0]
+        L = V + 1
+        xk = np.empty(V)
+        xj = np.empty(V)
+        for b in range(B):
+            mb = m[b]
+            hb = h[b]
+            bot = 0
+            top = 0
+            ub = -np.inf
+            lb = np.inf
+            kt = -np.inf
+            for t in range(mb):
+                ia = order[b, t]
+                ib_ = order[b, (t + 1) % mb]
+                na0 = allr[b, ia, 0]
+                na1 = allr[b, ia, 1]
+                nb0 = allr[b, ib_, 0]
+                nb1 = allr[b, ib_, 1]
+                det = na0 * nb1 - na1 * nb0
+                if not det > 0:
+                    return False
+                zx = (nb1 - na1) / det
+                zu = (na0 - nb0) / det
+                x = zx + 2.0 * hb * zu
+                if x != x or zu != zu:
+                    return False
+                xk[t] = zx
+                xj[t] = x
+                if x < xj[bot]:
+                    bot = t
+                if x > xj[top]:
+                    top = t
+                if zu > ub:
+                    ub = zu
+                if zu < lb:
+                    lb = zu
+                if zx > kt:
+                    kt = zx
+            c = (top - bot) % mb + 1
+            nl = mb - c + 2
+            sc = xn_cur[b]
+            off = 3.0 * b
+            for ll in range(L):
+                ri = (bot + min(ll, c - 1)) % mb
+                li = (bot - min(ll, nl - 1)) % mb
+                rq[b * L + ll] = xj[ri] / sc + off
+                rk[b * L + ll] = xk[ri]
+                lq[b * L + ll] = xj[li] / sc + off
+                lk[b * L + ll] = xk[li]
+            xjb[b] = xj[bot]
+            xjt[b] = xj[top]
+            uhi[b] = ub
+            ulo[b] = lb
+            xkt[b] = kt
+        return True
+
+    return _chains_k
+
+
+def chains(allr: np.ndarray, order: np.ndarray, m: np.ndarray, h: np.ndarray, xn_cur: np.ndarray
+           ) -> dict[str, np.ndarray] | None:
+    """The polygon chains of :func:`engine.timeparam._chains` from the hull vertex rows ``order``, ``m``
+    (bit for bit its numpy code's), or ``None`` (without numba, or where the numpy code handles parallel
+    normals or NaN vertices)."""
+    if not _CHAINS:
+        if kernel(0) is None:
+            return None
+        try:
+            _CHAINS.append(_build_chains())
+        except Exception:  # noqa: BLE001 - see kernel()
+            _CHAINS.append(None)
+    if _CHAINS[0] is None:
+        return None
+    B = order.shape[0]
+    V = int(m.max())
+    L = V + 1
+    out = {k: np.empty(B * L) for k in ("rq", "rk", "lq", "lk")}
+    out.update({k: np.empty(B) for k in ("xjb", "xjt", "uhi", "ulo", "xkt")})
+    ok = _CHAINS[0](np.ascontiguousarray(allr, float), np.ascontiguousarray(order, np.int64),
+                    np.ascontiguousarray(m, np.int64), V, np.ascontiguousarray(h, float),
+                    np.ascontiguousarray(xn_cur, float), out["rq"], out["rk"], out["lq"], out["lk"], out["xjb"],
+                    out["xjt"], out["uhi"], out["ulo"], out["xkt"])
+    return out if ok else None
+
+
 _HULL: list[Any] = []
 
 
@@ -612,4 +709,4 @@ def warm() -> bool:
     return True
 
 
-__all__ = ["IMPORT_THRESHOLD", "dp_pass", "forward_pass", "hulls", "kernel", "warm", "windows"]
+__all__ = ["IMPORT_THRESHOLD", "chains", "dp_pass", "forward_pass", "hulls", "kernel", "warm", "windows"]

@@ -161,3 +161,23 @@ def test_compiled_pass_bit_identical_on_the_long_path() -> None:
     new = _law(True, s, X, dX, ddX, lim)
     assert np.array_equal(ref.sdot, new.sdot)
     assert [it.total_time_s for it in ref.iterations] == [it.total_time_s for it in new.iterations]
+
+
+@pytest.mark.parametrize("n", [300, 3000])
+def test_compiled_chains_bit_identical(n: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The compiled polygon chains (engine.timeparam_jit.chains) are the numpy code's bit for bit, on
+    the given nodes (n = 300) and on node groups (n = 3000: many rows per interval)."""
+    from engine import timeparam_jit
+
+    s, X, dX, ddX = example_path(n)
+    lim = replace(example_limits(), levels=100)
+    prob = tp._prepare(s, X, dX, ddX, lim, chains=False)
+    ell = tp._group_length(prob)
+    assert (ell is None) == (n == 300)
+    new = tp._with_chains(prob) if ell is None else tp._coarse_problem(prob, ell)[0]
+    assert timeparam_jit.chains(np.zeros((1, 3, 2)), np.zeros((1, 3), np.int64), np.array([3]), np.ones(1),
+                                np.ones(1)) is None                       # det 0: the numpy branch
+    monkeypatch.setattr(timeparam_jit, "chains", lambda *a: None)
+    ref = tp._with_chains(prob) if ell is None else tp._coarse_problem(prob, ell)[0]
+    for k in ("rq", "rk", "lq", "lk", "xjb", "xjt", "cap_dp", "xn"):
+        assert np.array_equal(getattr(ref, k), getattr(new, k)), k

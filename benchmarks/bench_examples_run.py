@@ -1,0 +1,75 @@
+"""Issue 16: `winder run` of the shipped examples and `winder --version`, start-up included.
+
+Run: ``.venv/bin/python benchmarks/bench_examples_run.py [--repeat 5] [--quiet-only]``
+
+Each case runs as a fresh process (``python -m engine ...``, as the ``winder`` script does), the cases
+interleaved, ``--repeat`` times; printed: the medians of wall and CPU time (user + system of the child)
+and the targets (vessel <= 1.5 s, pipe <= 1 s, ``--version`` <= 0.15 s).  The machine is shared: the
+load average is printed, and CPU time is the better figure.  Bytecode is written and used (as an
+installed program has it): ``PYTHONDONTWRITEBYTECODE`` is removed from the children's environment and a
+first unmeasured run of every case warms the caches (bytecode, numba's on-disk cache).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+EX = ROOT / "resources" / "examples"
+TARGETS = {"pressure_vessel": 1.5, "pipe": 1.0, "--version": 0.15}
+
+
+def _run(args: list[str], env: dict[str, str]) -> tuple[float, float]:
+    """(wall, cpu) seconds of one child process."""
+    t0 = time.perf_counter()
+    proc = subprocess.Popen([sys.executable, "-m", "engine", *args], cwd=ROOT, env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _, status, ru = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    err = proc.stderr.read().decode() if proc.stderr else ""
+    if proc.returncode != 0:
+        raise SystemExit(f"{args}: exit {proc.returncode}\n{err}")
+    return wall, ru.ru_utime + ru.ru_stime
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--repeat", type=int, default=5)
+    args = ap.parse_args()
+    env = dict(os.environ)
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
+    env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
+    with tempfile.TemporaryDirectory() as tmp:
+        cases = {
+            "pressure_vessel": ["run", str(EX / "pressure_vessel.toml"), "-o", f"{tmp}/v.ngc", "--quiet"],
+            "pipe": ["run", str(EX / "pipe.toml"), "-o", f"{tmp}/p.ngc", "--quiet"],
+            "--version": ["--version"],
+        }
+        for a in cases.values():                       # warm-up: bytecode, numba cache
+            _run(a, env)
+        load0 = os.getloadavg()[0]
+        res: dict[str, list[tuple[float, float]]] = {k: [] for k in cases}
+        for _ in range(args.repeat):
+            for k, a in cases.items():
+                res[k].append(_run(a, env))
+        load1 = os.getloadavg()[0]
+    print(f"load average {load0:.2f} -> {load1:.2f} on {os.cpu_count()} cores; medians of {args.repeat} "
+          f"interleaved runs")
+    print(f"{'case':<18}{'wall s':>9}{'cpu s':>9}{'target s':>10}  verdict (CPU)")
+    for k, r in res.items():
+        wall = statistics.median(w for w, _ in r)
+        cpu = statistics.median(c for _, c in r)
+        print(f"{k:<18}{wall:9.3f}{cpu:9.3f}{TARGETS[k]:10.2f}  {'PASS' if cpu <= TARGETS[k] else 'FAIL'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
