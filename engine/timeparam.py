@@ -64,6 +64,7 @@ rides in the low 12 bits of the float cost, giving min and argmin together).
 from __future__ import annotations
 
 import bisect
+import functools
 import math
 import os
 import time
@@ -427,7 +428,7 @@ class _Problem:
     hull_rows: np.ndarray | None = None   # rows with the provably redundant ones zeroed (for the hull)
     ipos: np.ndarray | None = None        # the ± pairs of rows: rows[:, ineg] == -rows[:, ipos]
     ineg: np.ndarray | None = None
-    slopes: tuple[np.ndarray, np.ndarray] | None = None   # segment slopes of the chains (compiled pass)
+    slopes: tuple | None = None   # the compiled pass's constants: chain slopes, 2h, K/4h², uniform h
 
 
 MAX_PATH_VALUE = 1e9
@@ -1125,6 +1126,25 @@ def _forward_compiled(chunks: list[tuple[int, int]], uniform_h: bool, two_h: np.
 _NUMBA = True  # False: always the numpy pass (the tested reference; tests switch it)
 
 
+@functools.lru_cache(maxsize=32)
+def _level_tables(M: int, cluster: float) -> tuple[np.ndarray, int, np.ndarray, np.ndarray]:
+    """The levels' fractions of the span (clustered towards the middle by ``cluster``) and the lookup
+    tables of :func:`_dp`: the index of the first level >= / last level <= a fraction of the span, in
+    bins that hold at most one level each (the estimate is then exact or one off; :func:`_dp` corrects
+    it).  Cached (read-only arrays): every pass of a tube uses the same ones."""
+    xi = np.linspace(-1.0, 1.0, M)
+    a = float(cluster)
+    frac = (1.0 + (xi + a * xi**3) / (1.0 + a)) / 2.0 if a > 0 else (xi + 1.0) / 2.0
+    frac[0], frac[-1] = 0.0, 1.0
+    nb = int(2.0 / max(float(np.min(np.diff(frac))), 1e-9)) + 2
+    edges = np.arange(nb + 1) / nb
+    t_lo = np.searchsorted(frac, edges[:-1], side="left")
+    t_hi = np.searchsorted(frac, edges[1:], side="right") - 1
+    for arr in (frac, t_lo, t_hi):
+        arr.flags.writeable = False
+    return frac, nb, t_lo, t_hi
+
+
 def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | None = None,
         square: bool = False, cluster: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """One DP pass on the grid ``s_i × {M levels in [lo_i, hi_i]}``.
@@ -1139,37 +1159,22 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
     span = phi - plo
     degenerate = span <= 0
     span = np.where(degenerate, 0.0, span)
-    xi = np.linspace(-1.0, 1.0, M)
-    a = float(cluster)
-    frac = (1.0 + (xi + a * xi**3) / (1.0 + a)) / 2.0 if a > 0 else (xi + 1.0) / 2.0
-    frac[0], frac[-1] = 0.0, 1.0
-    lev = np.minimum(plo[:, None] + span[:, None] * frac, phi[:, None])   # (N, M) in phi
-    if square:
-        xall = lev
-        lev = np.sqrt(lev)
-    else:
-        xall = lev * lev
-    # index of the first level >= / last level <= a fraction of the span, through a lookup table
-    # whose bins hold at most one level each (the estimate is then exact or one off; corrected below)
-    nb = int(2.0 / max(float(np.min(np.diff(frac))), 1e-9)) + 2
-    edges = np.arange(nb + 1) / nb
-    t_lo = np.searchsorted(frac, edges[:-1], side="left")
-    t_hi = np.searchsorted(frac, edges[1:], side="right") - 1
+    frac, nb, t_lo, t_hi = _level_tables(M, float(cluster))
     sp_p = np.where(degenerate[:-1], 1.0, span[:-1])
-    win = None
     if not square and _NUMBA:
         from engine import timeparam_jit
 
         L = prob.rq.size // max(n - 1, 1)
-        h = prob.h
-        if prob.slopes is None:              # the chains' segment slopes, once per problem
+        if prob.slopes is None:     # once per problem: the chains' segment slopes, 2h, K/4h², uniform h
+            h = prob.h
             with np.errstate(divide="ignore", invalid="ignore"):
-                prob.slopes = (np.diff(prob.rk) / np.diff(prob.rq), np.diff(prob.lk) / np.diff(prob.lq))
-        fused = timeparam_jit.dp_pass(lev, xall, prob.xn, (prob.rq, prob.rk, prob.lq, prob.lk, *prob.slopes), L,
+                prob.slopes = (np.diff(prob.rk) / np.diff(prob.rq), np.diff(prob.lk) / np.diff(prob.lq), 2.0 * h,
+                               (K / 4.0) / (h * h), bool(np.ptp(h) <= 1e-12 * h.max()))
+        rs, ls, two_h, kq_h, uniform_h = prob.slopes
+        fused = timeparam_jit.dp_pass((plo, span, phi, frac), prob.xn, (prob.rq, prob.rk, prob.lq, prob.lk, rs, ls), L,
                                       prob.xjb,
-                                      prob.xjt, degenerate, plo, sp_p, t_lo, t_hi, nb, 2.0 * h,
-                                      (K / 4.0) / (h * h), bool(np.ptp(h) <= 1e-12 * h.max()), _CHUNK, K > 0,
-                                      int(_LOMASK), int(_HIMASK))
+                                      prob.xjt, degenerate, plo, sp_p, t_lo, t_hi, nb, two_h, kq_h, uniform_h,
+                                      _CHUNK, K > 0, int(_LOMASK), int(_HIMASK))
         if fused is not None:                # windows, forward and backward pass in one call: the same bits
             _STATS["candidates"], bad_node, final_ok, jidx, sdot = fused
             if bad_node >= 0:
@@ -1177,6 +1182,17 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
             if not final_ok:
                 raise _infeasible(prob, n - 1, "the final speed cannot be reached")
             return sdot, jidx
+    lev = np.minimum(plo[:, None] + span[:, None] * frac, phi[:, None])   # (N, M) in phi
+    if square:
+        xall = lev
+        lev = np.sqrt(lev)
+    else:
+        xall = lev * lev
+    win = None
+    if not square and _NUMBA:
+        from engine import timeparam_jit
+
+        L = prob.rq.size // max(n - 1, 1)
         win = timeparam_jit.windows(lev, xall, prob.xn, (prob.rq, prob.rk, prob.lq, prob.lk), L, prob.xjb,
                                     prob.xjt, degenerate, plo, sp_p, t_lo, t_hi, nb)
     if win is not None:                      # the compiled windows: the same integers

@@ -209,14 +209,25 @@ def _build_fused() -> Any:
     import numba
 
     @numba.njit(cache=True, nogil=True, error_model="numpy")
-    def _dp_pass(lev, xall, xn, rq, rk, lq, lk, rs, ls, L, xjb, xjt, degenerate, plo, sp_p, t_lo, t_hi, nb,
-                 two_h, kq_h, uniform_h, chunk, use_k, lomask, himask, Jraw, jidx, sdot):  # pragma: no cover
+    def _dp_pass(plo_, span, phi, frac, lev, xall, xn, rq, rk, lq, lk, rs, ls, L, xjb, xjt, degenerate, plo,
+                 sp_p, t_lo, t_hi, nb, two_h, kq_h, uniform_h, chunk, use_k, lomask, himask, Jraw, jidx,
+                 sdot):  # pragma: no cover
         # One whole DP pass: per interval the windows (as _windows), the chunk bookkeeping of the numpy
         # pass (a uniform-spacing pass costs every interval of a chunk with its first interval's 2h and
         # K/4h², as the numpy pass does), the candidates (as _forward), then the reach checks and the
         # backward pass.  Returns (candidates, node that cannot be reached or -1, final level reached).
         n, M = lev.shape
         n1 = n - 1
+        for i in range(n):                  # the levels, as numpy's minimum(plo + span·frac, phi)
+            a = plo_[i]
+            sp = span[i]
+            ph = phi[i]
+            for k in range(M):
+                v = a + sp * frac[k]
+                if ph < v:
+                    v = ph
+                lev[i, k] = v
+                xall[i, k] = v * v
         levf = lev.reshape(-1)
         Jf = Jraw.view(np.float64)
         for q0 in range(n * M):
@@ -430,12 +441,14 @@ def _build_fused() -> Any:
     return _dp_pass
 
 
-def dp_pass(lev: np.ndarray, xall: np.ndarray, xn: np.ndarray, ch: tuple[np.ndarray, ...], L: int,
+def dp_pass(levels: tuple[np.ndarray, ...], xn: np.ndarray, ch: tuple[np.ndarray, ...], L: int,
             xjb: np.ndarray, xjt: np.ndarray, degenerate: np.ndarray, plo: np.ndarray, sp_p: np.ndarray,
             t_lo: np.ndarray, t_hi: np.ndarray, nb: int, two_h: np.ndarray, kq_h: np.ndarray, uniform_h: bool,
             chunk: int, use_k: bool, lomask: int, himask: int) -> tuple[int, int, bool, np.ndarray, np.ndarray] | None:
     """One whole DP pass of :func:`engine.timeparam._dp` (levels uniform in ṡ) in one compiled call:
-    the windows, the forward pass and the backward pass, bit for bit the numpy code's.  ``ch`` =
+    the levels, the windows, the forward pass and the backward pass, bit for bit the numpy code's.
+    ``levels`` = ``(plo, span, phi, frac)``: level ``k`` at node ``i`` is ``min(plo_i + span_i·frac_k,
+    phi_i)`` (mm/s).  ``ch`` =
     ``(rq, rk, lq, lk, rs, ls)``: the chains and their segment slopes ``diff(rk)/diff(rq)``,
     ``diff(lk)/diff(lq)`` (numpy's ``interp`` computes the same quotients).
 
@@ -450,14 +463,18 @@ def dp_pass(lev: np.ndarray, xall: np.ndarray, xn: np.ndarray, ch: tuple[np.ndar
             _FUSED.append(None)
     if _FUSED[0] is None:
         return None
-    n, M = lev.shape
+    plo_, span, phi, frac = levels
+    n, M = plo_.size, frac.size
+    lev = np.empty((n, M))
+    xall = np.empty((n, M))
     Jraw = np.empty(n * M, np.int64)
     jidx = np.empty(n, np.int64)
     sdot = np.empty(n)
     rq, rk, lq, lk, rs, ls = ch
-    total, bad_node, final_ok = _FUSED[0](lev, xall, xn, rq, rk, lq, lk, rs, ls, int(L), xjb, xjt, degenerate, plo,
-                                          sp_p, t_lo, t_hi, int(nb), two_h, kq_h, bool(uniform_h), int(chunk),
-                                          bool(use_k), np.int64(lomask), np.int64(himask), Jraw, jidx, sdot)
+    total, bad_node, final_ok = _FUSED[0](plo_, span, phi, frac, lev, xall, xn, rq, rk, lq, lk, rs, ls, int(L),
+                                          xjb, xjt, degenerate, plo, sp_p, t_lo, t_hi, int(nb), two_h, kq_h,
+                                          bool(uniform_h), int(chunk), bool(use_k), np.int64(lomask),
+                                          np.int64(himask), Jraw, jidx, sdot)
     return int(total), int(bad_node), bool(final_ok), jidx, sdot
 
 
