@@ -886,6 +886,10 @@ def carriage_need(machine: MachineTemplate, line: Any, eye_radius_mm: float | No
     (its arm reaches along the mandrel axis beyond the track)."""
     if machine.kind != "cartesian":
         return None
+    from engine.periodic import deferred
+
+    if deferred(line, "xyz") is not None or deferred(line, "tau") is not None:
+        line = line.one_circuit          # circuits are circuit 0 turned about the axis: the same z range
     c = np.asarray(line.xyz, dtype=float)
     if c.shape[0] == 0:
         return None

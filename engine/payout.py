@@ -1957,16 +1957,25 @@ def _extend_replicated(eye: EyePath, line: Any) -> EyePath | None:
     twist = getattr(line, "twist_per_circuit_rad", None)
     if nc < REPLICATE_MIN_CIRCUITS or m < 2 or take is None or twist is None or eye.parameter not in ("s", "v"):
         return None
+    from engine.periodic import deferred
+
     n = nc * m + 1
-    z = np.asarray(line.z)
-    if z.shape != (n,):
+    dz = deferred(line, "z")
+    if (len(dz) if dz is not None else np.shape(line.z)[0]) != n:
         return None
     # the line must repeat circuit 0: exactly in z, r, r', β and the direction, v shifted by Δv per circuit
+    # (a field kept as circuit 0 + rule, engine.periodic.CircuitArray "tile", does by construction)
     for name in ("z", "r", "dr", "beta", "direction"):
+        d = deferred(line, name)
+        if d is not None and d.kind == "tile" and (d.circuits, d.m) == (nc, m):
+            continue
         a = np.asarray(getattr(line, name))
+        if a.shape != (n,):
+            return None
         if not np.array_equal(a[:-1].reshape(nc, m), np.broadcast_to(a[:m], (nc, m))) or a[-1] != a[m]:
             return None
-    v = np.asarray(line.v, dtype=float)
+    dv = deferred(line, "v")
+    v = dv.materialise() if dv is not None else np.asarray(line.v, dtype=float)   # not kept by the line
     kk = np.arange(nc)
     if np.any(np.abs(v[kk * m] - v[0] - kk * float(twist)) > 1e-9 * (1.0 + abs(float(v[-1])))):
         return None
@@ -1974,7 +1983,6 @@ def _extend_replicated(eye: EyePath, line: Any) -> EyePath | None:
     one = _extend_pointwise(eye, one_line)
     if one.index.size != m + 1:      # zero-length steps dropped: evaluate point by point
         return None
-    del z
 
     def tile(a: FloatArray) -> FloatArray:
         out = np.empty(n, dtype=a.dtype)

@@ -18,6 +18,10 @@ from typing import Any
 
 import numpy as np
 
+#: circuits from which the winding line keeps its per-point arrays as circuit 0 + rule (:class:`CircuitArray`),
+#: materialised on first use (as :data:`engine.payout.REPLICATE_MIN_CIRCUITS`: every shipped example has fewer)
+DEFER_MIN_CIRCUITS = 100
+
 #: relative tolerance of the periodicity check of the axis path (of 1 + the axis' largest |value|)
 PERIODIC_RTOL = 1e-9
 
@@ -164,3 +168,173 @@ def circuit_pieces(axes: Any, s: Any, rtol: float = 1e-7) -> list[tuple[int, int
         if np.any(np.abs(s[a:a + m + 1] - s[a] - ref) > tol):
             return None
     return [(k * m, (k + 1) * m) for k in range(nc)]
+
+
+# --------------------------------------------------------------------------------------------------
+# Per-point arrays kept as circuit 0 + how circuit k is made (materialised on first use)
+# --------------------------------------------------------------------------------------------------
+class CircuitArray:
+    """A per-point array of ``circuits`` circuits of ``m`` points plus the closing point, kept as
+    circuit 0 (``m + 1`` rows) and the rule that makes circuit k from it (issue 16: the line of a
+    400 x 8 000 program is 1 GB materialised).
+
+    ``kind``:
+
+    * ``"tile"``: every circuit is circuit 0 (rows ``base[:m]``), the closing point ``base[m]``;
+    * ``"shift"``: circuit k is ``base[:m] + k·step``, the closing point ``base[m] + (circuits-1)·step``;
+    * ``"circuit"``: the circuit number k (the closing point circuits - 1);
+    * ``"turn"``: (N, 3) points of circuit 0 given by their columns ``base = (x0, y0, z0)``, turned by
+      the angle whose cosine / sine are ``cos_k[k]`` / ``sin_k[k]`` about z.
+
+    :meth:`materialise` and :meth:`rows` use the arithmetic of :func:`engine.winding._assemble`
+    (bit for bit the arrays it made)."""
+
+    __slots__ = ("base", "circuits", "m", "kind", "step", "cos_k", "sin_k", "dtype")
+
+    def __init__(self, kind: str, base: Any, circuits: int, m: int, step: Any = 0,
+                 cos_k: np.ndarray | None = None, sin_k: np.ndarray | None = None) -> None:
+        if kind not in ("tile", "shift", "circuit", "turn"):
+            raise ValueError(f"CircuitArray: unknown kind {kind!r}")
+        self.kind, self.base, self.circuits, self.m, self.step = kind, base, int(circuits), int(m), step
+        self.cos_k, self.sin_k = cos_k, sin_k
+        self.dtype = np.dtype(np.int64) if kind == "circuit" else (
+            np.dtype(float) if kind == "turn" else np.asarray(base).dtype)
+
+    @property
+    def n(self) -> int:
+        """Points of the whole path."""
+        return self.circuits * self.m + 1
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return (self.n, 3) if self.kind == "turn" else (self.n,)
+
+    def __len__(self) -> int:
+        return self.n
+
+    @property
+    def nbytes_materialised(self) -> int:
+        """Bytes the whole array takes once materialised."""
+        return int(np.prod(self.shape)) * self.dtype.itemsize
+
+    def materialise(self) -> np.ndarray:
+        """The whole array (a new ndarray)."""
+        total, m, n = self.circuits, self.m, self.n
+        k = np.arange(total)
+        if self.kind == "tile":
+            a = self.base
+            res = np.empty(n, dtype=a.dtype)
+            res[:-1].reshape(total, m)[:] = a[:m]
+            res[-1] = a[m]
+            return res
+        if self.kind == "shift":
+            a, step = self.base, self.step
+            res = np.empty(n, dtype=a.dtype)
+            res[:-1].reshape(total, m)[:] = a[:m][None, :] + (k * step)[:, None]
+            res[-1] = a[m] + (total - 1) * step
+            return res
+        if self.kind == "circuit":
+            res = np.empty(n, dtype=np.int64)
+            res[:-1].reshape(total, m)[:] = k[:, None]
+            res[-1] = total - 1
+            return res
+        x0, y0, z0 = self.base
+        ck, sk = self.cos_k[:, None], self.sin_k[:, None]
+        arr = np.empty((n, 3))
+        body = arr[:-1].reshape(total, m, 3)
+        # x0·cos − y0·sin and x0·sin + y0·cos written in place (the same arithmetic, one temporary)
+        np.multiply(x0[:m], ck, out=body[:, :, 0])
+        body[:, :, 0] -= y0[:m] * sk
+        np.multiply(x0[:m], sk, out=body[:, :, 1])
+        body[:, :, 1] += y0[:m] * ck
+        body[:, :, 2] = z0[:m]
+        cl, sl = float(ck[-1, 0]), float(sk[-1, 0])
+        arr[-1] = (x0[m] * cl - y0[m] * sl, x0[m] * sl + y0[m] * cl, z0[m])
+        return arr
+
+    def rows(self, start: int, stop: int) -> np.ndarray:
+        """Rows ``start .. stop-1`` of the whole array (the same values as ``materialise()[start:stop]``)."""
+        n, m, total = self.n, self.m, self.circuits
+        start, stop, _ = slice(start, stop).indices(n)
+        i = np.arange(start, max(stop, start))
+        kk, j = np.divmod(i, m)
+        last = i == n - 1
+        j = np.where(last, m, j)
+        kk = np.where(last, total - 1, kk)
+        if self.kind == "tile":
+            return self.base[j]
+        if self.kind == "shift":
+            out = self.base[j] + kk * self.step
+            if last.any():
+                out[last] = self.base[m] + (total - 1) * self.step
+            return out
+        if self.kind == "circuit":
+            return kk.astype(np.int64)
+        x0, y0, z0 = self.base
+        ck, sk = self.cos_k[kk], self.sin_k[kk]
+        out = np.empty((i.size, 3))
+        np.multiply(x0[j], ck, out=out[:, 0])
+        out[:, 0] -= y0[j] * sk
+        np.multiply(x0[j], sk, out=out[:, 1])
+        out[:, 1] += y0[j] * ck
+        out[:, 2] = z0[j]
+        if last.any():
+            cl, sl = float(self.cos_k[-1]), float(self.sin_k[-1])
+            out[last] = (x0[m] * cl - y0[m] * sl, x0[m] * sl + y0[m] * cl, z0[m])
+        return out
+
+    def value_range(self) -> tuple[float, float]:
+        """(min, max) of a ``"tile"`` array without materialising it (its values are circuit 0's)."""
+        if self.kind != "tile":
+            a = self.materialise()
+            return float(a.min()), float(a.max())
+        return float(np.min(self.base)), float(np.max(self.base))
+
+
+class DeferredField:
+    """A data descriptor for a per-point field of a frozen dataclass that may hold a
+    :class:`CircuitArray`: the first read materialises it (and keeps the array), so every reader sees a
+    plain ndarray; :func:`deferred` gives the CircuitArray itself while it is not materialised."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+
+    def __get__(self, obj: Any, owner: Any = None) -> Any:
+        if obj is None:
+            return self
+        v = obj.__dict__[self.name]
+        if isinstance(v, CircuitArray):
+            v = v.materialise()
+            obj.__dict__[self.name] = v
+        return v
+
+    def __set__(self, obj: Any, value: Any) -> None:
+        obj.__dict__[self.name] = value
+
+
+def install_deferred_fields(cls: type, names: tuple[str, ...]) -> None:
+    """Make the dataclass fields ``names`` of ``cls`` :class:`DeferredField` s (after the dataclass is made)."""
+    for name in names:
+        setattr(cls, name, DeferredField(name))
+
+
+def deferred(obj: Any, name: str) -> CircuitArray | None:
+    """The :class:`CircuitArray` of field ``name`` of ``obj`` while it is not materialised, else None."""
+    v = getattr(obj, "__dict__", {}).get(name)
+    return v if isinstance(v, CircuitArray) else None
+
+
+def field_rows(obj: Any, name: str, start: int, stop: int) -> np.ndarray:
+    """Rows ``start .. stop-1`` of the per-point field ``name`` of ``obj``, without materialising it."""
+    d = deferred(obj, name)
+    return getattr(obj, name)[start:stop] if d is None else d.rows(start, stop)
+
+
+def materialise_all(obj: Any) -> Any:
+    """Materialise every deferred per-point field of ``obj`` (in place; returns ``obj``): a worker thread
+    calls it before a GUI thread reads the fields (``winder_gui.tasks``)."""
+    if obj is not None:
+        for name, v in list(getattr(obj, "__dict__", {}).items()):
+            if isinstance(v, CircuitArray):
+                getattr(obj, name)
+    return obj

@@ -140,17 +140,23 @@ class WindingLine:
         return self.take_circuit(0)
 
     def take_circuit(self, k: int) -> WindingLine:
-        """Circuit ``k`` alone as a WindingLine."""
+        """Circuit ``k`` alone as a WindingLine (a per-point array kept as circuit 0 + rule stays so:
+        only the circuit's rows are made)."""
+        from engine.periodic import field_rows
+
         sl = self.circuit_slice(k)
-        arrays = {
-            name: getattr(self, name)[sl]
-            for name in ("z", "r", "dr", "v", "beta", "direction", "C", "lam", "s", "xyz", "tau", "normal",
-                         "circuit", "pass_id", "dwell")
-        }
+        arrays = {name: field_rows(self, name, sl.start, sl.stop) for name in PER_POINT_FIELDS}
         return replace(self, circuits=1, circuit_order=[0], **arrays)
+
+    @property
+    def n_points(self) -> int:
+        """Number of points N (without materialising an array)."""
+        return len(self.__dict__["z"])
 
     def summary(self) -> dict[str, Any]:
         """JSON-able summary (``winder trajectory --json``)."""
+        from engine.periodic import field_rows
+
         return {
             "mode": self.mode,
             "lambda": self.lambda_,
@@ -170,13 +176,40 @@ class WindingLine:
             "circuit_order": self.circuit_order,
             "z_turn": list(self.z_turn),
             "end_kinds": list(self.end_kinds),
-            "points": int(len(self.z)),
+            "points": self.n_points,
             "points_per_circuit": self.points_per_circuit,
-            "band_length_mm": float(self.s[-1]),
-            "beta_deg_range": [math.degrees(float(self.beta.min())), math.degrees(float(self.beta.max()))],
+            "band_length_mm": float(field_rows(self, "s", self.n_points - 1, self.n_points)[0]),
+            "beta_deg_range": [math.degrees(b) for b in _value_range(self, "beta")],
             "notes": self.notes,
             "turnarounds": self.turnarounds,
         }
+
+
+PER_POINT_FIELDS: tuple[str, ...] = ("z", "r", "dr", "v", "beta", "direction", "C", "lam", "s", "xyz", "tau",
+                                     "normal", "circuit", "pass_id", "dwell")
+"""The per-point array fields of :class:`WindingLine`.  A line of at least
+:data:`engine.periodic.DEFER_MIN_CIRCUITS` circuits keeps them as circuit 0 + rule
+(:class:`engine.periodic.CircuitArray`); each becomes a plain array on its first read."""
+
+
+def _install_fields() -> None:
+    from engine.periodic import install_deferred_fields
+
+    install_deferred_fields(WindingLine, PER_POINT_FIELDS)
+
+
+_install_fields()
+
+
+def _value_range(line: WindingLine, name: str) -> tuple[float, float]:
+    """(min, max) of a per-point field, without materialising a deferred one."""
+    from engine.periodic import deferred
+
+    d = deferred(line, name)
+    if d is not None:
+        return d.value_range()
+    a = getattr(line, name)
+    return float(a.min()), float(a.max())
 
 
 # ------------------------------------------------------------------------------------------------
@@ -1053,44 +1086,22 @@ def _assemble(pl: PassLine, dwell: tuple[float, float], total: int, twist_circ: 
         "tau": (cb * d0 * cv - sb * sv, cb * d0 * sv + sb * cv, cb),
         "normal": (g * cv, g * sv, -g * d0),
     }
-    n = total * m + 1
+    from engine.periodic import DEFER_MIN_CIRCUITS, CircuitArray
+
     k = np.arange(total)
     ang = k * twist_circ
-    ck, sk = np.cos(ang)[:, None], np.sin(ang)[:, None]
+    ck, sk = np.cos(ang), np.sin(ang)
     out: dict[str, Any] = {}
-
-    def tile(a: NDArray[Any]) -> NDArray[Any]:
-        res = np.empty(n, dtype=a.dtype)
-        res[:-1].reshape(total, m)[:] = a[:m]
-        res[-1] = a[m]
-        return res
-
-    def shifted(a: NDArray[Any], step: Any) -> NDArray[Any]:
-        res = np.empty(n, dtype=a.dtype)
-        res[:-1].reshape(total, m)[:] = a[:m][None, :] + (k * step)[:, None]
-        res[-1] = a[m] + (total - 1) * step
-        return res
-
     for name in ("z", "r", "dr", "beta", "C", "lam", "direction", "dwell"):
-        out[name] = tile(c0[name])
-    out["v"] = shifted(v0, twist_circ)
-    out["s"] = shifted(c0["s"], float(c0["s"][-1]))
-    out["pass_id"] = shifted(c0["pass_id"], 2)
-    out["circuit"] = np.empty(n, dtype=np.int64)
-    out["circuit"][:-1].reshape(total, m)[:] = k[:, None]
-    out["circuit"][-1] = total - 1
-    for name, (x0, y0, z0) in local.items():
-        arr = np.empty((n, 3))
-        body = arr[:-1].reshape(total, m, 3)
-        # x0·cos − y0·sin and x0·sin + y0·cos written in place (the same arithmetic, one temporary)
-        np.multiply(x0[:m], ck, out=body[:, :, 0])
-        body[:, :, 0] -= y0[:m] * sk
-        np.multiply(x0[:m], sk, out=body[:, :, 1])
-        body[:, :, 1] += y0[:m] * ck
-        body[:, :, 2] = z0[:m]
-        cl, sl = float(ck[-1, 0]), float(sk[-1, 0])
-        arr[-1] = (x0[m] * cl - y0[m] * sl, x0[m] * sl + y0[m] * cl, z0[m])
-        out[name] = arr
+        out[name] = CircuitArray("tile", c0[name], total, m)
+    out["v"] = CircuitArray("shift", v0, total, m, twist_circ)
+    out["s"] = CircuitArray("shift", c0["s"], total, m, float(c0["s"][-1]))
+    out["pass_id"] = CircuitArray("shift", c0["pass_id"], total, m, 2)
+    out["circuit"] = CircuitArray("circuit", None, total, m)
+    for name, cols in local.items():
+        out[name] = CircuitArray("turn", cols, total, m, cos_k=ck, sin_k=sk)
+    if total < DEFER_MIN_CIRCUITS:    # small programs: plain arrays (a big one materialises each on first use)
+        out = {name: a.materialise() for name, a in out.items()}
     out["points_per_circuit"] = m
     return out
 

@@ -158,3 +158,46 @@ def test_block_errors_by_circuit_equal_every_block() -> None:
             assert e_rep.shape == e_ref.shape == (ix.size - 1,)
             assert np.abs(e_rep - e_ref).max() <= 1e-9
             assert e_ref.max() > 1e-3          # real errors, not all zero
+
+
+def test_deferred_line_fields_equal_materialised() -> None:
+    """A line of >= DEFER_MIN_CIRCUITS circuits keeps its per-point arrays as circuit 0 + rule: every
+    field read gives a plain array, circuit slices (take_circuit) are made without materialising and are
+    bit for bit the materialised array's rows; circuit k's points are circuit 0's turned by k·Δv (an
+    independent rotation) and its length advances by circuit 0's; the summary is the same either way."""
+    from dataclasses import replace
+
+    from engine.periodic import DEFER_MIN_CIRCUITS, CircuitArray, deferred
+    from engine.winding import PER_POINT_FIELDS
+
+    job = load_job(EX / "pressure_vessel.toml")
+    job = job.replace(winding={**job.winding.model_dump(), "circuits": DEFER_MIN_CIRCUITS + 3,
+                               "points_per_pass": 100})
+    line = winding_line_for_job(job, str(EX / "pressure_vessel.toml"))
+    nc, m = line.circuits, line.points_per_circuit
+    n = nc * m + 1
+    assert all(isinstance(deferred(line, f), CircuitArray) for f in PER_POINT_FIELDS)
+    summary = line.summary()
+    one = line.take_circuit(nc - 1)
+    mid = line.take_circuit(nc // 2)
+    assert all(deferred(line, f) is not None for f in PER_POINT_FIELDS)    # nothing materialised yet
+    assert summary["points"] == n == line.n_points
+    for f in PER_POINT_FIELDS:
+        a = getattr(line, f)
+        assert isinstance(a, np.ndarray) and a.shape[0] == n and deferred(line, f) is None, f
+        assert np.array_equal(getattr(one, f), a[(nc - 1) * m:]), f
+        assert np.array_equal(getattr(mid, f), a[(nc // 2) * m:(nc // 2 + 1) * m + 1]), f
+        assert a.dtype == getattr(one, f).dtype, f
+    assert line.summary() == summary
+    # circuit k = circuit 0 turned by k·Δv (rotation by a matrix, independently of CircuitArray)
+    k = 57
+    ang = k * line.twist_per_circuit_rad
+    rot = np.array([[np.cos(ang), -np.sin(ang), 0.0], [np.sin(ang), np.cos(ang), 0.0], [0.0, 0.0, 1.0]])
+    c0, ck = line.xyz[:m + 1], line.xyz[k * m:(k + 1) * m + 1]
+    assert np.abs(c0 @ rot.T - ck).max() < 1e-9
+    assert np.abs(line.s[k * m:(k + 1) * m + 1] - line.s[:m + 1] - k * line.s[m]).max() < 1e-9 * line.s[-1]
+    assert np.array_equal(line.z[k * m:(k + 1) * m], line.z[:m]) and np.all(line.circuit[k * m:(k + 1) * m] == k)
+    # a plain (materialised) copy of the line gives the same summary
+    plain = replace(line)
+    assert all(deferred(plain, f) is None for f in PER_POINT_FIELDS)
+    assert plain.summary() == summary

@@ -40,6 +40,7 @@ class RunOutput:
 
 def pipeline_task(job: Job, job_path: Path | None, previous: Any, upto: str, *, state: Any) -> RunOutput:
     """:func:`engine.pipeline.run_pipeline` up to ``upto``, re-using the unchanged stages of ``previous``."""
+    from engine.periodic import materialise_all
     from engine.pipeline import run_pipeline
     from winder_gui.views.geometry import paths_view_data
     from winder_gui.views.view3d import MAX_DISPLAY_POINTS, MAX_FRAMES
@@ -47,6 +48,7 @@ def pipeline_task(job: Job, job_path: Path | None, previous: Any, upto: str, *, 
     res = run_pipeline(job, job_path, upto=upto, previous=previous, state=state)
     check_cancel(state)
     setup = job.machine.setup
+    materialise_all(res.line)    # a big line's arrays are made here, not on a first read in the GUI thread
     paths = (paths_view_data(res.line, res.eye, MAX_DISPLAY_POINTS, MAX_FRAMES, blocks=res.blocks,
                              axes=res.axes, machine=res.machine,
                              head_mm=(setup.head_radius_mm, setup.head_length_mm))
