@@ -66,6 +66,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     app.setApplicationName("winder")
     app.setOrganizationName("winder")
     app.setDesktopFileName("winder")  # matches installer/winder.desktop (Wayland window grouping)
+    from winder_gui.i18n import install_translator
+
+    install_translator()  # resources/i18n/winder_<lang>.qm for $WINDER_LANG or the system locale, if any
     from PySide6.QtGui import QIcon
 
     from engine.resources import resource_path

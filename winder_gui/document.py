@@ -25,6 +25,7 @@ from engine.job import FileSpec, Job, default_job, load_job
 from engine.job import save_job as write_job
 from winder_gui import texts
 from winder_gui.autosave import AUTOSAVE_HEADER, AutosaveOwner, autosave_dir, process_autosave_owner, slug
+from winder_gui.i18n import tr
 from winder_gui.settings import add_recent
 from winder_gui.tasks import BuildResult, profile_ref
 
@@ -252,11 +253,11 @@ class JobDocument(QObject):
     def export_block_reason(self) -> str:
         """Why the NC program may not be exported now ('' when it may): no program, or a stale one."""
         if self.result is None or self.result.nc_text is None:
-            return texts.EXPORT_NO_PROGRAM
+            return tr(texts.EXPORT_NO_PROGRAM)
         if self.running and self.result_job != self.job:
-            return texts.EXPORT_RUNNING
+            return tr(texts.EXPORT_RUNNING)
         if not self.results_current():
-            return texts.EXPORT_STALE
+            return tr(texts.EXPORT_STALE)
         return ""
 
     # -- autosave ------------------------------------------------------------------------------------

@@ -16,6 +16,7 @@ from typing import Any
 
 from PySide6.QtCore import QObject, Signal
 
+from winder_gui.i18n import tr
 from winder_gui.laminate_tasks import LaminateOutput, is_laminate
 
 _SHOW_STEPS = 5
@@ -213,4 +214,4 @@ class LaminatePresenter(QObject):
     def _on_stale(self, stale: bool) -> None:
         from winder_gui import texts
 
-        self.v.laminate_plot.setToolTip(texts.STALE_RESULTS if stale else "")
+        self.v.laminate_plot.setToolTip(tr(texts.STALE_RESULTS) if stale else "")

@@ -55,6 +55,7 @@ from winder_gui.autosave import (  # noqa: F401 - re-exported for callers of the
     process_autosave_owner,
 )
 from winder_gui.document import JobDocument
+from winder_gui.i18n import tr
 from winder_gui.laminate_view import LaminatePresenter
 from winder_gui.panels.segments_table import apply_handles
 from winder_gui.results_view import ResultsPresenter
@@ -164,15 +165,15 @@ class MainWindow(QMainWindow):
         ctl.build_progress.connect(lambda _f, m: m and self.busy_bar.setToolTip(m))
         ctl.busy_changed.connect(self._on_busy)
         ctl.progress.connect(self._on_pipe_progress)
-        ctl.run_started.connect(lambda: (self.progress_bar.setValue(0), self._status("Running the pipeline…")))
+        ctl.run_started.connect(lambda: (self.progress_bar.setValue(0), self._status(tr("Running the pipeline…"))))
         ctl.run_done.connect(lambda out: self.pipeline_done.emit(out.result))
         ctl.run_failed.connect(self._on_pipe_failed)
-        ctl.run_cancelled.connect(lambda: self._status("Cancelled; the results of the finished stages are kept."))
-        ctl.laws_failed.connect(lambda exc, tb: self.report_dialog("Payout law comparison failed", exc, tb))
+        ctl.run_cancelled.connect(lambda: self._status(tr("Cancelled; the results of the finished stages are kept.")))
+        ctl.laws_failed.connect(lambda exc, tb: self.report_dialog(tr("Payout law comparison failed"), exc, tb))
         ctl.timelaw_failed.connect(self._on_timelaw_failed)
         ctl.nc_written.connect(self._on_nc_written)
         ctl.nc_read.connect(self._on_nc_read)
-        ctl.exported.connect(lambda p: self._status(f"Exported the mandrel to {p}"))
+        ctl.exported.connect(lambda p: self._status(tr("Exported the mandrel to {p}").format(p=p)))
         ctl.io_failed.connect(self.report_dialog)
         res.status.connect(self._status)
         res.laws_shown.connect(self.laws_done)
@@ -203,7 +204,7 @@ class MainWindow(QMainWindow):
     def open_job(self, path: str | Path) -> None:
         """Open a job file; the mandrel is built in a worker and the job replaced only on success."""
         p = Path(path)
-        self._status(f"Opening {p.name}…")
+        self._status(tr("Opening {name}…").format(name=p.name))
         self.ctl.build("open", open_task, p)
 
     def new_job(self) -> None:
@@ -225,10 +226,10 @@ class MainWindow(QMainWindow):
         try:
             target = self.doc.save(Path(path) if path is not None else self.job_path)
         except (InputError, OSError) as exc:
-            self.report_dialog("Could not save the job", exc)
+            self.report_dialog(tr("Could not save the job"), exc)
             return False
         window_menus.rebuild_recent_menu(self)
-        self._status(f"Saved {target}")
+        self._status(tr("Saved {target}").format(target=target))
         return True
 
     def _action_save_as(self) -> bool:
@@ -241,37 +242,39 @@ class MainWindow(QMainWindow):
 
     def _update_title(self) -> None:
         where = self.job_path.name if self.job_path is not None else "not saved"
-        self.setWindowTitle(f"{self.job.name}{'*' if self.dirty else ''} — {where} — winder {__version__}")
+        self.setWindowTitle(tr("{name}{v1} — {where} — winder {__version__}")
+                            .format(name=self.job.name, v1='*' if self.dirty else '', where=where,
+                                    __version__=__version__))
 
     def import_generatrix(self, path: str | Path) -> None:
         """Make the job's mandrel the profile in ``path`` (.csv/.txt/.dxf/.step/.stp), read in a worker."""
         p = Path(path)
         if not mandrel_io_available():
-            self.report_dialog("Import generatrix", InputError(
+            self.report_dialog(tr("Import generatrix"), InputError(
                 "importing profiles needs engine.mandrel_io, which this build does not have yet", file=p))
             return
         try:
             spec = FileSpec(path=profile_ref(p, self.job_path))
         except ValueError as exc:
             msg = exc.errors()[0]["msg"] if hasattr(exc, "errors") else str(exc)  # pydantic ValidationError
-            self.report_dialog("Import generatrix", InputError(msg.removeprefix("Value error, "), file=p))
+            self.report_dialog(tr("Import generatrix"), InputError(msg.removeprefix("Value error, "), file=p))
             return
-        self._status(f"Importing {p.name}…")
+        self._status(tr("Importing {name}…").format(name=p.name))
         self.ctl.build("import", build_task, self.job.replace(mandrel=spec), self.job_path)
 
     def export_mandrel(self, path: str | Path) -> None:
         """Write the current mandrel as STEP (solid) or STL (mesh) by suffix, in the CAD worker."""
         p = Path(path)
         if self.mandrel is None:
-            self.report_dialog("Export mandrel", InputError("there is no valid mandrel to export yet"))
+            self.report_dialog(tr("Export mandrel"), InputError("there is no valid mandrel to export yet"))
             return
         if not mandrel_io_available():
-            self.report_dialog("Export mandrel", InputError(
+            self.report_dialog(tr("Export mandrel"), InputError(
                 "exporting needs engine.mandrel_io, which this build does not have yet", file=p))
             return
         if p.suffix.lower() not in (".step", ".stp", ".stl"):
             p = p.with_suffix(".step")
-        self._status(f"Exporting {p.name}…")
+        self._status(tr("Exporting {name}…").format(name=p.name))
         self.ctl.export_mandrel(self.mandrel, p)
 
     def wait_idle(self, timeout_ms: int = 30000, pipeline: bool = True) -> bool:
@@ -330,7 +333,7 @@ class MainWindow(QMainWindow):
                 seg = apply_handles(self.job.mandrel, z, r)
             except ValueError as exc:
                 self.plot.revert_points()
-                self.plot.show_message(f"Not applied: {exc}")
+                self.plot.show_message(tr("Not applied: {exc}").format(exc=exc))
                 return
             self.ctl.queue_edit(self.job.replace(mandrel=seg), "points")
             return
@@ -338,7 +341,7 @@ class MainWindow(QMainWindow):
             spec = PointsSpec(z_mm=[float(v) for v in z], r_mm=[float(v) for v in r])
         except ValueError as exc:  # pydantic: not finite
             self.plot.revert_points()
-            self.plot.show_message(f"Not applied: {exc}")
+            self.plot.show_message(tr("Not applied: {exc}").format(exc=exc))
             return
         self.ctl.queue_edit(self.job.replace(mandrel=spec), "points")
 
@@ -385,12 +388,13 @@ class MainWindow(QMainWindow):
         reason = self.run_block_reason()
         running = self.ctl.pipe_runner.is_busy()
         self.actions["run"].setEnabled(not reason)
-        self.actions["run"].setToolTip(f"Run disabled: {reason}" if reason else "Run the pipeline (F5)")
+        self.actions["run"].setToolTip(tr("Run disabled: {reason}")
+                                       .format(reason=reason) if reason else tr("Run the pipeline (F5)"))
         self.nc_panel.set_run_state(not reason, reason, running)
         self.timelaw_panel.compute_button.setEnabled(not self.timelaw_panel.errors())
         why = self.export_block_reason()
         self.actions["export_nc"].setEnabled(not why)
-        self.actions["export_nc"].setToolTip(texts.export_refused(why) if why else "Export the NC program")
+        self.actions["export_nc"].setToolTip(texts.export_refused(why) if why else tr("Export the NC program"))
         self.actions["export_report"].setEnabled(not why)
         self.nc_panel.set_export_state(texts.export_refused(why) if why else "")
 
@@ -400,7 +404,7 @@ class MainWindow(QMainWindow):
         field is bad."""
         reason = self.run_block_reason()
         if reason:
-            self._status(f"Run disabled: {reason}", error=True)
+            self._status(tr("Run disabled: {reason}").format(reason=reason), error=True)
             return False
         return self.ctl.run_now(upto, explicit)
 
@@ -426,11 +430,11 @@ class MainWindow(QMainWindow):
             if fld.startswith("layer"):
                 shown = self.layers_panel.show_error(fld, exc.message) or shown
         msg = exc.message if isinstance(exc, InputError) else str(exc)
-        self.nc_panel.summary.setText(f"<span style='color:#c01010'>Not computed: {msg}</span>")
+        self.nc_panel.summary.setText(tr("<span style='color:#c01010'>Not computed: {msg}</span>").format(msg=msg))
         if self.ctl.explicit or not shown:
-            self.report_dialog("The pipeline stopped", exc, tb)
+            self.report_dialog(tr("The pipeline stopped"), exc, tb)
         else:
-            self._status(f"Pipeline stopped: {msg}", error=True)
+            self._status(tr("Pipeline stopped: {msg}").format(msg=msg), error=True)
             self.error_reported.emit(msg)
         self._update_run_state()
 
@@ -441,8 +445,8 @@ class MainWindow(QMainWindow):
     def _on_timelaw_failed(self, exc: BaseException, tb: str) -> None:
         self.timelaw_panel.summary.setText("")
         if not self.timelaw_plot.has_data():
-            self.timelaw_plot.set_message(texts.NO_DATA)
-        self.report_dialog("Time law failed", exc, tb)
+            self.timelaw_plot.set_message(tr(texts.NO_DATA))
+        self.report_dialog(tr("Time law failed"), exc, tb)
 
     # -- NC export -----------------------------------------------------------------------------------
     def export_nc(self, path: str | Path, force: bool | None = None) -> bool:
@@ -451,7 +455,8 @@ class MainWindow(QMainWindow):
 
     def open_nc(self, path: str | Path) -> None:
         """Read an NC program back on the job's machine (worker) and draw its eye path and laid fibre."""
-        self._status(f"Reading {Path(path).name} back on {self.job.machine.template}…")
+        self._status(tr("Reading {v0} back on {template}…")
+                     .format(v0=Path(path).name, template=self.job.machine.template))
         self.ctl.read_nc(Path(path))
 
     def _on_nc_read(self, out: Any) -> None:
@@ -468,7 +473,7 @@ class MainWindow(QMainWindow):
 
     def _on_nc_written(self, path: Path) -> None:
         what = "the job report" if path.suffix.lower() in (".pdf", ".html", ".htm") else "the NC program"
-        self._status(f"Wrote {what} to {path}")
+        self._status(tr("Wrote {what} to {path}").format(what=what, path=path))
         self.nc_written.emit(path)
 
     def export_report(self, path: str | Path) -> bool:
@@ -557,7 +562,7 @@ class MainWindow(QMainWindow):
             self._status(str(exc), error=True)
             return
         except (InputError, OSError) as exc:
-            self.report_dialog("Could not restore the autosaved job", exc)
+            self.report_dialog(tr("Could not restore the autosaved job"), exc)
             return
         self.ctl.build("restore", build_task, job, autosave_origin(p))
 
@@ -579,7 +584,7 @@ class MainWindow(QMainWindow):
         self._status(f"{title}: {text.splitlines()[-1] if text else ''}", error=True)
         box = QMessageBox(QMessageBox.Icon.Warning, title, text, QMessageBox.StandardButton.Ok, self)
         if isinstance(exc, InputError | OSError):
-            box.setInformativeText(texts.NOTHING_CHANGED)
+            box.setInformativeText(tr(texts.NOTHING_CHANGED))
         box.setAttribute(Qt.WidgetAttribute.WA_DeleteOnClose)
         box.open()
         self.error_box = box
@@ -592,7 +597,8 @@ class MainWindow(QMainWindow):
         if not self.dirty or not self.confirm_discard:
             return True
         ans = QMessageBox.question(
-            self, "Unsaved changes", f"The job \"{self.job.name}\" has unsaved changes. Save them first?",
+            self, tr("Unsaved changes"), tr("The job \"{name}\" has unsaved changes. Save them first?")
+                                         .format(name=self.job.name),
             QMessageBox.StandardButton.Save | QMessageBox.StandardButton.Discard | QMessageBox.StandardButton.Cancel,
             QMessageBox.StandardButton.Save)
         if ans == QMessageBox.StandardButton.Save:

@@ -17,6 +17,7 @@ from PySide6.QtCore import QObject, QTimer, Signal
 
 from winder_gui import texts
 from winder_gui.document import JobDocument
+from winder_gui.i18n import QT_TR_NOOP, tr
 from winder_gui.run_controller import RunController
 from winder_gui.tasks import JobTimeLawResult
 
@@ -73,9 +74,9 @@ class ResultsPresenter(QObject):
         self._shown.clear()
         self._queue.clear()
         for page in (v.winding_plots, v.eye_plot, v.axes_plot, v.coverage_plot):
-            page.clear_data(texts.NO_DATA)
+            page.clear_data(tr(texts.NO_DATA))
         v.pull_plot.set_laws({}, "", "s")
-        v.pull_plot.set_message(texts.NO_DATA)
+        v.pull_plot.set_message(tr(texts.NO_DATA))
         v.nc_panel.set_result(None)
         v.view3d.set_paths(None)
         self._tl_laws = ()
@@ -138,10 +139,12 @@ class ResultsPresenter(QObject):
                          + (f"; {n} warning{'s' if n != 1 else ''} (NC step)" if n else ""), False)
         info = getattr(res, "timelaw", None)  # the time law that set the block times (method tube/dp/toppra)
         v.timelaw_panel.program_label.setText(
-            f"Program block times: {info.get('method')} law over the job's axis path, "
-            f"{float(info.get('total_time_s', 0.0)):.2f} s, {info.get('iterations', 0)} iterations"
+            tr("Program block times: {v0} law over the job's axis path, {v1:.2f} s, {v2} iterations")
+            .format(v0=info.get(QT_TR_NOOP('method')), v1=float(info.get('total_time_s', 0.0)),
+                    v2=info.get('iterations', 0))
             if isinstance(info, dict) else
-            f"Program block times: (17)/(18), {res.blocks.total:.2f} s" if res.blocks is not None else "")
+            tr("Program block times: (17)/(18), {total:.2f} s")
+            .format(total=res.blocks.total) if res.blocks is not None else "")
         self.offer_job_laws(res)
 
     def _on_stale(self, stale: bool) -> None:
@@ -149,7 +152,7 @@ class ResultsPresenter(QObject):
         self.v.nc_panel.set_stale(stale)
         for page in (self.v.winding_plots, self.v.eye_plot, self.v.axes_plot, self.v.coverage_plot,
                      self.v.pull_plot):
-            page.setToolTip(texts.STALE_RESULTS if stale else "")
+            page.setToolTip(tr(texts.STALE_RESULTS) if stale else "")
         self.v.stale_label.setVisible(stale)
 
     def _on_laws_done(self, laws: dict[str, Any]) -> None:
@@ -216,18 +219,18 @@ class ResultsPresenter(QObject):
         res = self.law_result()
         panel = self.v.timelaw_panel
         if i >= 0 and res is not None and i < len(getattr(res, "timelaw_laws", ())):
-            panel.summary.setText("computing…")
+            panel.summary.setText(tr("computing…"))
             if not self.v.timelaw_plot.has_data():
-                self.v.timelaw_plot.set_message(texts.COMPUTING_TIMELAW)
+                self.v.timelaw_plot.set_message(tr(texts.COMPUTING_TIMELAW))
             self.ctl.compute_job_timelaw(i, res)
             self.status.emit("Computing DP and TOPP-RA on the job's time-law path…", False)
             return
         if panel.errors():
             self.status.emit(f"Time law: {panel.errors()}", True)
             return
-        panel.summary.setText("computing…")
+        panel.summary.setText(tr("computing…"))
         if not self.v.timelaw_plot.has_data():
-            self.v.timelaw_plot.set_message(texts.COMPUTING_TIMELAW)
+            self.v.timelaw_plot.set_message(tr(texts.COMPUTING_TIMELAW))
         self.ctl.compute_paper_timelaw()
         self.status.emit("Computing the time law…", False)
 
@@ -235,17 +238,22 @@ class ResultsPresenter(QObject):
         v = self.v
         if isinstance(r, JobTimeLawResult):
             self.job_timelaw = r
-            self.queue(*v.timelaw_plot.updates(r.law, r.dp, r.toppra, r.source, f"job {r.law.method}", r.s_offset))
+            label = tr("job {method}").format(method=r.law.method)
+            self.queue(*v.timelaw_plot.updates(r.law, r.dp, r.toppra, r.source, label, r.s_offset))
             v.timelaw_panel.summary.setText(
-                f"{r.source}: {r.law.method} {r.law.total_time_s:.3f} s in {len(r.law.iterations)} iterations; "
-                f"single DP {r.dp.total_time_s:.3f} s; TOPP-RA bound {r.toppra.total_time_s:.3f} s")
+                tr("{source}: {method} {total_time_s:.3f} s in {v3} iterations; single DP {v4:.3f} "
+                   "s; TOPP-RA bound {v5:.3f} s")
+                .format(source=r.source, method=r.law.method, total_time_s=r.law.total_time_s,
+                        v3=len(r.law.iterations), v4=r.dp.total_time_s, v5=r.toppra.total_time_s))
             self.status.emit("Time law comparison computed", False)
         else:
             self.timelaw = r
             self.queue(*v.timelaw_plot.updates(r.tube, r.dp, r.toppra, r.source))
             v.timelaw_panel.summary.setText(
-                f"{r.source}: tube {r.tube.total_time_s:.3f} s in {len(r.tube.iterations)} iterations; "
-                f"single DP {r.dp.total_time_s:.3f} s; TOPP-RA bound {r.toppra.total_time_s:.3f} s")
+                tr("{source}: tube {total_time_s:.3f} s in {v2} iterations; single DP {v3:.3f} s; "
+                   "TOPP-RA bound {v4:.3f} s")
+                .format(source=r.source, total_time_s=r.tube.total_time_s, v2=len(r.tube.iterations),
+                        v3=r.dp.total_time_s, v4=r.toppra.total_time_s))
             self.status.emit("Time law computed", False)
         self.queue(lambda: self.timelaw_shown.emit(r))
 

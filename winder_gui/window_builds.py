@@ -8,14 +8,17 @@ from typing import TYPE_CHECKING, Any
 from engine.errors import InputError
 from engine.job import PointsSpec, SegmentsSpec
 from winder_gui import window_menus
+from winder_gui.i18n import QT_TR_NOOP, tr
 from winder_gui.panels.segments_table import segment_handles
 
 if TYPE_CHECKING:
     from winder_gui.main_window import MainWindow
 
-BUILD_ERROR_TITLES = {"open": "Could not open the job", "import": "Could not import the generatrix",
-                      "new": "Could not create a job", "restore": "Could not restore the autosaved job",
-                      "undo": "Could not undo"}
+BUILD_ERROR_TITLES = {"open": QT_TR_NOOP("Could not open the job"),
+                      "import": QT_TR_NOOP("Could not import the generatrix"),
+                      "new": QT_TR_NOOP("Could not create a job"),
+                      "restore": QT_TR_NOOP("Could not restore the autosaved job"),
+                      "undo": QT_TR_NOOP("Could not undo")}
 
 
 def on_built(w: MainWindow, purpose: str, res: Any) -> None:
@@ -44,12 +47,14 @@ def on_built(w: MainWindow, purpose: str, res: Any) -> None:
     m = res.mandrel
     zones = len(res.data.concave)
     w.summary_label.setText(
-        f"L {m.length:.1f} mm · r {m.r_min:.1f}…{m.r_max:.1f} mm · poles {m.pole_radii[0]:.1f}/"
-        f"{m.pole_radii[1]:.1f} mm · {zones} concave zone{'s' if zones != 1 else ''}")
+        tr("L {length:.1f} mm · r {r_min:.1f}…{r_max:.1f} mm · poles {v3:.1f}/{v4:.1f} mm · {zones} "
+           "concave zone{v6}")
+        .format(length=m.length, r_min=m.r_min, r_max=m.r_max, v3=m.pole_radii[0], v4=m.pole_radii[1], zones=zones,
+                v6='s' if zones != 1 else ''))
     spec = res.job.mandrel
-    w._status({"open": f"Opened {res.path}", "new": "New job",
-                  "import": f"Imported the generatrix from {getattr(spec, 'path', '')}",
-                  "restore": f"Restored the autosaved copy of {res.job.name} (not saved yet)"}.get(
+    w._status({"open": tr("Opened {path}").format(path=res.path), "new": tr("New job"),
+                  "import": tr("Imported the generatrix from {v0}").format(v0=getattr(spec, 'path', '')),
+                  "restore": tr("Restored the autosaved copy of {name} (not saved yet)").format(name=res.job.name)}.get(
         purpose,
         f"The mandrel is now a sketched generatrix (kind \"points\", {len(getattr(spec, 'z_mm', []))} points); "
         f"it was a \"{old_kind}\" template" if purpose == "points" and old_kind != "points" else "Mandrel updated"))
@@ -71,10 +76,10 @@ def on_build_failed(w: MainWindow, purpose: str, exc: BaseException, tb: str) ->
             w._update_run_state()
         else:
             w.plot.revert_points()
-            w.plot.show_message(f"Not applied: {exc.message}")
-        w._status(f"Not applied: {exc.message}", error=True)
+            w.plot.show_message(tr("Not applied: {message}").format(message=exc.message))
+        w._status(tr("Not applied: {message}").format(message=exc.message), error=True)
         w.error_reported.emit(exc.message)
         return
-    w.report_dialog(BUILD_ERROR_TITLES.get(purpose, "Error"), exc)
+    w.report_dialog(tr(BUILD_ERROR_TITLES.get(purpose, QT_TR_NOOP("Error"))), exc)
     if w.mandrel is not None:
         w.mandrel_panel.set_spec(w.job.mandrel)

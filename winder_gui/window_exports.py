@@ -10,6 +10,7 @@ from PySide6.QtWidgets import QMessageBox
 
 from engine.errors import InputError
 from winder_gui import texts, window_menus
+from winder_gui.i18n import tr
 
 if TYPE_CHECKING:
     from winder_gui.main_window import MainWindow
@@ -26,7 +27,7 @@ def export_nc(w: MainWindow, path: str | Path, force: bool | None = None) -> boo
     if why:
         w._status(texts.export_refused(why), error=True)
         if w.result is None or w.result.nc_text is None:
-            w.report_dialog("Export NC program", InputError(why))
+            w.report_dialog(tr("Export NC program"), InputError(why))
         return False
     res = w.result
     p = Path(path)
@@ -35,13 +36,13 @@ def export_nc(w: MainWindow, path: str | Path, force: bool | None = None) -> boo
     viol = w.doc.violations()
     if viol and force is None:
         ans = QMessageBox.question(
-            w, "Write anyway?",
-            f"The program violates {len(viol)} limit(s), e.g.\n{getattr(viol[0], 'message', viol[0])}\n\n"
-            "Write it anyway?",
+            w, tr("Write anyway?"),
+            tr("The program violates {v0} limit(s), e.g.\n{v1}\n\nWrite it anyway?")
+            .format(v0=len(viol), v1=getattr(viol[0], 'message', viol[0])),
             QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.No, QMessageBox.StandardButton.No)
         force = ans == QMessageBox.StandardButton.Yes
         if not force:
-            w._status("NC program not written (it violates limits)")
+            w._status(tr("NC program not written (it violates limits)"))
             return False
     w.ctl.write_nc(p, bool(force))
     return True
@@ -58,7 +59,7 @@ def export_report(w: MainWindow, path: str | Path) -> bool:
     if p.suffix.lower() not in (".pdf", ".html", ".htm"):
         p = p.with_suffix(".pdf")
     w.ctl.write_report(p)
-    w._status(f"Writing the report {p.name}…")
+    w._status(tr("Writing the report {name}…").format(name=p.name))
     return True
 
 

@@ -18,6 +18,7 @@ from PySide6.QtWidgets import (
 )
 
 from winder_gui import texts
+from winder_gui.i18n import tr
 from winder_gui.panels.layers_panel import LayersPanel
 from winder_gui.panels.machine_panel import MachinePanel
 from winder_gui.panels.mandrel_panel import MandrelPanel
@@ -48,7 +49,7 @@ def build_layout(w: MainWindow) -> None:
     w.plot = ProfilePlot()
     w.plot_tabs = QTabWidget()
     w.plot_tabs.setDocumentMode(True)
-    w.plot_tabs.addTab(w.plot, "Generatrix r(z)")
+    w.plot_tabs.addTab(w.plot, tr("Generatrix r(z)"))
     w.winding_plots = WindingPlots()
     w.eye_plot = EyePlot()
     w.pull_plot = PullSpeedPlot()
@@ -57,13 +58,13 @@ def build_layout(w: MainWindow) -> None:
     w.coverage_plot = CoveragePlot()
     w.laminate_plot = LaminatePlots()
     w.tabs: dict[str, QWidget] = {"generatrix": w.plot}
-    for key, page, title in (("winding", w.winding_plots, "Winding β, C, λ (z)"),
-                             ("eye", w.eye_plot, "Eye path Z–R"),
-                             ("pull_speed", w.pull_plot, "Pull speed u(x)"),
-                             ("axes", w.axes_plot, "Axes q(t), v(t)"),
-                             ("time_law", w.timelaw_plot, "Time law ṡ"),
-                             ("coverage", w.coverage_plot, "Coverage v(z)"),
-                             ("laminate", w.laminate_plot, "Laminate r(z), β, t")):
+    for key, page, title in (("winding", w.winding_plots, tr("Winding β, C, λ (z)")),
+                             ("eye", w.eye_plot, tr("Eye path Z–R")),
+                             ("pull_speed", w.pull_plot, tr("Pull speed u(x)")),
+                             ("axes", w.axes_plot, tr("Axes q(t), v(t)")),
+                             ("time_law", w.timelaw_plot, tr("Time law ṡ")),
+                             ("coverage", w.coverage_plot, tr("Coverage v(z)")),
+                             ("laminate", w.laminate_plot, tr("Laminate r(z), β, t"))):
         w.plot_tabs.addTab(page, title)
         w.tabs[key] = page
 
@@ -93,7 +94,7 @@ def build_layout(w: MainWindow) -> None:
     box = QVBoxLayout(winding_page)
     box.setContentsMargins(0, 0, 0, 0)
     box.addWidget(w.layers_panel)
-    defaults = QLabel("<b>Defaults</b> — inherited by every layer that leaves a field blank")
+    defaults = QLabel(tr("<b>Defaults</b> — inherited by every layer that leaves a field blank"))
     defaults.setWordWrap(True)
     box.addWidget(defaults)
     box.addWidget(w.winding_panel)
@@ -113,9 +114,9 @@ def build_layout(w: MainWindow) -> None:
     w.status_msg = QLabel("")
     w.status_msg.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
     w.summary_label = QLabel("")
-    w.stale_label = QLabel("results out of date")
+    w.stale_label = QLabel(tr("results out of date"))
     w.stale_label.setObjectName("staleResults")
-    w.stale_label.setToolTip(texts.STALE_RESULTS)
+    w.stale_label.setToolTip(tr(texts.STALE_RESULTS))
     w.stale_label.setStyleSheet("color: #a05a00; font-weight: bold;")
     w.stale_label.hide()
     w.busy_bar = QProgressBar()
@@ -129,9 +130,9 @@ def build_layout(w: MainWindow) -> None:
     w.progress_bar.setMaximumWidth(360)
     w.progress_bar.setFormat("%p%")
     w.progress_bar.hide()
-    w.cancel_button = QPushButton("Cancel")
+    w.cancel_button = QPushButton(tr("Cancel"))
     w.cancel_button.setObjectName("cancelRun")
-    w.cancel_button.setToolTip("Stop the computation (Esc)")
+    w.cancel_button.setToolTip(tr("Stop the computation (Esc)"))
     w.cancel_button.hide()
     sb = w.statusBar()
     sb.addWidget(w.status_msg, 1)

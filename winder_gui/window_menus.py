@@ -13,23 +13,24 @@ from PySide6.QtWidgets import QFileDialog, QMessageBox, QToolBar, QWidget
 
 from engine import __version__
 from winder_gui.autosave import autosave_origin
+from winder_gui.i18n import QT_TR_NOOP, tr
 from winder_gui.panels.steps import STEPS
 from winder_gui.settings import apply_memory_budget, recent_files, set_memory_budget
 
 if TYPE_CHECKING:
     from winder_gui.main_window import MainWindow
 
-NC_FILTER = "NC programs (*.ngc *.nc *.gcode *.mpf *.csv *.txt);;All files (*)"
-JOB_FILTER = "Winding jobs (*.toml);;All files (*)"
-PROFILE_FILTER = "Generatrix profiles (*.csv *.txt *.dxf *.step *.stp);;All files (*)"
-EXPORT_FILTER = "STEP solid (*.step *.stp);;STL mesh (*.stl)"
-REPORT_FILTER = "PDF report (*.pdf);;HTML report (*.html)"
+NC_FILTER = QT_TR_NOOP("NC programs (*.ngc *.nc *.gcode *.mpf *.csv *.txt);;All files (*)")
+JOB_FILTER = QT_TR_NOOP("Winding jobs (*.toml);;All files (*)")
+PROFILE_FILTER = QT_TR_NOOP("Generatrix profiles (*.csv *.txt *.dxf *.step *.stp);;All files (*)")
+EXPORT_FILTER = QT_TR_NOOP("STEP solid (*.step *.stp);;STL mesh (*.stl)")
+REPORT_FILTER = QT_TR_NOOP("PDF report (*.pdf);;HTML report (*.html)")
 
 
 def build_menus(w: MainWindow) -> None:
     """The menu bar; every command is also in ``w.actions`` by key."""
     mb = w.menuBar()
-    w.menu_file = mb.addMenu("&File")
+    w.menu_file = mb.addMenu(tr("&File"))
     w.actions = {}
 
     def add(menu: Any, key: str, text: str, slot: Any, shortcut: Any = None) -> QAction:
@@ -42,65 +43,68 @@ def build_menus(w: MainWindow) -> None:
         return act
 
     f = w.menu_file
-    add(f, "new", "&New", w.action_new, QKeySequence.StandardKey.New)
-    add(f, "open", "&Open…", lambda: action_open(w), QKeySequence.StandardKey.Open)
-    w.menu_recent = f.addMenu("Open &Recent")
-    add(f, "save", "&Save", lambda: w.save_job(), QKeySequence.StandardKey.Save)
-    add(f, "save_as", "Save &As…", w._action_save_as, QKeySequence.StandardKey.SaveAs)
+    add(f, "new", tr("&New"), w.action_new, QKeySequence.StandardKey.New)
+    add(f, "open", tr("&Open…"), lambda: action_open(w), QKeySequence.StandardKey.Open)
+    w.menu_recent = f.addMenu(tr("Open &Recent"))
+    add(f, "save", tr("&Save"), lambda: w.save_job(), QKeySequence.StandardKey.Save)
+    add(f, "save_as", tr("Save &As…"), w._action_save_as, QKeySequence.StandardKey.SaveAs)
     f.addSeparator()
-    add(f, "import", "&Import generatrix…", lambda: action_import(w), "Ctrl+I")
-    add(f, "export", "&Export mandrel…", lambda: action_export_mandrel(w), "Ctrl+E")
-    add(f, "export_nc", "Export &NC program…", w.action_export_nc, "Ctrl+Shift+E")
-    add(f, "export_plot", "Export current &plot…", lambda: action_export_plot(w), "Ctrl+Shift+P")
-    add(f, "open_nc", "Open NC program (read back)…", lambda: action_open_nc(w), "Ctrl+Shift+O")
-    add(f, "export_report", "Export/print &report (PDF, HTML)…", w.action_export_report, "Ctrl+P")
+    add(f, "import", tr("&Import generatrix…"), lambda: action_import(w), "Ctrl+I")
+    add(f, "export", tr("&Export mandrel…"), lambda: action_export_mandrel(w), "Ctrl+E")
+    add(f, "export_nc", tr("Export &NC program…"), w.action_export_nc, "Ctrl+Shift+E")
+    add(f, "export_plot", tr("Export current &plot…"), lambda: action_export_plot(w), "Ctrl+Shift+P")
+    add(f, "open_nc", tr("Open NC program (read back)…"), lambda: action_open_nc(w), "Ctrl+Shift+O")
+    add(f, "export_report", tr("Export/print &report (PDF, HTML)…"), w.action_export_report, "Ctrl+P")
     f.addSeparator()
-    add(f, "quit", "&Quit", w.close, QKeySequence.StandardKey.Quit)
+    add(f, "quit", tr("&Quit"), w.close, QKeySequence.StandardKey.Quit)
 
-    w.menu_edit = mb.addMenu("&Edit")
-    undo = w.undo_stack.createUndoAction(w, "&Undo")
+    w.menu_edit = mb.addMenu(tr("&Edit"))
+    undo = w.undo_stack.createUndoAction(w, tr("&Undo"))
     undo.setShortcut(QKeySequence.StandardKey.Undo)
-    redo = w.undo_stack.createRedoAction(w, "&Redo")
+    redo = w.undo_stack.createRedoAction(w, tr("&Redo"))
     redo.setShortcuts([QKeySequence.StandardKey.Redo, QKeySequence("Ctrl+Shift+Z")])
     w.menu_edit.addAction(undo)
     w.menu_edit.addAction(redo)
     w.actions["undo"], w.actions["redo"] = undo, redo
 
-    w.menu_run = mb.addMenu("&Run")
-    add(w.menu_run, "run", "&Run pipeline", lambda: w.run_pipeline_now(), "F5")
-    add(w.menu_run, "cancel", "&Cancel", w.cancel_run, "Esc")
-    add(w.menu_run, "timelaw", "Compute &time law", w.compute_timelaw, "F6")
-    auto = add(w.menu_run, "auto_run", "Re-run &automatically after edits", w._toggle_auto_run)
+    w.menu_run = mb.addMenu(tr("&Run"))
+    add(w.menu_run, "run", tr("&Run pipeline"), lambda: w.run_pipeline_now(), "F5")
+    add(w.menu_run, "cancel", tr("&Cancel"), w.cancel_run, "Esc")
+    add(w.menu_run, "timelaw", tr("Compute &time law"), w.compute_timelaw, "F6")
+    auto = add(w.menu_run, "auto_run", tr("Re-run &automatically after edits"), w._toggle_auto_run)
     auto.setCheckable(True)
     auto.setChecked(True)
 
-    w.menu_view = mb.addMenu("&View")
+    w.menu_view = mb.addMenu(tr("&View"))
     for i, (key, title) in enumerate(STEPS):
-        add(w.menu_view, f"step_{key}", f"&{i + 1} {title}", lambda _c=False, k=key: w.go_to_step(k), f"Ctrl+{i + 1}")
+        add(w.menu_view, f"step_{key}", f"&{i + 1} {tr(title)}", lambda _c=False, k=key: w.go_to_step(k),
+            f"Ctrl+{i + 1}")
     w.menu_view.addSeparator()
-    add(w.menu_view, "play", "&Play / pause the winding", w._toggle_play, "Space")
-    machine = add(w.menu_view, "show_machine", "Show the &machine in 3D (carriage, head)",
+    add(w.menu_view, "play", tr("&Play / pause the winding"), w._toggle_play, "Space")
+    machine = add(w.menu_view, "show_machine", tr("Show the &machine in 3D (carriage, head)"),
                   lambda on: w.view3d.set_machine_visible(on))
     machine.setCheckable(True)
     machine.setChecked(True)
     if getattr(w, "view3d", None) is not None:   # the action follows the 3D view's box
         w.view3d.machine_check.toggled.connect(machine.setChecked)
 
-    w.menu_tools = mb.addMenu("&Tools")
-    add(w.menu_tools, "turning", "&Turning optimiser…",
+    w.menu_tools = mb.addMenu(tr("&Tools"))
+    add(w.menu_tools, "turning", tr("&Turning optimiser…"),
         lambda: open_tool(w, "turning", "winder_gui.dialogs.turning", "TurningDialog"))
-    add(w.menu_tools, "slotting", "&Slot forming…",
+    add(w.menu_tools, "slotting", tr("&Slot forming…"),
         lambda: open_tool(w, "slotting", "winder_gui.dialogs.slotting", "SlotDialog"))
     w.menu_tools.addSeparator()
-    add(w.menu_tools, "memory_budget", "&Memory budget…", lambda: ask_memory_budget(w))
+    add(w.menu_tools, "memory_budget", tr("&Memory budget…"), lambda: ask_memory_budget(w))
     apply_memory_budget()
 
-    w.menu_help = mb.addMenu("&Help")
-    add(w.menu_help, "shortcuts", "&Keyboard shortcuts", lambda: show_box(w, "shortcuts", "Keyboard shortcuts",
+    w.menu_help = mb.addMenu(tr("&Help"))
+    add(w.menu_help, "shortcuts", tr("&Keyboard shortcuts"), lambda: show_box(w, "shortcuts", tr("Keyboard shortcuts"),
                                                                           shortcuts_text(w)), "F1")
-    add(w.menu_help, "about", "&About winder", lambda: show_box(
-        w, "about", "About winder", f"<b>winder {__version__}</b><br>Open CAD/CAM for filament winding:<br>"
-        "mandrel → winding line → payout eye → machine axes → NC.<br><br>GPL-3.0-or-later",
+    add(w.menu_help, "about", tr("&About winder"), lambda: show_box(
+        w, "about", tr("About winder"),
+            tr("<b>winder {__version__}</b><br>Open CAD/CAM for filament winding:<br>mandrel → "
+               "winding line → payout eye → machine axes → NC.<br><br>GPL-3.0-or-later")
+            .format(__version__=__version__),
         QMessageBox.Icon.Information))
 
 
@@ -160,7 +164,7 @@ def open_tool(w: MainWindow, key: str, module: str, cls_name: str) -> QWidget | 
         cls = getattr(importlib.import_module(module), cls_name)
         dlg = cls(w)
     except Exception as exc:  # noqa: BLE001 - a tool that cannot load must not take the app down
-        w.report_dialog("Tool not available", f"{cls_name} could not be loaded ({type(exc).__name__}: {exc}).")
+        w.report_dialog(tr("Tool not available"), f"{cls_name} could not be loaded ({type(exc).__name__}: {exc}).")
         return None
     w.dialogs[key] = dlg
     dlg.show()
@@ -170,26 +174,26 @@ def open_tool(w: MainWindow, key: str, module: str, cls_name: str) -> QWidget | 
 def action_open(w: MainWindow) -> None:
     if not w._may_discard():
         return
-    path, _ = QFileDialog.getOpenFileName(w, "Open job", str(w.doc.start_dir()), JOB_FILTER)
+    path, _ = QFileDialog.getOpenFileName(w, tr("Open job"), str(w.doc.start_dir()), tr(JOB_FILTER))
     if path:
         w.open_job(path)
 
 
 def action_open_nc(w: MainWindow) -> None:
-    path, _ = QFileDialog.getOpenFileName(w, "Open NC program (read back on the job's machine)",
-                                          str(w.doc.start_dir()), NC_FILTER)
+    path, _ = QFileDialog.getOpenFileName(w, tr("Open NC program (read back on the job's machine)"),
+                                          str(w.doc.start_dir()), tr(NC_FILTER))
     if path:
         w.open_nc(path)
 
 
 def ask_save_path(w: MainWindow) -> str:
     start = str(w.job_path) if w.job_path else str(w.doc.start_dir() / "job.toml")
-    path, _ = QFileDialog.getSaveFileName(w, "Save job as", start, JOB_FILTER)
+    path, _ = QFileDialog.getSaveFileName(w, tr("Save job as"), start, tr(JOB_FILTER))
     return path
 
 
 def action_import(w: MainWindow) -> None:
-    path, _ = QFileDialog.getOpenFileName(w, "Import generatrix", str(w.doc.start_dir()), PROFILE_FILTER)
+    path, _ = QFileDialog.getOpenFileName(w, tr("Import generatrix"), str(w.doc.start_dir()), tr(PROFILE_FILTER))
     if path:
         w.import_generatrix(path)
     else:
@@ -198,20 +202,21 @@ def action_import(w: MainWindow) -> None:
 
 def action_export_mandrel(w: MainWindow) -> None:
     stem = w.job_path.stem if w.job_path else "mandrel"
-    path, _ = QFileDialog.getSaveFileName(w, "Export mandrel", str(w.doc.start_dir() / f"{stem}.step"), EXPORT_FILTER)
+    path, _ = QFileDialog.getSaveFileName(w,
+        tr("Export mandrel"), str(w.doc.start_dir() / f"{stem}.step"), tr(EXPORT_FILTER))
     if path:
         w.export_mandrel(path)
 
 
 def ask_nc_path(w: MainWindow, extension: str) -> str:
-    path, _ = QFileDialog.getSaveFileName(w, "Export NC program",
-                                          str(w.doc.start_dir() / f"{w.doc.file_stem()}{extension}"), NC_FILTER)
+    path, _ = QFileDialog.getSaveFileName(w, tr("Export NC program"),
+                                          str(w.doc.start_dir() / f"{w.doc.file_stem()}{extension}"), tr(NC_FILTER))
     return path
 
 
 def ask_report_path(w: MainWindow) -> str:
-    path, _ = QFileDialog.getSaveFileName(w, "Export job report",
-                                          str(w.doc.start_dir() / f"{w.doc.file_stem()}-report.pdf"), REPORT_FILTER)
+    path, _ = QFileDialog.getSaveFileName(w, tr("Export job report"),
+                                          str(w.doc.start_dir() / f"{w.doc.file_stem()}-report.pdf"), tr(REPORT_FILTER))
     return path
 
 
@@ -234,9 +239,10 @@ def offer_autosaves(w: MainWindow) -> None:
             continue  # another instance took it meanwhile
         origin = autosave_origin(p)
         ans = QMessageBox.question(
-            w, "Restore autosaved job?",
-            f"winder found unsaved changes from an earlier session:\n{p.name}"
-            + (f" (job {origin})" if origin else " (never saved)") + "\n\nRestore them?",
+            w, tr("Restore autosaved job?"),
+            tr("winder found unsaved changes from an earlier session:\n{name}").format(name=p.name)
+            + (tr(" (job {origin})")
+               .format(origin=origin) if origin else tr(" (never saved)")) + tr("\n\nRestore them?"),
             QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.Discard | QMessageBox.StandardButton.Ignore,
             QMessageBox.StandardButton.Yes)
         if ans == QMessageBox.StandardButton.Yes:
@@ -246,7 +252,7 @@ def offer_autosaves(w: MainWindow) -> None:
             try:
                 p.unlink(missing_ok=True)
             except OSError as exc:
-                w._status(f"Could not delete the autosaved copy {p}: {exc}", error=True)
+                w._status(tr("Could not delete the autosaved copy {p}: {exc}").format(p=p, exc=exc), error=True)
         if not owned:
             owner.release(p)
 
@@ -260,9 +266,9 @@ def ask_memory_budget(w: MainWindow) -> None:
 
     cur = budget.fmt_bytes(budget.max_memory_bytes()).replace(" ", "")
     text, ok = QInputDialog.getText(
-        w, "Memory budget",
-        "Largest memory a computation may use (e.g. 4G, 12G; empty = the default "
-        f"{budget.fmt_bytes(budget.DEFAULT_MAX_MEMORY_BYTES)}).\nLarger jobs are refused before they start.",
+        w, tr("Memory budget"),
+        tr("Largest memory a computation may use (e.g. 4G, 12G; empty = the default {v0}).\nLarger "
+           "jobs are refused before they start.").format(v0=budget.fmt_bytes(budget.DEFAULT_MAX_MEMORY_BYTES)),
         text=cur)
     if not ok:
         return
@@ -271,4 +277,4 @@ def ask_memory_budget(w: MainWindow) -> None:
     except InputError as exc:
         w._report_dialog("Memory budget", exc)
         return
-    w.statusBar().showMessage(f"Memory budget {budget.fmt_bytes(n)}", 5000)
+    w.statusBar().showMessage(tr("Memory budget {v0}").format(v0=budget.fmt_bytes(n)), 5000)

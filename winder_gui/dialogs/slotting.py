@@ -52,6 +52,7 @@ from engine.slotting import (
     slot_study,
     write_table_csv,
 )
+from winder_gui.i18n import QT_TR_NOOP, tr
 from winder_gui.texts import CUT_MODE, CUT_MODE_SHORT
 from winder_gui.workers import JobRunner
 
@@ -74,24 +75,32 @@ class SlotInputs:
 
 # (key, label with unit, default text, tooltip)
 _FIELDS: tuple[tuple[str, str, str, str], ...] = (
-    ("rho", "Forming radius ρ, mm", "22", "Radius at which the slot length is given, e.g. the tube bore R_d1."),
-    ("tool_radius", "Tool radius R_u, mm", "-95",
-     "Signed, as in the paper: negative = external scheme (tool outside), positive = internal."),
-    ("ratio", "Kinematic ratio i = ω_d/ω_u", "-2",
-     "Part over tool angular speed. i·R_u > 0 is down-cut, i·R_u < 0 up-cut, 0 a fixed part."),
-    ("lengths", "Slot lengths l, mm (from:to:step)", "2:20:2", "FROM:TO:STEP, one value, or a list a, b, c."),
-    ("tol", "Admissible rel. error [Δ], –", "0.005", "Stop test of the iteration: |Δ| ≤ [Δ]."),
-    ("max_iter", "Iteration budget, –", "100", "Steps before the iteration is declared non-convergent."),
-    ("part_radius", "Part radius R_d, mm (optional)", "",
-     "Nominal part radius for the reduced parameters of Table 1 and the outer circle of the path plot."),
-    ("curve_lengths", "Fig. 4: slot lengths l, mm", "2, 5, 10, 15, 20", "One A(i) curve per length."),
-    ("curve_ratios", "Fig. 4: ratios i (from:to:step)", "-4:4:0.1", "The i axis of the A(i) curves."),
-    ("history_ratios", "Fig. 5: ratios i", "-3, -2, -1, 0, 1, 2, 3", "One Δ(j) history per ratio."),
-    ("focus_length", "Fig. 5 and path S: slot length l, mm", "20", "Slot length of the histories and of S."),
+    ("rho", QT_TR_NOOP("Forming radius ρ, mm"), "22",
+     QT_TR_NOOP("Radius at which the slot length is given, e.g. the tube bore R_d1.")),
+    ("tool_radius", QT_TR_NOOP("Tool radius R_u, mm"), "-95",
+     QT_TR_NOOP("Signed, as in the paper: negative = external scheme (tool outside), positive = internal.")),
+    ("ratio", QT_TR_NOOP("Kinematic ratio i = ω_d/ω_u"), "-2",
+     QT_TR_NOOP("Part over tool angular speed. i·R_u > 0 is down-cut, i·R_u < 0 up-cut, 0 a fixed part.")),
+    ("lengths", QT_TR_NOOP("Slot lengths l, mm (from:to:step)"), "2:20:2",
+     QT_TR_NOOP("FROM:TO:STEP, one value, or a list a, b, c.")),
+    ("tol", QT_TR_NOOP("Admissible rel. error [Δ], –"), "0.005", QT_TR_NOOP("Stop test of the iteration: |Δ| ≤ [Δ].")),
+    ("max_iter", QT_TR_NOOP("Iteration budget, –"), "100",
+     QT_TR_NOOP("Steps before the iteration is declared non-convergent.")),
+    ("part_radius", QT_TR_NOOP("Part radius R_d, mm (optional)"), "",
+     QT_TR_NOOP("Nominal part radius for the reduced parameters of Table 1 and the outer circle of the path plot.")),
+    ("curve_lengths", QT_TR_NOOP("Fig. 4: slot lengths l, mm"), "2, 5, 10, 15, 20",
+     QT_TR_NOOP("One A(i) curve per length.")),
+    ("curve_ratios", QT_TR_NOOP("Fig. 4: ratios i (from:to:step)"), "-4:4:0.1",
+     QT_TR_NOOP("The i axis of the A(i) curves.")),
+    ("history_ratios", QT_TR_NOOP("Fig. 5: ratios i"), "-3, -2, -1, 0, 1, 2, 3",
+     QT_TR_NOOP("One Δ(j) history per ratio.")),
+    ("focus_length", QT_TR_NOOP("Fig. 5 and path S: slot length l, mm"), "20",
+     QT_TR_NOOP("Slot length of the histories and of S.")),
 )
 
-_COLUMNS = ("l, mm", "A, mm", "A (paper eq.), mm", "A check (brentq), mm", "θ, deg", "j", "converged",
-            "method", "note")
+_COLUMNS = (QT_TR_NOOP("l, mm"), QT_TR_NOOP("A, mm"), QT_TR_NOOP("A (paper eq.), mm"),
+            QT_TR_NOOP("A check (brentq), mm"), QT_TR_NOOP("θ, deg"), "j", QT_TR_NOOP("converged"),
+            QT_TR_NOOP("method"), QT_TR_NOOP("note"))
 
 
 def parse_inputs(texts: dict[str, str], a_formula: str = "exact") -> SlotInputs:
@@ -165,7 +174,7 @@ class SlotDialog(QDialog):
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
-        self.setWindowTitle("Slot forming — cycloidal slotting with a rotating blade tool")
+        self.setWindowTitle(tr("Slot forming — cycloidal slotting with a rotating blade tool"))
         self.resize(1400, 860)
         self.study: SlotStudy | None = None
         self._inputs: SlotInputs | None = None
@@ -182,22 +191,22 @@ class SlotDialog(QDialog):
         for key, label, default, tip in _FIELDS:
             ed = QLineEdit(default)
             ed.setObjectName(key)
-            ed.setToolTip(tip)
+            ed.setToolTip(tr(tip))
             ed.textChanged.connect(self._validate)
             ed.returnPressed.connect(self.compute)
             self.edits[key] = ed
-            lab = QLabel(label)
-            lab.setToolTip(tip)
+            lab = QLabel(tr(label))
+            lab.setToolTip(tr(tip))
             form.addRow(lab, ed)
         self.formula = QComboBox()
-        self.formula.addItem("exact triangle closure", "exact")
-        self.formula.addItem("paper's printed equation", "paper")
+        self.formula.addItem(tr("exact triangle closure"), "exact")
+        self.formula.addItem(tr("paper's printed equation"), "paper")
         self.formula.setToolTip(
-            "Which closure is reported as A. The paper prints A = −R_u + √(ρ² − (R_u sin θ)²), which\n"
-            "drops cos θ; the exact closure is A = ρ cos(φ + iθ) − R_u cos θ (see docs/slotting.md)."
+            tr("Which closure is reported as A. The paper prints A = −R_u + √(ρ² − (R_u sin θ)²), which\n"
+            "drops cos θ; the exact closure is A = ρ cos(φ + iθ) − R_u cos θ (see docs/slotting.md).")
         )
         self.formula.currentIndexChanged.connect(self._validate)
-        form.addRow(QLabel("A reported by"), self.formula)
+        form.addRow(QLabel(tr("A reported by")), self.formula)
 
         self.mode_label = QLabel()
         self.mode_label.setWordWrap(True)
@@ -212,12 +221,12 @@ class SlotDialog(QDialog):
         self.reduced_label.setWordWrap(True)
         self.reduced_label.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
 
-        self.compute_button = QPushButton("Compute")
+        self.compute_button = QPushButton(tr("Compute"))
         self.compute_button.setDefault(True)
         self.compute_button.clicked.connect(self.compute)
-        self.export_button = QPushButton("Export table (CSV)…")
+        self.export_button = QPushButton(tr("Export table (CSV)…"))
         self.export_button.clicked.connect(lambda: self.export_csv())
-        close = QPushButton("Close")
+        close = QPushButton(tr("Close"))
         close.clicked.connect(self.reject)
         buttons = QHBoxLayout()
         buttons.addWidget(self.compute_button)
@@ -226,14 +235,14 @@ class SlotDialog(QDialog):
         buttons.addWidget(close)
 
         left = QVBoxLayout()
-        box = QGroupBox("Set-up")
+        box = QGroupBox(tr("Set-up"))
         box.setLayout(form)
         left.addWidget(box)
         left.addWidget(self.mode_label)
         left.addWidget(self.error_label)
         left.addLayout(buttons)
         left.addWidget(self.status_label)
-        rbox = QGroupBox("Reduced parameters (Table 1)")
+        rbox = QGroupBox(tr("Reduced parameters (Table 1)"))
         rl = QVBoxLayout(rbox)
         rl.addWidget(self.reduced_label)
         left.addWidget(rbox)
@@ -244,7 +253,7 @@ class SlotDialog(QDialog):
 
         # ---- table and plots ---------------------------------------------------------------
         self.table = QTableWidget(0, len(_COLUMNS))
-        self.table.setHorizontalHeaderLabels(list(_COLUMNS))
+        self.table.setHorizontalHeaderLabels([tr(c) for c in _COLUMNS])
         self.table.setEditTriggers(QAbstractItemView.EditTrigger.NoEditTriggers)
         self.table.verticalHeader().setVisible(False)
         hh = self.table.horizontalHeader()
@@ -253,30 +262,30 @@ class SlotDialog(QDialog):
 
         self.plot_ai = pg.PlotWidget()
         self.plot_ai.setBackground("w")
-        self.plot_ai.setTitle("Fig. 4 — centre distance A(i)")
-        self.plot_ai.setLabel("bottom", "kinematic ratio i = ω_d/ω_u")
-        self.plot_ai.setLabel("left", "A, mm")
+        self.plot_ai.setTitle(tr("Fig. 4 — centre distance A(i)"))
+        self.plot_ai.setLabel("bottom", tr("kinematic ratio i = ω_d/ω_u"))
+        self.plot_ai.setLabel("left", tr("A, mm"))
         self.plot_ai.showGrid(x=True, y=True, alpha=0.3)
         self.plot_ai.addLegend(offset=(-10, -10))
 
         self.plot_err = pg.PlotWidget()
         self.plot_err.setBackground("w")
-        self.plot_err.setTitle("Fig. 5 — relative error Δ(j) of the iteration")
-        self.plot_err.setLabel("bottom", "iteration j")
+        self.plot_err.setTitle(tr("Fig. 5 — relative error Δ(j) of the iteration"))
+        self.plot_err.setLabel("bottom", tr("iteration j"))
         self.plot_err.setLabel("left", "Δ = (θ_j+1 − θ_j)/θ_j+1")
         self.plot_err.showGrid(x=True, y=True, alpha=0.3)
         self.plot_err.addLegend(offset=(-10, 10))
 
         self.plot_path = pg.PlotWidget()
         self.plot_path.setBackground("w")
-        self.plot_path.setTitle("Path S of the forming point in the part's frame")
-        self.plot_path.setLabel("bottom", "x, mm")
-        self.plot_path.setLabel("left", "y, mm")
+        self.plot_path.setTitle(tr("Path S of the forming point in the part's frame"))
+        self.plot_path.setLabel("bottom", tr("x, mm"))
+        self.plot_path.setLabel("left", tr("y, mm"))
         self.plot_path.setAspectLocked(True)
         self.plot_path.showGrid(x=True, y=True, alpha=0.3)
 
         grid = QGridLayout()
-        grid.addWidget(self._boxed("Tables 2/3 — A and iterations j over the slot length", self.table), 0, 0)
+        grid.addWidget(self._boxed(tr("Tables 2/3 — A and iterations j over the slot length"), self.table), 0, 0)
         grid.addWidget(self.plot_ai, 0, 1)
         grid.addWidget(self.plot_err, 1, 0)
         grid.addWidget(self.plot_path, 1, 1)
@@ -337,17 +346,19 @@ class SlotDialog(QDialog):
         kia = abs(s.k * s.ratio)
         mode = cutting_mode(s.ratio, s.tool_radius)
         extra = {
-            "down-cut": f"{CUT_MODE['down-cut']}: the error of the iteration decays monotonically",
-            "up-cut": f"{CUT_MODE['up-cut']}: the error of the iteration alternates in sign",
-            "fixed part": "fixed part (i = 0): the iteration ends at the first step",
+            "down-cut": tr("{mode}: the error of the iteration decays monotonically").format(
+                mode=tr(CUT_MODE["down-cut"])),
+            "up-cut": tr("{mode}: the error of the iteration alternates in sign").format(mode=tr(CUT_MODE["up-cut"])),
+            "fixed part": tr("fixed part (i = 0): the iteration ends at the first step"),
         }[mode]
-        text = f"{s.scheme.capitalize()} scheme; {extra}. |ρ·i/R_u| = {kia:.3g}"
+        text = tr("{scheme} scheme; {extra}. |ρ·i/R_u| = {kia:.3g}").format(
+            scheme=tr(s.scheme.capitalize()), extra=extra, kia=kia)
         if kia >= 1.0:
-            text += " ≥ 1: the iteration is not sure to converge — the bracketing solver takes over."
+            text += tr(" ≥ 1: the iteration is not sure to converge — the bracketing solver takes over.")
         self.mode_label.setText(text)
         if self.study is not None:
             self._stale = True
-            self.status_label.setText("Inputs changed: press Compute to refresh the results.")
+            self.status_label.setText(tr("Inputs changed: press Compute to refresh the results."))
         self._update_buttons()
         return True
 
@@ -362,7 +373,7 @@ class SlotDialog(QDialog):
         if not self._validate() or self._inputs is None:
             return
         inp = self._inputs
-        self.status_label.setText("Computing…")
+        self.status_label.setText(tr("Computing…"))
         self._runner.submit(
             slot_study, inp.setup, inp.lengths, inp.curve_lengths, inp.curve_ratios, inp.history_ratios,
             inp.focus_length,
@@ -384,7 +395,7 @@ class SlotDialog(QDialog):
         return True
 
     def _on_busy(self, busy: bool) -> None:
-        self.compute_button.setText("Computing…" if busy else "Compute")
+        self.compute_button.setText(tr("Computing…") if busy else tr("Compute"))
 
     def _on_failed(self, exc: object, tb: str) -> None:
         del tb  # the traceback is for a log, never the user message
@@ -438,13 +449,14 @@ class SlotDialog(QDialog):
         n_fb = sum(r.method == "fallback" for r in rows)
         n_none = sum(not r.ok for r in rows)
         n_dis = sum(r.method == "iteration" and not r.agrees for r in rows)
-        parts = [f"{len(rows)} rows computed."]
+        parts = [tr("{n} rows computed.").format(n=len(rows))]
         if n_fb:
-            parts.append(f"{n_fb} row(s): the iteration did not converge — A from the bracketing solver.")
+            parts.append(tr("{n} row(s): the iteration did not converge — A from the bracketing solver.")
+                         .format(n=n_fb))
         if n_none:
-            parts.append(f"{n_none} row(s): the slot length cannot be reached (see the note).")
+            parts.append(tr("{n} row(s): the slot length cannot be reached (see the note).").format(n=n_none))
         if n_dis:
-            parts.append(f"{n_dis} row(s): iteration and bracketing solver disagree (see the note).")
+            parts.append(tr("{n} row(s): iteration and bracketing solver disagree (see the note).").format(n=n_dis))
         self.status_label.setText(" ".join(parts))
         self.status_label.setStyleSheet(_ERR_STYLE if (n_none or n_dis) else _NOTE_STYLE)
 
@@ -455,7 +467,7 @@ class SlotDialog(QDialog):
         n = len(c.lengths)
         for m, l in enumerate(c.lengths):
             pen = pg.mkPen(pg.intColor(m, hues=max(n, 1), values=1, maxValue=200), width=2)
-            p.plot(c.ratios, c.A[m], pen=pen, name=f"l = {l:g} mm", connect="finite")
+            p.plot(c.ratios, c.A[m], pen=pen, name=tr("l = {l:g} mm").format(l=l), connect="finite")
             fb = c.method[m] == "fallback"
             if np.any(fb):
                 p.plot(c.ratios[fb], c.A[m][fb], pen=None, symbol="x", symbolSize=6,
@@ -487,8 +499,8 @@ class SlotDialog(QDialog):
                 continue
             color = pg.intColor(m, hues=max(n, 1), values=1, maxValue=200)
             mode = cutting_mode(ratio, study.table.setup.tool_radius)
-            tag = CUT_MODE_SHORT[mode]
-            conv = "" if it.converged else " (no conv.)"
+            tag = tr(CUT_MODE_SHORT[mode])
+            conv = "" if it.converged else tr(" (no conv.)")
             dd = np.clip(d, -2.0, 2.0)  # keep a divergent history from flattening the others
             p.plot(np.arange(d.size), dd, pen=pg.mkPen(color, width=2), symbol="o", symbolSize=5,
                    symbolBrush=color, name=f"i = {ratio:g} {tag}{conv}")
@@ -505,21 +517,22 @@ class SlotDialog(QDialog):
                                                                     style=Qt.PenStyle.DashLine))
         if s.part_radius is not None:
             p.plot(s.part_radius * np.cos(t), s.part_radius * np.sin(t), pen=pg.mkPen((150, 150, 150), width=1))
-        tr, row = study.trajectory, study.trajectory_row
+        traj, row = study.trajectory, study.trajectory_row
         focus = study.history_length
-        if tr is None or row is None:
-            p.setTitle(f"Path S: slot length {focus:g} mm cannot be reached")
+        if traj is None or row is None:
+            p.setTitle(tr("Path S: slot length {focus:g} mm cannot be reached").format(focus=focus))
             p.autoRange()
             return
-        p.plot(tr.x, tr.y, pen=pg.mkPen((0, 90, 200), width=2))
-        h = tr.slot_half_angle
+        p.plot(traj.x, traj.y, pen=pg.mkPen((0, 90, 200), width=2))
+        h = traj.slot_half_angle
         if math.isfinite(h):
             ends_x = s.rho * np.cos([-h, h])
             ends_y = s.rho * np.sin([-h, h])
             p.plot(ends_x, ends_y, pen=None, symbol="o", symbolSize=8, symbolBrush=(200, 30, 30))
             arc = np.linspace(-h, h, 120)
             p.plot(s.rho * np.cos(arc), s.rho * np.sin(arc), pen=pg.mkPen((200, 30, 30), width=3))
-        p.setTitle(f"Path S (part frame): A = {row.A:.3f} mm → slot {tr.slot_length:.3f} mm")
+        p.setTitle(tr("Path S (part frame): A = {A:.3f} mm → slot {slot_length:.3f} mm")
+                   .format(A=row.A, slot_length=traj.slot_length))
         p.autoRange()
 
     def _show_reduced(self, study: SlotStudy) -> None:
@@ -527,12 +540,11 @@ class SlotDialog(QDialog):
         rd = "ρ" if study.table.setup.part_radius is None else f"{study.table.setup.part_radius:g} mm"
         i_text = "—" if red.I is None else f"{red.I:.5g}"
         self.reduced_label.setText(
-            f"R_d = {rd}\n"
-            f"i1 = R_u/R_d = {red.i1:.5g}\n"
-            f"Ã = A/R_d = 1 − i1 = {red.A_tilde_nominal:.5g} (nominal)\n"
-            f"i = ω_d/ω_u = {red.i:g}\n"
-            f"I = V_u/V_d = i1/i = {i_text}\n"
-            f"ρ̃ = ρ/R_d = {red.rho_tilde:.5g}"
+            tr("R_d = {rd}\ni1 = R_u/R_d = {i1:.5g}\nÃ = A/R_d = 1 − i1 = {A_tilde_nominal:.5g} "
+               "(nominal)\ni = ω_d/ω_u = {i:g}\nI = V_u/V_d = i1/i = {i_text}\nρ̃ = ρ/R_d = "
+               "{rho_tilde:.5g}")
+            .format(rd=rd, i1=red.i1, A_tilde_nominal=red.A_tilde_nominal, i=red.i, i_text=i_text,
+                    rho_tilde=red.rho_tilde)
         )
 
     # -- export --------------------------------------------------------------------------------------
@@ -541,7 +553,7 @@ class SlotDialog(QDialog):
         if self.study is None or self._stale:
             return False
         if path is None:
-            path, _ = QFileDialog.getSaveFileName(self, "Export slot table", "slot_table.csv", "CSV (*.csv)")
+            path, _ = QFileDialog.getSaveFileName(self, tr("Export slot table"), "slot_table.csv", tr("CSV (*.csv)"))
             if not path:
                 return False
         try:
@@ -550,7 +562,7 @@ class SlotDialog(QDialog):
             self.error_label.setText(str(exc))
             self.error_label.setVisible(True)
             return False
-        self.status_label.setText(f"Table written to {out}")
+        self.status_label.setText(tr("Table written to {out}").format(out=out))
         return True
 
     # -- shutdown ------------------------------------------------------------------------------------

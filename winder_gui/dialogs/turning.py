@@ -55,6 +55,7 @@ from engine.turning import (
     optimise_with_plot,
 )
 from winder_gui.dialogs.turning_views import COLOURS, TurningViewsMixin, _fmt  # noqa: F401 - COLOURS: API
+from winder_gui.i18n import QT_TR_NOOP, tr
 from winder_gui.workers import JobRunner
 
 _ERR_STYLE = "color: #b00020;"
@@ -62,38 +63,46 @@ _DEBOUNCE_MS = 150
 
 # (section, key, label with unit, tooltip)
 _NUM_FIELDS: tuple[tuple[str, str, str, str], ...] = (
-    ("machine", "n_min_rpm", "n min, rpm", "Lowest spindle speed, constraint (12)."),
-    ("machine", "n_max_rpm", "n max, rpm", "Highest spindle speed, constraint (13)."),
-    ("machine", "s_min_mm_rev", "S min, mm/rev", "Smallest feed, constraint (10)."),
-    ("machine", "s_max_mm_rev", "S max, mm/rev", "Largest feed, constraint (11)."),
-    ("machine", "power_kw", "Drive power N, kW", "Main drive power, constraint (4)."),
-    ("machine", "efficiency", "Efficiency η, –", "Drive efficiency, constraint (4)."),
-    ("machine", "feed_force_max_n", "Max feed force, N", "Strength of the weakest feed-mechanism link, (5)."),
-    ("workpiece", "hb", "Hardness, HB", "Brinell hardness (K_mv, K_mp of cast irons)."),
-    ("workpiece", "sigma_b_mpa", "Tensile strength σ_b, MPa", "K_mv, K_mp of steels."),
-    ("workpiece", "diameter_mm", "Diameter D, mm", "Workpiece diameter before the pass."),
-    ("workpiece", "depth_mm", "Depth of cut t, mm", "One pass removes the whole allowance."),
-    ("workpiece", "length_mm", "Part length L, mm", "Span for the deflection check (9)."),
-    ("workpiece", "machined_length_mm", "Machined length l, mm", "Path length of the pass: t_m = l/(n S)."),
-    ("workpiece", "tolerance_mm", "Diameter tolerance, mm", "E.g. IT11 at 83 mm = 0.22 mm."),
-    ("workpiece", "deflection_share", "Deflection share of tolerance, –",
-     "Admissible part deflection = share × tolerance, (9)."),
-    ("tool", "tool_life_min", "Tool life T, min", "Economic tool life in the Taylor constraint (3)."),
-    ("tool", "phi_deg", "Approach angle φ, deg", "Main cutting-edge angle (K_φv, K_φp, insert (7))."),
-    ("tool", "phi1_deg", "Minor angle φ1, deg", "Minor cutting-edge angle (empirical roughness)."),
-    ("tool", "gamma_deg", "Rake angle γ, deg", "K_γp."),
-    ("tool", "lambda_deg", "Inclination λ, deg", "K_λp."),
-    ("tool", "nose_radius_mm", "Nose radius r, mm", "Roughness (8)."),
-    ("tool", "insert_thickness_mm", "Insert thickness c, mm", "Insert strength (7)."),
-    ("tool", "holder_b_mm", "Holder width B, mm", "Holder strength (6)."),
-    ("tool", "holder_h_mm", "Holder height H, mm", "Holder strength (6)."),
-    ("tool", "holder_overhang_mm", "Holder overhang, mm", "Holder strength (6)."),
-    ("tool", "holder_stress_mpa", "Holder stress [σ], MPa", "Admissible bending stress of the shank (6)."),
-    ("requirements", "rz_um", "Roughness Rz, µm", "Required surface roughness (8)."),
+    ("machine", "n_min_rpm", QT_TR_NOOP("n min, rpm"), QT_TR_NOOP("Lowest spindle speed, constraint (12).")),
+    ("machine", "n_max_rpm", QT_TR_NOOP("n max, rpm"), QT_TR_NOOP("Highest spindle speed, constraint (13).")),
+    ("machine", "s_min_mm_rev", QT_TR_NOOP("S min, mm/rev"), QT_TR_NOOP("Smallest feed, constraint (10).")),
+    ("machine", "s_max_mm_rev", QT_TR_NOOP("S max, mm/rev"), QT_TR_NOOP("Largest feed, constraint (11).")),
+    ("machine", "power_kw", QT_TR_NOOP("Drive power N, kW"), QT_TR_NOOP("Main drive power, constraint (4).")),
+    ("machine", "efficiency", QT_TR_NOOP("Efficiency η, –"), QT_TR_NOOP("Drive efficiency, constraint (4).")),
+    ("machine", "feed_force_max_n", QT_TR_NOOP("Max feed force, N"),
+     QT_TR_NOOP("Strength of the weakest feed-mechanism link, (5).")),
+    ("workpiece", "hb", QT_TR_NOOP("Hardness, HB"), QT_TR_NOOP("Brinell hardness (K_mv, K_mp of cast irons).")),
+    ("workpiece", "sigma_b_mpa", QT_TR_NOOP("Tensile strength σ_b, MPa"), QT_TR_NOOP("K_mv, K_mp of steels.")),
+    ("workpiece", "diameter_mm", QT_TR_NOOP("Diameter D, mm"), QT_TR_NOOP("Workpiece diameter before the pass.")),
+    ("workpiece", "depth_mm", QT_TR_NOOP("Depth of cut t, mm"), QT_TR_NOOP("One pass removes the whole allowance.")),
+    ("workpiece", "length_mm", QT_TR_NOOP("Part length L, mm"), QT_TR_NOOP("Span for the deflection check (9).")),
+    ("workpiece", "machined_length_mm", QT_TR_NOOP("Machined length l, mm"),
+     QT_TR_NOOP("Path length of the pass: t_m = l/(n S).")),
+    ("workpiece", "tolerance_mm", QT_TR_NOOP("Diameter tolerance, mm"), QT_TR_NOOP("E.g. IT11 at 83 mm = 0.22 mm.")),
+    ("workpiece", "deflection_share", QT_TR_NOOP("Deflection share of tolerance, –"),
+     QT_TR_NOOP("Admissible part deflection = share × tolerance, (9).")),
+    ("tool", "tool_life_min", QT_TR_NOOP("Tool life T, min"),
+     QT_TR_NOOP("Economic tool life in the Taylor constraint (3).")),
+    ("tool", "phi_deg", QT_TR_NOOP("Approach angle φ, deg"),
+     QT_TR_NOOP("Main cutting-edge angle (K_φv, K_φp, insert (7)).")),
+    ("tool", "phi1_deg", QT_TR_NOOP("Minor angle φ1, deg"),
+     QT_TR_NOOP("Minor cutting-edge angle (empirical roughness).")),
+    ("tool", "gamma_deg", QT_TR_NOOP("Rake angle γ, deg"), QT_TR_NOOP("K_γp.")),
+    ("tool", "lambda_deg", QT_TR_NOOP("Inclination λ, deg"), QT_TR_NOOP("K_λp.")),
+    ("tool", "nose_radius_mm", QT_TR_NOOP("Nose radius r, mm"), QT_TR_NOOP("Roughness (8).")),
+    ("tool", "insert_thickness_mm", QT_TR_NOOP("Insert thickness c, mm"), QT_TR_NOOP("Insert strength (7).")),
+    ("tool", "holder_b_mm", QT_TR_NOOP("Holder width B, mm"), QT_TR_NOOP("Holder strength (6).")),
+    ("tool", "holder_h_mm", QT_TR_NOOP("Holder height H, mm"), QT_TR_NOOP("Holder strength (6).")),
+    ("tool", "holder_overhang_mm", QT_TR_NOOP("Holder overhang, mm"), QT_TR_NOOP("Holder strength (6).")),
+    ("tool", "holder_stress_mpa", QT_TR_NOOP("Holder stress [σ], MPa"),
+     QT_TR_NOOP("Admissible bending stress of the shank (6).")),
+    ("requirements", "rz_um", QT_TR_NOOP("Roughness Rz, µm"), QT_TR_NOOP("Required surface roughness (8).")),
 )
 _EXPERT_KEEP = {"diameter_mm", "machined_length_mm"}  # still used in expert mode (V and t_m)
-_SURFACES = ("no_crust", "rolled", "forging", "casting_crust", "casting_dirty_crust")
-_TABLE_COLS = ("on", "row", "constraint", "a", "b", "rhs = ln c", "limit ×", "slack", "use", "status")
+_SURFACES = {"no_crust": QT_TR_NOOP("no crust"), "rolled": QT_TR_NOOP("rolled"), "forging": QT_TR_NOOP("forging"),
+             "casting_crust": QT_TR_NOOP("casting crust"), "casting_dirty_crust": QT_TR_NOOP("casting dirty crust")}
+_TABLE_COLS = (QT_TR_NOOP("on"), QT_TR_NOOP("row"), QT_TR_NOOP("constraint"), "a", "b", QT_TR_NOOP("rhs = ln c"),
+               QT_TR_NOOP("limit ×"), QT_TR_NOOP("slack"), QT_TR_NOOP("use"), QT_TR_NOOP("status"))
 
 
 class TurningDialog(TurningViewsMixin, QDialog):
@@ -110,7 +119,7 @@ class TurningDialog(TurningViewsMixin, QDialog):
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
-        self.setWindowTitle("Turning optimiser — spindle speed and feed for minimum machine time")
+        self.setWindowTitle(tr("Turning optimiser — spindle speed and feed for minimum machine time"))
         self.resize(1500, 900)
         self.data: CuttingData = load_data()
         self.result: Any = None  # the last TurningResult shown (None when infeasible)
@@ -134,55 +143,55 @@ class TurningDialog(TurningViewsMixin, QDialog):
         self.example = QComboBox()
         for p in sorted((example_case_path("paper").parent).glob("*.toml")):
             self.example.addItem(p.stem, str(p))
-        load_btn = QPushButton("Load")
+        load_btn = QPushButton(tr("Load"))
         load_btn.clicked.connect(lambda: self.load_case_file(self.example.currentData()))
         row = QHBoxLayout()
         row.addWidget(self.example, 1)
         row.addWidget(load_btn)
-        top.addRow("Example case", row)
+        top.addRow(tr("Example case"), row)
         self.mode = QComboBox()
-        self.mode.addItem("Physical model (handbook data)", "physical")
-        self.mode.addItem("Expert (edit LP rows b1…b11)", "expert")
+        self.mode.addItem(tr("Physical model (handbook data)"), "physical")
+        self.mode.addItem(tr("Expert (edit LP rows b1…b11)"), "expert")
         self.mode.currentIndexChanged.connect(self._mode_changed)
-        top.addRow("Mode", self.mode)
+        top.addRow(tr("Mode"), self.mode)
         lv.addLayout(top)
 
-        self.machine = self._combo(self.data.machines, "Lathe (resources/cutting/machines.toml)")
+        self.machine = self._combo(self.data.machines, tr("Lathe (resources/cutting/machines.toml)"))
         self.machine.currentIndexChanged.connect(self._machine_changed)
-        self.material = self._combo(self.data.materials, "Workpiece material (materials.toml)")
+        self.material = self._combo(self.data.materials, tr("Workpiece material (materials.toml)"))
         self.material.currentIndexChanged.connect(self._material_changed)
-        self.tool = self._combo(self.data.tools, "Tool material (tools.toml)")
+        self.tool = self._combo(self.data.tools, tr("Tool material (tools.toml)"))
         self.fixture = QComboBox()
-        for k, lab in (("centres", "between centres"), ("chuck", "in a chuck"),
-                       ("chuck_tailstock", "chuck + tailstock")):
+        for k, lab in (("centres", tr("between centres")), ("chuck", tr("in a chuck")),
+                       ("chuck_tailstock", tr("chuck + tailstock"))):
             self.fixture.addItem(lab, k)
         self.surface = QComboBox()
         for k in _SURFACES:
-            self.surface.addItem(k.replace("_", " "), k)
+            self.surface.addItem(tr(_SURFACES[k]), k)
         self.roughness_model = QComboBox()
-        self.roughness_model.addItem("geometric Rz = S²/8r", "geometric")
-        self.roughness_model.addItem("empirical (paper's (8); uncertain data)", "empirical")
+        self.roughness_model.addItem(tr("geometric Rz = S²/8r"), "geometric")
+        self.roughness_model.addItem(tr("empirical (paper's (8); uncertain data)"), "empirical")
         self.speed_bands = QComboBox()
-        self.speed_bands.addItem("per feed band (handbook)", "auto")
-        self.speed_bands.addItem("first band for all S (as the paper)", "first")
-        self.snap = QCheckBox("Snap to the machine's speed/feed series")
+        self.speed_bands.addItem(tr("per feed band (handbook)"), "auto")
+        self.speed_bands.addItem(tr("first band for all S (as the paper)"), "first")
+        self.snap = QCheckBox(tr("Snap to the machine's speed/feed series"))
         self.groups: dict[str, QGroupBox] = {}
         forms: dict[str, QFormLayout] = {}
-        for sec, title in (("machine", "Machine"), ("workpiece", "Workpiece"), ("tool", "Tool"),
-                           ("requirements", "Requirements and options")):
+        for sec, title in (("machine", tr("Machine")), ("workpiece", tr("Workpiece")), ("tool", tr("Tool")),
+                           ("requirements", tr("Requirements and options"))):
             g = QGroupBox(title)
             forms[sec] = QFormLayout(g)
             self.groups[sec] = g
             lv.addWidget(g)
-        forms["machine"].addRow("Lathe", self.machine)
-        forms["workpiece"].addRow("Material", self.material)
-        forms["workpiece"].addRow("Fixture", self.fixture)
-        forms["workpiece"].addRow("Surface", self.surface)
-        forms["tool"].addRow("Tool material", self.tool)
+        forms["machine"].addRow(tr("Lathe"), self.machine)
+        forms["workpiece"].addRow(tr("Material"), self.material)
+        forms["workpiece"].addRow(tr("Fixture"), self.fixture)
+        forms["workpiece"].addRow(tr("Surface"), self.surface)
+        forms["tool"].addRow(tr("Tool material"), self.tool)
         for sec, key, label, tip in _NUM_FIELDS:
             ed = QLineEdit()
             ed.setObjectName(key)
-            ed.setToolTip(tip)
+            ed.setToolTip(tr(tip))
             ed.textChanged.connect(self._changed)
             err = QLabel()
             err.setStyleSheet(_ERR_STYLE)
@@ -192,13 +201,13 @@ class TurningDialog(TurningViewsMixin, QDialog):
             box.setSpacing(0)
             box.addWidget(ed)
             box.addWidget(err)
-            lab = QLabel(label)
-            lab.setToolTip(tip)
+            lab = QLabel(tr(label))
+            lab.setToolTip(tr(tip))
             forms[sec].addRow(lab, box)
             self.edits[key] = ed
             self.field_errors[key] = err
-        forms["requirements"].addRow("Roughness model", self.roughness_model)
-        forms["requirements"].addRow("Taylor coefficients", self.speed_bands)
+        forms["requirements"].addRow(tr("Roughness model"), self.roughness_model)
+        forms["requirements"].addRow(tr("Taylor coefficients"), self.speed_bands)
         forms["requirements"].addRow(self.snap)
         for w in (self.fixture, self.surface, self.tool, self.roughness_model, self.speed_bands):
             w.currentIndexChanged.connect(self._changed)
@@ -228,19 +237,19 @@ class TurningDialog(TurningViewsMixin, QDialog):
         mv.addWidget(self.summary)
         mv.addWidget(self.message)
         self.table = QTableWidget(0, len(_TABLE_COLS))
-        self.table.setHorizontalHeaderLabels(list(_TABLE_COLS))
+        self.table.setHorizontalHeaderLabels([tr(c) for c in _TABLE_COLS])
         self.table.verticalHeader().setVisible(False)
         self.table.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
         self.table.setSelectionBehavior(QAbstractItemView.SelectionBehavior.SelectRows)
         self.table.itemChanged.connect(self._table_changed)
         mv.addWidget(self.table, 1)
         btns = QHBoxLayout()
-        add = QPushButton("Add row n^a·S^b ≤ c")
+        add = QPushButton(tr("Add row n^a·S^b ≤ c"))
         add.clicked.connect(self.add_user_row)
-        rem = QPushButton("Remove user row")
+        rem = QPushButton(tr("Remove user row"))
         rem.clicked.connect(self.remove_user_row)
-        to_exp = QPushButton("Rows → expert")
-        to_exp.setToolTip("Copy the current LP rows (of the feed band in use) into expert mode.")
+        to_exp = QPushButton(tr("Rows → expert"))
+        to_exp.setToolTip(tr("Copy the current LP rows (of the feed band in use) into expert mode."))
         to_exp.clicked.connect(self.rows_to_expert)
         for b in (add, rem, to_exp):
             btns.addWidget(b)
@@ -255,9 +264,9 @@ class TurningDialog(TurningViewsMixin, QDialog):
             row=0, col=0, axisItems={"bottom": LogTickAxis("bottom"), "left": LogTickAxis("left")})
         self.plot_widget.setLogMode(True, True)
         self.plot_widget.showGrid(x=True, y=True, alpha=0.25)
-        self.plot_widget.setLabel("bottom", "spindle speed n, rpm")
-        self.plot_widget.setLabel("left", "feed S, mm/rev")
-        self.plot_widget.setTitle("Feasible region in the (n, S) plane (log axes)")
+        self.plot_widget.setLabel("bottom", tr("spindle speed n, rpm"))
+        self.plot_widget.setLabel("left", tr("feed S, mm/rev"))
+        self.plot_widget.setTitle(tr("Feasible region in the (n, S) plane (log axes)"))
         self.legend = pg.LegendItem(labelTextColor="k", colCount=2)  # below the plot, never over it
         self.plot_view.addItem(self.legend, row=1, col=0)
         self.plot_view.ci.layout.setRowStretchFactor(0, 4)
@@ -267,7 +276,7 @@ class TurningDialog(TurningViewsMixin, QDialog):
         self.region_items: list[QGraphicsPolygonItem] = []
         self.label_items: list[pg.TextItem] = []
         self.objective_item = pg.PlotDataItem(pen=pg.mkPen("#d62728", width=2, style=Qt.PenStyle.DashLine),
-                                              name="objective n·S = max")
+                                              name=tr("objective n·S = max"))
         self.optimum_item = pg.PlotDataItem(pen=None, symbol="star", symbolSize=18,
                                             symbolBrush=pg.mkBrush("#d62728"), symbolPen=pg.mkPen("k"))
         self.snapped_item = pg.PlotDataItem(pen=None, symbol="x", symbolSize=14, symbolBrush=pg.mkBrush("k"),
@@ -442,7 +451,7 @@ class TurningDialog(TurningViewsMixin, QDialog):
                 continue
             text = self.edits[key].text().strip()
             if not text:
-                raise InputError(f"{label}: a value is required", field=f"{sec}.{key}")
+                raise InputError(tr("{label}: a value is required").format(label=tr(label)), field=f"{sec}.{key}")
             try:
                 v = float(text.replace(",", "."))
             except ValueError:
@@ -480,7 +489,7 @@ class TurningDialog(TurningViewsMixin, QDialog):
 
     def _show_input_error(self, exc: InputError) -> None:
         self.error = str(exc)
-        self.message.setText(f"Input: {exc}")
+        self.message.setText(tr("Input: {exc}").format(exc=exc))
         fld = exc.location.field or ""
         key = fld.split(".")[-1]
         if key in self.field_errors:
@@ -503,10 +512,10 @@ class TurningDialog(TurningViewsMixin, QDialog):
         if isinstance(exc, InputError):
             self._show_input_error(exc)
         else:  # a bug: show it, never crash the dialog
-            self.message.setText(f"Internal error: {exc!r}")
+            self.message.setText(tr("Internal error: {exc!r}").format(exc=exc))
         self.result = None
         self.plot = None
-        self.summary.setText("<b>No result</b> — see the message below.")
+        self.summary.setText(tr("<b>No result</b> — see the message below."))
         self._draw(None)
         self.computed.emit({"result": None, "plot": None, "error": exc})
 
@@ -515,7 +524,7 @@ class TurningDialog(TurningViewsMixin, QDialog):
         self.plot = out["plot"]
         err = out["error"]
         self.error = str(err) if err is not None else ""
-        self.message.setText(f"Infeasible: {err.message}" if err is not None else "")
+        self.message.setText(tr("Infeasible: {message}").format(message=err.message) if err is not None else "")
         self._show_result()
         self._draw(self.plot)
         self.computed.emit(out)

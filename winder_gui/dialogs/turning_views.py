@@ -20,6 +20,7 @@ from engine.turning import (
     CONSTRAINT_NAMES,
     LABELS,
 )
+from winder_gui.i18n import tr
 
 #: colour per constraint (the paper's Fig. 2 colours where it has them)
 COLOURS: dict[str, str] = {
@@ -119,7 +120,7 @@ class TurningViewsMixin:
     def rows_to_expert(self) -> None:
         """Switch to expert mode with the rows of the current result (the feed band in use)."""
         if self.result is None:
-            self.message.setText("No result to copy the rows from; fix the set-up first.")
+            self.message.setText(tr("No result to copy the rows from; fix the set-up first."))
             return
         users = [r for r in self._rows if r["user"]]
         rows = [{"name": r.name, "a": r.a, "b": r.b, "rhs": r.rhs, "on": r.enabled, "factor": 1.0, "user": False}
@@ -147,7 +148,7 @@ class TurningViewsMixin:
         finally:
             self.table.blockSignals(False)
         if res is None:
-            self.summary.setText("<b>No feasible cutting mode.</b>")
+            self.summary.setText(tr("<b>No feasible cutting mode.</b>"))
             return
         q = res.quantities
         lines = [f"<b>n = {res.n_rpm:.2f} rpm, S = {res.feed_mm_rev:.4g} mm/rev</b> "
@@ -182,9 +183,9 @@ class TurningViewsMixin:
                 if r["name"] in res.slack:
                     self.table.item(i, 7).setText(f"{res.slack[r['name']]:.4f}")
                     self.table.item(i, 8).setText(f"{100 * res.utilisation[r['name']]:.1f} %")
-                    self.table.item(i, 9).setText("ACTIVE" if r["name"] in res.active else "")
+                    self.table.item(i, 9).setText(tr("ACTIVE") if r["name"] in res.active else "")
                 elif not r["on"]:
-                    self.table.item(i, 9).setText("off")
+                    self.table.item(i, 9).setText(tr("off"))
         finally:
             self.table.blockSignals(False)
 

@@ -11,6 +11,7 @@ from PySide6.QtCore import QAbstractTableModel, QMimeData, QModelIndex, QPersist
 from PySide6.QtGui import QColor
 
 from engine.job import HelicalLayer, HoopLayer, PolarLayer, SkipLayer, layer_name
+from winder_gui.i18n import QT_TR_NOOP
 
 LAYER_CLASSES: dict[str, type] = {"hoop": HoopLayer, "helical": HelicalLayer, "polar": PolarLayer, "skip": SkipLayer}
 LAYER_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf",
@@ -18,7 +19,7 @@ LAYER_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b
 """Colour of job layer i: ``LAYER_COLOURS[i % len]`` (table swatch, plots)."""
 MIME = "application/x-winder-layer-rows"
 COLUMNS: tuple[tuple[str, str], ...] = (
-    ("on", ""), ("name", "Name"), ("kind", "Kind"), ("time_s", "Time [s]"), ("fibre_length_m", "Fibre [m]"),
+    (QT_TR_NOOP("on"), ""), ("name", "Name"), ("kind", "Kind"), ("time_s", "Time [s]"), ("fibre_length_m", "Fibre [m]"),
     ("thickness_cyl_mm", "t cyl [mm]"), ("definition", "Definition"),
 )
 COL = {key: i for i, (key, _t) in enumerate(COLUMNS)}
@@ -114,7 +115,7 @@ class LayerTableModel(QAbstractTableModel):
             return None
         row, key = index.row(), COLUMNS[index.column()][0]
         lay = self.layers[row]
-        if key == "on":
+        if key == QT_TR_NOOP("on"):
             if role == Qt.ItemDataRole.CheckStateRole:
                 return Qt.CheckState.Checked if lay.enabled else Qt.CheckState.Unchecked
             if role == Qt.ItemDataRole.DecorationRole:
@@ -150,7 +151,7 @@ class LayerTableModel(QAbstractTableModel):
             return base
         f = base | Qt.ItemFlag.ItemIsEnabled | Qt.ItemFlag.ItemIsSelectable | Qt.ItemFlag.ItemIsDragEnabled
         key = COLUMNS[index.column()][0]
-        if key == "on":
+        if key == QT_TR_NOOP("on"):
             f |= Qt.ItemFlag.ItemIsUserCheckable
         if key == "name":
             f |= Qt.ItemFlag.ItemIsEditable
@@ -162,7 +163,7 @@ class LayerTableModel(QAbstractTableModel):
             return False
         row, key = index.row(), COLUMNS[index.column()][0]
         lay = self.layers[row]
-        if key == "on" and role == Qt.ItemDataRole.CheckStateRole:
+        if key == QT_TR_NOOP("on") and role == Qt.ItemDataRole.CheckStateRole:
             on = Qt.CheckState(value) == Qt.CheckState.Checked if not isinstance(value, bool) else value
             new = [*self.layers]
             new[row] = lay.model_copy(update={"enabled": bool(on)})

@@ -42,6 +42,7 @@ from PySide6.QtWidgets import (
 )
 
 from engine.job import LAYER_KINDS, HelicalLayer, Job, layer_name
+from winder_gui.i18n import QT_TR_NOOP, tr
 from winder_gui.panels.layer_table import (  # noqa: F401 - COL, LAYER_COLOURS, layer_colour, move_rows: API
     COL,
     COLUMNS,
@@ -69,37 +70,46 @@ class LayerField:
 
 
 _COMMON = (
-    LayerField("name", "Name", "str", optional=True, tip="shown in the table, the NC comments and the report"),
-    LayerField("band.width_mm", "Band width [mm]", optional=True, tip="blank: [band] width"),
-    LayerField("band.thickness_mm", "Band thickness [mm]", optional=True, tip="blank: [band] thickness"),
-    LayerField("lead_in_mm", "Lead-in [mm]", tip="carriage move before the first point of the layer"),
-    LayerField("lead_out_deg", "Lead-out [deg]", tip="extra mandrel rotation after the last point (tie-off)"),
+    LayerField("name", QT_TR_NOOP("Name"), "str", optional=True,
+               tip=QT_TR_NOOP("shown in the table, the NC comments and the report")),
+    LayerField("band.width_mm", QT_TR_NOOP("Band width [mm]"), optional=True, tip=QT_TR_NOOP("blank: [band] width")),
+    LayerField("band.thickness_mm", QT_TR_NOOP("Band thickness [mm]"), optional=True,
+               tip=QT_TR_NOOP("blank: [band] thickness")),
+    LayerField("lead_in_mm", QT_TR_NOOP("Lead-in [mm]"),
+               tip=QT_TR_NOOP("carriage move before the first point of the layer")),
+    LayerField("lead_out_deg", QT_TR_NOOP("Lead-out [deg]"),
+               tip=QT_TR_NOOP("extra mandrel rotation after the last point (tie-off)")),
 )
 INHERITED = "(inherited)"
 """The choice that leaves a layer's value to ``[winding]``."""
 _MODES = (INHERITED, "auto", "geodesic", "constant-lambda", "piecewise-lambda", "minimax")
 _HELICAL = (
-    LayerField("angle_deg", "Angle β [deg]", optional=True,
-               tip="winding angle on the middle of the cylindrical part; blank: pole C or [winding] angles"),
-    LayerField("pole_c_mm.0", "Pole C left [mm]", optional=True),
-    LayerField("pole_c_mm.1", "Pole C right [mm]", optional=True),
-    LayerField("mode", "Line", "choice", optional=True, choices=_MODES, tip="blank: [winding] mode"),
-    LayerField("pattern_p", "Pattern p [–]", "int", optional=True),
-    LayerField("pattern_q", "Pattern q [–]", "int", optional=True),
-    LayerField("circuits", "Circuits [–]", "int", optional=True),
-    LayerField("repeat", "Repeat [–]", "int", optional=True, tip="times the pattern is wound; blank: [winding] layers"),
+    LayerField("angle_deg", QT_TR_NOOP("Angle β [deg]"), optional=True,
+               tip=QT_TR_NOOP("winding angle on the middle of the cylindrical part; "
+                              "blank: pole C or [winding] angles")),
+    LayerField("pole_c_mm.0", QT_TR_NOOP("Pole C left [mm]"), optional=True),
+    LayerField("pole_c_mm.1", QT_TR_NOOP("Pole C right [mm]"), optional=True),
+    LayerField("mode", QT_TR_NOOP("Line"), "choice", optional=True, choices=_MODES,
+               tip=QT_TR_NOOP("blank: [winding] mode")),
+    LayerField("pattern_p", QT_TR_NOOP("Pattern p [–]"), "int", optional=True),
+    LayerField("pattern_q", QT_TR_NOOP("Pattern q [–]"), "int", optional=True),
+    LayerField("circuits", QT_TR_NOOP("Circuits [–]"), "int", optional=True),
+    LayerField("repeat", QT_TR_NOOP("Repeat [–]"), "int", optional=True,
+               tip=QT_TR_NOOP("times the pattern is wound; blank: [winding] layers")),
 )
 KIND_FIELDS: dict[str, tuple[LayerField, ...]] = {
     "hoop": (
-        LayerField("z_range_mm.0", "z from [mm]", optional=True, tip="blank (both): the cylindrical part"),
-        LayerField("z_range_mm.1", "z to [mm]", optional=True),
-        LayerField("overlap", "Overlap [–]", tip="share of the band width laid over the previous turn"),
-        LayerField("passes", "Passes [–]", "int"),
-        LayerField("terminal", "Terminal", "bool"),
+        LayerField("z_range_mm.0", QT_TR_NOOP("z from [mm]"), optional=True,
+                   tip=QT_TR_NOOP("blank (both): the cylindrical part")),
+        LayerField("z_range_mm.1", QT_TR_NOOP("z to [mm]"), optional=True),
+        LayerField("overlap", QT_TR_NOOP("Overlap [–]"),
+                   tip=QT_TR_NOOP("share of the band width laid over the previous turn")),
+        LayerField("passes", QT_TR_NOOP("Passes [–]"), "int"),
+        LayerField("terminal", QT_TR_NOOP("Terminal"), "bool"),
     ),
     "helical": _HELICAL,
     "polar": _HELICAL,
-    "skip": (LayerField("angle_deg", "Mandrel rotation [deg]"),),
+    "skip": (LayerField("angle_deg", QT_TR_NOOP("Mandrel rotation [deg]")),),
 }
 
 
@@ -159,25 +169,25 @@ class LayersPanel(QWidget):
         self.table.selectionModel().currentRowChanged.connect(lambda cur, _prev: self._on_row(cur.row()))
 
         self.add_button = QToolButton()
-        self.add_button.setText("Add")
+        self.add_button.setText(tr("Add"))
         self.add_button.setObjectName("addLayer")
         self.add_button.setPopupMode(QToolButton.ToolButtonPopupMode.InstantPopup)
         menu = QMenu(self.add_button)
         self.add_actions: dict[str, QAction] = {}
         for kind in LAYER_KINDS:
-            act = menu.addAction(f"{kind.capitalize()} layer")
+            act = menu.addAction(tr("{v0} layer").format(v0=kind.capitalize()))
             act.triggered.connect(lambda _c=False, k=kind: self.add_layer(k))
             self.add_actions[kind] = act
         self.add_button.setMenu(menu)
-        self.dup_button = QPushButton("Duplicate")
+        self.dup_button = QPushButton(tr("Duplicate"))
         self.dup_button.clicked.connect(lambda: self.duplicate_layer())
-        self.del_button = QPushButton("Delete")
+        self.del_button = QPushButton(tr("Delete"))
         self.del_button.clicked.connect(lambda: self.delete_layer())
         self.up_button = QPushButton("▲")
-        self.up_button.setToolTip("Move the layer one up (wound earlier); or drag the row")
+        self.up_button.setToolTip(tr("Move the layer one up (wound earlier); or drag the row"))
         self.up_button.clicked.connect(lambda: self.move_layer(self._selected, self._selected - 1))
         self.down_button = QPushButton("▼")
-        self.down_button.setToolTip("Move the layer one down (wound later); or drag the row")
+        self.down_button.setToolTip(tr("Move the layer one down (wound later); or drag the row"))
         self.down_button.clicked.connect(lambda: self.move_layer(self._selected, self._selected + 1))
         for b in (self.up_button, self.down_button):
             b.setMaximumWidth(32)
@@ -191,15 +201,15 @@ class LayersPanel(QWidget):
         self.totals.setWordWrap(True)
         self.totals.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
 
-        self.editor_box = QGroupBox("Layer")
+        self.editor_box = QGroupBox(tr("Layer"))
         box = QVBoxLayout(self.editor_box)
         self.kind_combo = QComboBox()
         self.kind_combo.setObjectName("layer.kind")
         self.kind_combo.addItems(list(LAYER_KINDS))
-        self.kind_combo.setToolTip("changing the kind keeps the name, band and lead-in/out")
+        self.kind_combo.setToolTip(tr("changing the kind keeps the name, band and lead-in/out"))
         self.kind_combo.activated.connect(lambda _i: self._on_kind())
         kind_row = QHBoxLayout()
-        kind_row.addWidget(QLabel("Kind"))
+        kind_row.addWidget(QLabel(tr("Kind")))
         kind_row.addWidget(self.kind_combo, 1)
         box.addLayout(kind_row)
         self.form = QFormLayout()
@@ -213,7 +223,7 @@ class LayersPanel(QWidget):
 
         lay = QVBoxLayout(self)
         lay.setContentsMargins(6, 6, 6, 6)
-        title = QLabel("<b>Laminate</b> — layers wound in this order on the growing surface")
+        title = QLabel(tr("<b>Laminate</b> — layers wound in this order on the growing surface"))
         title.setWordWrap(True)
         lay.addWidget(title)
         lay.addLayout(buttons)
@@ -252,12 +262,13 @@ class LayersPanel(QWidget):
             return
         t = layup["total"]
         self.totals.setText(
-            f"Total: program {t.get('program_time_s', 0.0):.1f} s (layers {t.get('time_s', 0.0):.1f} s + "
-            f"transitions {t.get('transition_time_s', 0.0):.1f} s) · fibre {t.get('fibre_length_m', 0.0):.1f} m, "
-            f"{t.get('fibre_mass_kg', 0.0):.3f} kg · resin {t.get('resin_mass_kg', 0.0):.3f} kg · "
-            f"thickness on the cylinder {t.get('thickness_cyl_mm', 0.0):.3f} mm, max "
-            f"{t.get('thickness_max_mm', 0.0):.3f} mm · volume check "
-            f"{100.0 * float(layup.get('volume_error', 0.0)):+.2f} %")
+            tr("Total: program {v0:.1f} s (layers {v1:.1f} s + transitions {v2:.1f} s) · fibre "
+               "{v3:.1f} m, {v4:.3f} kg · resin {v5:.3f} kg · thickness on the cylinder {v6:.3f} mm, "
+               "max {v7:.3f} mm · volume check {v8:+.2f} %")
+            .format(v0=t.get('program_time_s', 0.0), v1=t.get('time_s', 0.0), v2=t.get('transition_time_s', 0.0),
+                    v3=t.get('fibre_length_m', 0.0), v4=t.get('fibre_mass_kg', 0.0), v5=t.get('resin_mass_kg', 0.0),
+                    v6=t.get('thickness_cyl_mm', 0.0), v7=t.get('thickness_max_mm', 0.0),
+                    v8=100.0 * float(layup.get('volume_error', 0.0))))
 
     def selected_layer(self) -> int:
         """The job layer selected (0-based; -1: none)."""
@@ -336,7 +347,7 @@ class LayersPanel(QWidget):
         if self.job is None or not (0 <= i < len(self.job.layers)):
             return
         if len(self.job.layers) == 1:
-            self._set_status("a job keeps at least one layer (disable it or change its kind instead)")
+            self._set_status(tr("a job keeps at least one layer (disable it or change its kind instead)"))
             return
         layers = list(self.job.layers)
         del layers[i]
@@ -356,7 +367,7 @@ class LayersPanel(QWidget):
 
     def set_enabled(self, index: int, on: bool) -> None:
         """Enable or disable layer ``index`` (as its check box does)."""
-        self.model.setData(self.model.index(index, COL["on"]),
+        self.model.setData(self.model.index(index, COL[QT_TR_NOOP("on")]),
                            Qt.CheckState.Checked if on else Qt.CheckState.Unchecked, Qt.ItemDataRole.CheckStateRole)
 
     # -- internals ---------------------------------------------------------------------------------------
@@ -367,7 +378,7 @@ class LayersPanel(QWidget):
         try:
             return self.job.replace(layers=[lay.model_dump() for lay in layers])
         except ValidationError as exc:
-            self._set_status(f"not applied: {exc.errors()[0].get('msg', exc)}")
+            self._set_status(tr("not applied: {v0}").format(v0=exc.errors()[0].get('msg', exc)))
             return None
 
     def _apply_layers(self, layers: list[Any], text: str, select: int) -> None:
@@ -407,10 +418,10 @@ class LayersPanel(QWidget):
         self._clear_form()
         job, i = self.job, self._selected
         if job is None or not (0 <= i < len(job.layers)):
-            self.editor_box.setTitle("Layer")
+            self.editor_box.setTitle(tr("Layer"))
             return
         lay = job.layers[i]
-        self.editor_box.setTitle(f"Layer {i + 1}: {layer_name(lay, i)}")
+        self.editor_box.setTitle(tr("Layer {v0}: {v1}").format(v0=i + 1, v1=layer_name(lay, i)))
         self._loading = True
         try:
             self.kind_combo.setCurrentText(lay.kind)
@@ -434,18 +445,19 @@ class LayersPanel(QWidget):
                     if f.kind != "str":
                         ed.setAlignment(Qt.AlignmentFlag.AlignRight)
                     if f.optional:
-                        ed.setPlaceholderText("inherited" if f.key.startswith("band.") or f.key in
-                                              ("mode", "repeat", "pattern_p", "pattern_q", "circuits") else "default")
+                        inherited = f.key.startswith("band.") or f.key in (
+                            "mode", "repeat", "pattern_p", "pattern_q", "circuits")
+                        ed.setPlaceholderText(tr("inherited") if inherited else tr("default"))
                     ed.setText("" if v is None else (v if isinstance(v, str) else format(v, ".10g")))
                     ed.textEdited.connect(lambda _t: self._on_field_edited())
                 ed.setObjectName(f"layer.{f.key}")
                 if f.tip:
-                    ed.setToolTip(f.tip)
+                    ed.setToolTip(tr(f.tip))
                 err = QLabel("")
                 err.setStyleSheet("color: #c01010; font-size: 9pt; padding-left: 12px;")
                 err.setWordWrap(True)
                 err.hide()
-                self.form.addRow(f.label, ed)
+                self.form.addRow(tr(f.label), ed)
                 self.form.addRow(err)
                 self.editors[f.key] = ed
                 self.error_labels[f.key] = err
@@ -515,7 +527,7 @@ class LayersPanel(QWidget):
             lab.setVisible(bool(msg))
         if errs:
             k, m = next(iter(errs.items()))
-            self._set_status(f"layer {i + 1} {k}: {m}")
+            self._set_status(tr("layer {v0} {k}: {m}").format(v0=i + 1, k=k, m=m))
             return
         self._set_status("")
         assert new_layer is not None
@@ -540,7 +552,8 @@ class LayersPanel(QWidget):
             self.table.setCurrentIndex(self.model.index(select, COL["name"]))
         finally:
             self._loading = False
-        self.editor_box.setTitle(f"Layer {select + 1}: {layer_name(job.layers[select], select)}")
+        self.editor_box.setTitle(tr("Layer {v0}: {v1}")
+                                 .format(v0=select + 1, v1=layer_name(job.layers[select], select)))
         self.job_edited.emit(job, text)
 
     def _on_kind(self) -> None:

@@ -34,44 +34,45 @@ from PySide6.QtWidgets import (
 )
 
 from engine.job import Job
+from winder_gui.i18n import QT_TR_NOOP, tr
 from winder_gui.panels.section_panel import Field, SectionPanel, fmt
 from winder_gui.views.machine_schematic import MachineSchematic, axis_colour
 
 LIMIT_COLUMNS: tuple[tuple[str, str], ...] = (
-    ("min", "min"),
-    ("max", "max"),
-    ("max_speed", "speed"),
-    ("max_accel", "accel"),
-    ("max_jump", "jump"),
+    ("min", QT_TR_NOOP("min")),
+    ("max", QT_TR_NOOP("max")),
+    ("max_speed", QT_TR_NOOP("speed")),
+    ("max_accel", QT_TR_NOOP("accel")),
+    ("max_jump", QT_TR_NOOP("jump")),
 )
 UNLIMITED = 1e11
-DEFAULT_CONTROLLER = "(post's own)"
+DEFAULT_CONTROLLER = QT_TR_NOOP("(post's own)")
 
 # [machine.setup] editors: key, label, optional (blank = the engine's default)
 SETUP_FIELDS: tuple[tuple[str, str, bool], ...] = (
-    ("mandrel_z0_mm", "Mandrel z = 0 at carriage [mm]", True),
-    ("eye_radius_mm", "Eye radius (fixed-radius machine) [mm]", True),
-    ("head_offset_mm.0", "Head offset radial [mm]", False),
-    ("head_offset_mm.1", "Head offset vertical [mm]", False),
-    ("head_offset_mm.2", "Head offset axial [mm]", False),
-    ("shaft_radius_mm", "Shaft radius [mm]", True),
-    ("shaft_length_mm", "Free shaft length [mm]", False),
-    ("chuck_radius_mm", "Chuck radius [mm]", True),
-    ("chuck_length_mm", "Chuck length [mm]", False),
-    ("tailstock_radius_mm", "Tailstock radius [mm]", True),
-    ("tailstock_length_mm", "Tailstock length [mm]", False),
-    ("clearance_mm", "Clearance to supports [mm]", False),
-    ("head_radius_mm", "Head body radius around the eye [mm]", False),
-    ("head_length_mm", "Head body length along the roll axis [mm]", False),
-    ("back_turn_tol_deg", "Back-turn tolerance [deg]", False),
+    ("mandrel_z0_mm", QT_TR_NOOP("Mandrel z = 0 at carriage [mm]"), True),
+    ("eye_radius_mm", QT_TR_NOOP("Eye radius (fixed-radius machine) [mm]"), True),
+    ("head_offset_mm.0", QT_TR_NOOP("Head offset radial [mm]"), False),
+    ("head_offset_mm.1", QT_TR_NOOP("Head offset vertical [mm]"), False),
+    ("head_offset_mm.2", QT_TR_NOOP("Head offset axial [mm]"), False),
+    ("shaft_radius_mm", QT_TR_NOOP("Shaft radius [mm]"), True),
+    ("shaft_length_mm", QT_TR_NOOP("Free shaft length [mm]"), False),
+    ("chuck_radius_mm", QT_TR_NOOP("Chuck radius [mm]"), True),
+    ("chuck_length_mm", QT_TR_NOOP("Chuck length [mm]"), False),
+    ("tailstock_radius_mm", QT_TR_NOOP("Tailstock radius [mm]"), True),
+    ("tailstock_length_mm", QT_TR_NOOP("Tailstock length [mm]"), False),
+    ("clearance_mm", QT_TR_NOOP("Clearance to supports [mm]"), False),
+    ("head_radius_mm", QT_TR_NOOP("Head body radius around the eye [mm]"), False),
+    ("head_length_mm", QT_TR_NOOP("Head body length along the roll axis [mm]"), False),
+    ("back_turn_tol_deg", QT_TR_NOOP("Back-turn tolerance [deg]"), False),
 )
-SETUP_DEFAULT_TEXT = {"mandrel_z0_mm": "centred", "eye_radius_mm": "template's",
-                      "shaft_radius_mm": "0.6 x end radius", "chuck_radius_mm": "2 x shaft",
-                      "tailstock_radius_mm": "1.5 x shaft"}
+SETUP_DEFAULT_TEXT = {"mandrel_z0_mm": QT_TR_NOOP("centred"), "eye_radius_mm": QT_TR_NOOP("template's"),
+                      "shaft_radius_mm": QT_TR_NOOP("0.6 x end radius"), "chuck_radius_mm": QT_TR_NOOP("2 x shaft"),
+                      "tailstock_radius_mm": QT_TR_NOOP("1.5 x shaft")}
 
 POST_FIELDS: tuple[Field, ...] = (
-    Field("post", "tolerance_mm", "Path tolerance [mm]", group="NC output"),
-    Field("post", "min_block_time_s", "Min block time τ [s]", group="NC output"),
+    Field("post", "tolerance_mm", QT_TR_NOOP("Path tolerance [mm]"), group=QT_TR_NOOP("NC output")),
+    Field("post", "min_block_time_s", QT_TR_NOOP("Min block time τ [s]"), group=QT_TR_NOOP("NC output")),
 )
 
 
@@ -79,16 +80,16 @@ class MachinePanel(SectionPanel):
     """Machine template picker with its axes table, post-processor and controller choice."""
 
     def __init__(self) -> None:
-        super().__init__("Machine", POST_FIELDS)
+        super().__init__(tr("Machine"), POST_FIELDS)
         from engine.kinematics import list_machines
         from engine.post import list_controllers, list_posts
 
-        box = QGroupBox("Kinematic template")
+        box = QGroupBox(tr("Kinematic template"))
         form = QFormLayout(box)
         self.template_combo = QComboBox()
         self.template_combo.setObjectName("machine.template")
         self.template_combo.addItems(list_machines())
-        form.addRow("Template", self.template_combo)
+        form.addRow(tr("Template"), self.template_combo)
         self.title_label = QLabel("")
         self.title_label.setWordWrap(True)
         self.title_label.setStyleSheet("color: #555;")
@@ -97,7 +98,7 @@ class MachinePanel(SectionPanel):
         form.addRow(self.schematic)
         self.table = QTableWidget(0, 3 + len(LIMIT_COLUMNS))
         self.table.setObjectName("machine.axes")
-        self.table.setHorizontalHeaderLabels(["axis", "type", "units", *[h for _, h in LIMIT_COLUMNS]])
+        self.table.setHorizontalHeaderLabels([tr("axis"), tr("type"), tr("units"), *[tr(h) for _, h in LIMIT_COLUMNS]])
         self.table.verticalHeader().hide()
         self.table.setSelectionBehavior(QTableWidget.SelectionBehavior.SelectRows)
         self.table.setSelectionMode(QTableWidget.SelectionMode.SingleSelection)
@@ -110,7 +111,7 @@ class MachinePanel(SectionPanel):
         font.setPointSizeF(max(font.pointSizeF() - 1.0, 7.0))
         self.table.setFont(font)
         self.table.setMinimumHeight(150)
-        self.table.setToolTip("Limits in controller units (mm or deg, per s). Blank: the template's value.")
+        self.table.setToolTip(tr("Limits in controller units (mm or deg, per s). Blank: the template's value."))
         form.addRow(self.table)
         self.table_error = QLabel("")
         self.table_error.setObjectName("error.machine.axes")
@@ -119,21 +120,21 @@ class MachinePanel(SectionPanel):
         self.table_error.hide()
         form.addRow(self.table_error)
 
-        pbox = QGroupBox("Post-processor")
+        pbox = QGroupBox(tr("Post-processor"))
         pform = QFormLayout(pbox)
         self.post_combo = QComboBox()
         self.post_combo.setObjectName("post.post")
         self.post_combo.addItems(list_posts())
         self.controller_combo = QComboBox()
         self.controller_combo.setObjectName("post.controller")
-        self.controller_combo.addItems([DEFAULT_CONTROLLER, *list_controllers()])
-        pform.addRow("Dialect", self.post_combo)
-        pform.addRow("Controller profile", self.controller_combo)
+        self.controller_combo.addItems([tr(DEFAULT_CONTROLLER), *list_controllers()])
+        pform.addRow(tr("Dialect"), self.post_combo)
+        pform.addRow(tr("Controller profile"), self.controller_combo)
         self.post_note = QLabel("")
         self.post_note.setWordWrap(True)
         self.post_note.setStyleSheet("color: #555; font-size: 9pt;")
         pform.addRow(self.post_note)
-        sbox = QGroupBox("Set-up (placement, head, supports)")
+        sbox = QGroupBox(tr("Set-up (placement, head, supports)"))
         sform = QFormLayout(sbox)
         self.setup_edits: dict[str, QLineEdit] = {}
         for key, label, optional in SETUP_FIELDS:
@@ -141,9 +142,9 @@ class MachinePanel(SectionPanel):
             ed.setObjectName(f"machine.setup.{key}")
             ed.setAlignment(Qt.AlignmentFlag.AlignRight)
             if optional:
-                ed.setPlaceholderText(SETUP_DEFAULT_TEXT.get(key, "default"))
+                ed.setPlaceholderText(tr(SETUP_DEFAULT_TEXT.get(key, QT_TR_NOOP("default"))))
             ed.textEdited.connect(lambda _t: self._on_edited())
-            sform.addRow(label, ed)
+            sform.addRow(tr(label), ed)
             self.setup_edits[key] = ed
         self.placement_label = QLabel("")
         self.placement_label.setObjectName("machine.placement")
@@ -207,7 +208,7 @@ class MachinePanel(SectionPanel):
                         f"{pick} chosen")
             ctls = [c for p, c in pairs if p == self.post_combo.currentText()]
             self.controller_combo.clear()
-            self.controller_combo.addItems([DEFAULT_CONTROLLER, *ctls])
+            self.controller_combo.addItems([tr(DEFAULT_CONTROLLER), *ctls])
             if controller and controller in ctls:
                 self.controller_combo.setCurrentText(controller)
             elif controller:
@@ -289,7 +290,8 @@ class MachinePanel(SectionPanel):
                 for j, text in enumerate((ax.name, ax.type, ax.units)):
                     it = QTableWidgetItem(text)
                     it.setFlags(Qt.ItemFlag.ItemIsEnabled | Qt.ItemFlag.ItemIsSelectable)
-                    it.setToolTip(f"{ax.name}: {ax.type} axis [{ax.units}]")
+                    it.setToolTip(tr("{name}: {type} axis [{units}]")
+                                  .format(name=ax.name, type=ax.type, units=ax.units))
                     if j == 0:   # the axis's colour in the schematic and the axis plots
                         pm = QPixmap(10, 10)
                         pm.fill(QColor(axis_colour(i)))
@@ -301,7 +303,7 @@ class MachinePanel(SectionPanel):
                     it.setTextAlignment(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter)
                     if v != float(getattr(base, key)):
                         it.setBackground(QBrush(QColor("#fff3c4")))  # an override of the template
-                        it.setToolTip(f"template: {fmt(float(getattr(base, key)))}")
+                        it.setToolTip(tr("template: {v0}").format(v0=fmt(float(getattr(base, key)))))
                     self.table.setItem(i, 3 + j, it)
         finally:
             self.table.clearSelection()
@@ -351,7 +353,7 @@ class MachinePanel(SectionPanel):
 
     def _on_post(self) -> None:
         ctl = self.controller_combo.currentText()
-        self._fill_posts(self.post_combo.currentText(), None if ctl == DEFAULT_CONTROLLER else ctl)
+        self._fill_posts(self.post_combo.currentText(), None if ctl == tr(DEFAULT_CONTROLLER) else ctl)
         self._on_edited()
 
     def select_template(self, name: str) -> None:
@@ -371,7 +373,7 @@ class MachinePanel(SectionPanel):
         try:
             self._fill_table(job)
             ctl = self.controller_combo.currentText()
-            self._fill_posts(self.post_combo.currentText(), None if ctl == DEFAULT_CONTROLLER else ctl)
+            self._fill_posts(self.post_combo.currentText(), None if ctl == tr(DEFAULT_CONTROLLER) else ctl)
         finally:
             self._loading = False
         self._on_edited()
@@ -379,7 +381,7 @@ class MachinePanel(SectionPanel):
     def extra_changes(self, sections: dict[str, dict[str, Any]], errs: dict[str, str]) -> None:
         sections["post"]["post"] = self.post_combo.currentText()
         ctl = self.controller_combo.currentText()
-        sections["post"]["controller"] = None if ctl == DEFAULT_CONTROLLER else ctl
+        sections["post"]["controller"] = None if ctl == tr(DEFAULT_CONTROLLER) else ctl
         if self.template is None:
             return
         axes: dict[str, dict[str, float]] = {}
@@ -422,7 +424,7 @@ class MachinePanel(SectionPanel):
                     setup[base] = SetupSpec.model_fields[base].default
                 continue
             if not _num(text):
-                bad.append(f"{label}: not a number ({text!r})")
+                bad.append(tr("{label}: not a number ({text!r})").format(label=tr(label), text=text))
                 continue
             if idx:
                 offs[int(idx)] = float(text)

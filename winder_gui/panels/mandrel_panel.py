@@ -37,6 +37,7 @@ from PySide6.QtWidgets import (
 )
 
 from engine.job import BottleSpec, ConeSpec, FileSpec, PipeSpec, PointsSpec, SegmentsSpec, VesselSpec
+from winder_gui.i18n import QT_TR_NOOP, tr
 from winder_gui.panels.points_table import PointsTable
 from winder_gui.panels.points_table import fmt as table_fmt
 from winder_gui.panels.segments_table import SegmentsTable
@@ -64,33 +65,33 @@ DOMES = ("hemisphere", "ellipse", "isotensoid")
 # (key, label); "name.0"/"name.1" are the left/right members of a pair field
 FIELDS: dict[str, tuple[tuple[str, str], ...]] = {
     "vessel": (
-        ("radius_mm", "Radius R [mm]"),
-        ("cylinder_length_mm", "Cylinder length [mm]"),
-        ("dome.0", "Left dome"),
-        ("dome_ratio.0", "Left dome axis ratio a/R [–]"),
-        ("pole_radius_mm.0", "Left pole opening radius [mm]"),
-        ("dome.1", "Right dome"),
-        ("dome_ratio.1", "Right dome axis ratio a/R [–]"),
-        ("pole_radius_mm.1", "Right pole opening radius [mm]"),
+        ("radius_mm", QT_TR_NOOP("Radius R [mm]")),
+        ("cylinder_length_mm", QT_TR_NOOP("Cylinder length [mm]")),
+        ("dome.0", QT_TR_NOOP("Left dome")),
+        ("dome_ratio.0", QT_TR_NOOP("Left dome axis ratio a/R [–]")),
+        ("pole_radius_mm.0", QT_TR_NOOP("Left pole opening radius [mm]")),
+        ("dome.1", QT_TR_NOOP("Right dome")),
+        ("dome_ratio.1", QT_TR_NOOP("Right dome axis ratio a/R [–]")),
+        ("pole_radius_mm.1", QT_TR_NOOP("Right pole opening radius [mm]")),
     ),
     "cone": (
-        ("r0_mm", "Radius at z = 0, r0 [mm]"),
-        ("r1_mm", "Radius at z = L, r1 [mm]"),
-        ("length_mm", "Length L [mm]"),
+        ("r0_mm", QT_TR_NOOP("Radius at z = 0, r0 [mm]")),
+        ("r1_mm", QT_TR_NOOP("Radius at z = L, r1 [mm]")),
+        ("length_mm", QT_TR_NOOP("Length L [mm]")),
     ),
-    "pipe": (("radius_mm", "Radius R [mm]"), ("length_mm", "Length L [mm]")),
+    "pipe": (("radius_mm", QT_TR_NOOP("Radius R [mm]")), ("length_mm", QT_TR_NOOP("Length L [mm]"))),
     "bottle": (
-        ("radius_mm", "Body radius R [mm]"),
-        ("body_length_mm", "Body length [mm]"),
-        ("shoulder_length_mm", "Shoulder length [mm]"),
-        ("waist_radius_mm", "Waist radius [mm]"),
-        ("neck_length_mm", "Neck length [mm]"),
-        ("neck_radius_mm", "Neck radius [mm]"),
-        ("bottom_pole_radius_mm", "Bottom pole opening radius [mm]"),
+        ("radius_mm", QT_TR_NOOP("Body radius R [mm]")),
+        ("body_length_mm", QT_TR_NOOP("Body length [mm]")),
+        ("shoulder_length_mm", QT_TR_NOOP("Shoulder length [mm]")),
+        ("waist_radius_mm", QT_TR_NOOP("Waist radius [mm]")),
+        ("neck_length_mm", QT_TR_NOOP("Neck length [mm]")),
+        ("neck_radius_mm", QT_TR_NOOP("Neck radius [mm]")),
+        ("bottom_pole_radius_mm", QT_TR_NOOP("Bottom pole opening radius [mm]")),
     ),
     "points": (),
     "segments": (),
-    "file": (("path", "Profile file"), ("smoothing_mm", "Smoothing tolerance [mm]")),
+    "file": (("path", QT_TR_NOOP("Profile file")), ("smoothing_mm", QT_TR_NOOP("Smoothing tolerance [mm]"))),
 }
 OPTIONAL = {"smoothing_mm"}
 """Fields that may stay empty (then left out of the spec)."""
@@ -141,19 +142,19 @@ class MandrelPanel(QWidget):
 
         lay = QVBoxLayout(self)
         lay.setContentsMargins(6, 6, 6, 6)
-        title = QLabel("<b>Mandrel</b>")
+        title = QLabel(tr("<b>Mandrel</b>"))
         lay.addWidget(title)
         kind_form = QFormLayout()
         self.kind_combo = QComboBox()
         for key, text in KINDS:
             self.kind_combo.addItem(text, key)
-        kind_form.addRow("Kind", self.kind_combo)
+        kind_form.addRow(tr("Kind"), self.kind_combo)
         lay.addLayout(kind_form)
 
         self.pages = QStackedWidget()
         self.page_index: dict[str, int] = {}
         for kind, _ in KINDS:
-            box = QGroupBox("Parameters")
+            box = QGroupBox(tr("Parameters"))
             form = QFormLayout(box)
             form.setFieldGrowthPolicy(QFormLayout.FieldGrowthPolicy.AllNonFixedFieldsGrow)
             for key, label in FIELDS[kind]:
@@ -165,16 +166,16 @@ class MandrelPanel(QWidget):
                 if kind == "file":
                     h = QHBoxLayout()
                     h.addWidget(row.editor, 1)
-                    self.import_button = QPushButton("Import…")
+                    self.import_button = QPushButton(tr("Import…"))
                     self.import_button.clicked.connect(self.import_requested)
                     h.addWidget(self.import_button)
                     v.addLayout(h)
                 else:
                     v.addWidget(row.editor)
-                form.addRow(label, cell)
+                form.addRow(tr(label), cell)
                 form.addRow(row.error)  # full width under its field; hidden while the value is fine
             if kind == "points":
-                box.setTitle("Points")
+                box.setTitle(tr("Points"))
                 self.points_info = QLabel("")
                 self.points_info.setWordWrap(True)
                 self.points_info.setStyleSheet("color: #666;")
@@ -182,19 +183,19 @@ class MandrelPanel(QWidget):
                 self.points_table = PointsTable()
                 form.addRow(self.points_table)
             if kind == "segments":
-                box.setTitle("Segments")
-                note = QLabel("Joints are tangent unless Corner is ticked (then rounded by Fillet). Arc: Centre, "
+                box.setTitle(tr("Segments"))
+                note = QLabel(tr("Joints are tangent unless Corner is ticked (then rounded by Fillet). Arc: Centre, "
                               "or a signed Radius (> 0 convex, < 0 concave), or neither (tangent arc). Isotensoid: "
-                              "Pole r (dome down to it) or Radius (dome up to that equator).")
+                              "Pole r (dome down to it) or Radius (dome up to that equator)."))
                 note.setWordWrap(True)
                 note.setStyleSheet("color: #666;")
                 form.addRow(note)
                 self.segments_table = SegmentsTable()
                 form.addRow(self.segments_table)
             if kind == "file":
-                note = QLabel("The profile is read from the file each time the job is opened. Smoothing (CSV "
+                note = QLabel(tr("The profile is read from the file each time the job is opened. Smoothing (CSV "
                               "tables only): the smoothest spline within this distance of the measured points; "
-                              "empty = through the points.")
+                              "empty = through the points."))
                 note.setWordWrap(True)
                 note.setStyleSheet("color: #666;")
                 form.addRow(note)
@@ -204,11 +205,11 @@ class MandrelPanel(QWidget):
                 form.addRow(self.file_info)
             self.page_index[kind] = self.pages.addWidget(box)
         lay.addWidget(self.pages)
-        self.convert_button = QPushButton("Convert to sketch (exact segments)")
+        self.convert_button = QPushButton(tr("Convert to sketch (exact segments)"))
         self.convert_button.setObjectName("convertToSketch")
         self.convert_button.setToolTip(
-            "Replace the template by a sketch of its exact segments (lines, arcs, ellipse arcs, domes);\n"
-            "the segments can then be edited in a table (undo with Ctrl+Z)"
+            tr("Replace the template by a sketch of its exact segments (lines, arcs, ellipse arcs, domes);\n"
+            "the segments can then be edited in a table (undo with Ctrl+Z)")
         )
         self.convert_button.clicked.connect(self.convert_to_sketch)
         lay.addWidget(self.convert_button)
@@ -234,7 +235,7 @@ class MandrelPanel(QWidget):
             editor = QLineEdit()
             if key == "path":
                 editor.setReadOnly(True)
-                editor.setPlaceholderText("choose a file with Import…")
+                editor.setPlaceholderText(tr("choose a file with Import…"))
             else:
                 editor.setAlignment(Qt.AlignmentFlag.AlignRight)
                 editor.textEdited.connect(lambda _t, k=kind: self._on_edited(k))
@@ -321,7 +322,7 @@ class MandrelPanel(QWidget):
             parts.append(f"smoothed within {sm['tolerance_mm']:g} mm: max deviation {sm['max_deviation_mm']:.4g} mm "
                          f"at z = {sm['at_z_mm']:.6g} mm, rms {sm['rms_deviation_mm']:.4g} mm")
         elif sm:
-            parts.append(f"smoothing: {sm.get('note', '')}")
+            parts.append(f"smoothing: {sm.get(QT_TR_NOOP('note'), '')}")
         self.file_info.setText("; ".join(parts))
 
     def convert_to_sketch(self) -> None:
@@ -408,7 +409,7 @@ class MandrelPanel(QWidget):
         try:
             spec = PointsSpec(z_mm=[float(v) for v in z], r_mm=[float(v) for v in r])
         except ValidationError as exc:  # cannot happen after the table's checks; never a traceback
-            self._set_status(f"sketch table: {exc.errors()[0]['msg']}")
+            self._set_status(tr("sketch table: {v0}").format(v0=exc.errors()[0]['msg']))
         else:
             self.spec_edited.emit(spec)
         self._update_points_info()
@@ -425,8 +426,9 @@ class MandrelPanel(QWidget):
         n = self.points_table.table.rowCount()
         span = f", z from {table_fmt(vals[0][0])} to {table_fmt(vals[0][-1])} mm" if vals is not None else ""
         self.points_info.setText(
-            f"{n} points{span}. C2 spline through them; ◐ marks a point in a concave zone (shaded on the plot). "
-            "Also editable on the r(z) plot (drag, double-click to add, right-click to remove)."
+            tr("{n} points{span}. C2 spline through them; ◐ marks a point in a concave zone (shaded "
+               "on the plot). Also editable on the r(z) plot (drag, double-click to add, right-click "
+               "to remove).").format(n=n, span=span)
         )
 
     def _show_page(self, kind: str) -> None:

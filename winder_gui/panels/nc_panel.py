@@ -27,6 +27,7 @@ from PySide6.QtWidgets import (
 )
 
 from winder_gui import texts
+from winder_gui.i18n import tr
 from winder_gui.panels.section_panel import TIMELAW_FIELDS, SectionPanel
 from winder_gui.texts import STALE_RESULTS
 
@@ -40,17 +41,17 @@ class TimeLawPanel(SectionPanel):
     compute_requested = Signal()
 
     def __init__(self) -> None:
-        super().__init__("Time law", TIMELAW_FIELDS)
-        box = QGroupBox("Tube iterations")
+        super().__init__(tr("Time law"), TIMELAW_FIELDS)
+        box = QGroupBox(tr("Tube iterations"))
         v = QVBoxLayout(box)
-        note = QLabel("Runs the DP tube algorithm, a single DP and the TOPP-RA bound on the law chosen above "
+        note = QLabel(tr("Runs the DP tube algorithm, a single DP and the TOPP-RA bound on the law chosen above "
                       "the plot: the paper's 7-axis example (Tables 4–5 limits), or one of the job's own laws "
                       "(after a run with method tube/dp/toppra). The method above sets the NC program's block "
-                      "times: a time law over the job's axis path (tube, the default) or (17)/(18) ('blocks').")
+                      "times: a time law over the job's axis path (tube, the default) or (17)/(18) ('blocks')."))
         note.setWordWrap(True)
         note.setStyleSheet("color: #555;")
         v.addWidget(note)
-        self.compute_button = QPushButton("Compute time law")
+        self.compute_button = QPushButton(tr("Compute time law"))
         self.compute_button.setObjectName("timelaw.compute")
         self.compute_button.clicked.connect(self.compute_requested)
         v.addWidget(self.compute_button)
@@ -76,14 +77,14 @@ class NCPanel(QWidget):
         super().__init__(parent)
         lay = QVBoxLayout(self)
         lay.setContentsMargins(6, 6, 6, 6)
-        lay.addWidget(QLabel("<b>NC program</b>"))
+        lay.addWidget(QLabel(tr("<b>NC program</b>")))
         row = QHBoxLayout()
-        self.run_button = QPushButton("Run (F5)")
+        self.run_button = QPushButton(tr("Run (F5)"))
         self.run_button.setObjectName("nc.run")
-        self.cancel_button = QPushButton("Cancel (Esc)")
+        self.cancel_button = QPushButton(tr("Cancel (Esc)"))
         self.cancel_button.setObjectName("nc.cancel")
         self.cancel_button.setEnabled(False)
-        self.export_button = QPushButton("Export NC…")
+        self.export_button = QPushButton(tr("Export NC…"))
         self.export_button.setObjectName("nc.export")
         self.export_button.setEnabled(False)
         for b in (self.run_button, self.cancel_button, self.export_button):
@@ -94,23 +95,23 @@ class NCPanel(QWidget):
         self.run_reason.setWordWrap(True)
         self.run_reason.setStyleSheet("color: #c01010;")
         lay.addWidget(self.run_reason)
-        self.stale = QLabel(STALE_RESULTS)
+        self.stale = QLabel(tr(STALE_RESULTS))
         self.stale.setObjectName("nc.stale")
         self.stale.setWordWrap(True)
         self.stale.setStyleSheet("color: #a05a00; font-weight: bold;")
         self.stale.hide()
         lay.addWidget(self.stale)
-        self.summary = QLabel("Not run yet.")
+        self.summary = QLabel(tr("Not run yet."))
         self.summary.setObjectName("nc.summary")
         self.summary.setWordWrap(True)
         lay.addWidget(self.summary)
-        lay.addWidget(QLabel("Warnings"))
+        lay.addWidget(QLabel(tr("Warnings")))
         self.warnings = QListWidget()
         self.warnings.setObjectName("nc.warnings")
         self.warnings.setWordWrap(True)
         self.warnings.setMaximumHeight(140)
         lay.addWidget(self.warnings)
-        lay.addWidget(QLabel("Program preview"))
+        lay.addWidget(QLabel(tr("Program preview")))
         self.preview = QPlainTextEdit()
         self.preview.setObjectName("nc.preview")
         self.preview.setReadOnly(True)
@@ -127,12 +128,12 @@ class NCPanel(QWidget):
         """Enable Run unless a field is bad (``reason``); Cancel while running."""
         self.run_button.setEnabled(can_run and not running)
         self.run_button.setToolTip(reason)
-        self.run_reason.setText(f"Run disabled: {reason}" if reason else "")
+        self.run_reason.setText(tr("Run disabled: {reason}").format(reason=reason) if reason else "")
         self.cancel_button.setEnabled(running)
 
     def set_stale(self, stale: bool, reason: str = "") -> None:
         """Grey and label the summary, warnings and preview while they describe an earlier job."""
-        self.stale.setText(reason or STALE_RESULTS)
+        self.stale.setText(reason or tr(STALE_RESULTS))
         self.stale.setVisible(stale)
         for w in (self.summary, self.warnings, self.preview):
             w.setEnabled(not stale)
@@ -146,21 +147,22 @@ class NCPanel(QWidget):
         """Show the program summary, ``warns`` and the first lines of the NC text of ``res``."""
         self.warnings.clear()
         if res is None or res.nc_text is None:
-            self.summary.setText("Not run yet." if res is None else "The pipeline stopped before the NC stage.")
+            self.summary.setText(tr("Not run yet.") if res is None else tr("The pipeline stopped before the NC stage."))
             self.preview.setPlainText("")
             return
         b = res.blocks
         text = res.nc_text
         lines = text.count("\n") + 1
         self.summary.setText(
-            f"Post <b>{res.post_name}</b> ({res.extension}) · machine {res.machine.name} · {b.n} blocks · "
-            f"{lines} lines<br>{texts.program_times(b.total, b.total_t17)}"
+            tr("Post <b>{post_name}</b> ({extension}) · machine {name} · {n} blocks · {lines} lines<br>{v5}")
+            .format(post_name=res.post_name, extension=res.extension, name=res.machine.name, n=b.n, lines=lines,
+                    v5=texts.program_times(b.total, b.total_t17))
         )
         warns = list(warns or [])
         for w in warns:
             self.warnings.addItem(w)
         if not warns:
-            self.warnings.addItem("none")
+            self.warnings.addItem(tr("none"))
         head = text.replace("\r\n", "\n").split("\n", PREVIEW_LINES)  # some dialects end lines with CR LF
         shown = "\n".join(head[:PREVIEW_LINES])
         if len(head) > PREVIEW_LINES:

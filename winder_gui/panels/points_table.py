@@ -38,11 +38,12 @@ from PySide6.QtWidgets import (
 )
 
 from engine.mandrel import MIN_SKETCH_POINTS
+from winder_gui.i18n import QT_TR_NOOP, tr
 from winder_gui.views.geometry import FloatArray
 
 MIN_POINTS = MIN_SKETCH_POINTS
 """A C2 spline through the points needs at least this many (as :func:`winder_gui.views.geometry.check_points`)."""
-COLUMNS = ("z [mm]", "r [mm]")
+COLUMNS = (QT_TR_NOOP("z [mm]"), QT_TR_NOOP("r [mm]"))
 _EXACT = Qt.ItemDataRole.UserRole
 _CONCAVE_FG = QBrush(QColor(200, 30, 30))
 _BAD_BG = QBrush(QColor(255, 200, 200))
@@ -171,7 +172,7 @@ class PointsTable(QWidget):
         lay.setSpacing(3)
         self.table = QTableWidget(0, 2)
         self.table.setObjectName("pointsTable")
-        self.table.setHorizontalHeaderLabels(list(COLUMNS))
+        self.table.setHorizontalHeaderLabels([tr(c) for c in COLUMNS])
         self.table.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
         self.table.verticalHeader().setDefaultSectionSize(22)
         self.table.verticalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Fixed)
@@ -183,21 +184,21 @@ class PointsTable(QWidget):
         )
         self.table.setMinimumHeight(200)
         self.table.setToolTip(
-            "Type a value and press Enter · Delete removes the selected rows · "
-            "Ctrl+V pastes numbers copied from a spreadsheet"
+            tr("Type a value and press Enter · Delete removes the selected rows · "
+            "Ctrl+V pastes numbers copied from a spreadsheet")
         )
         lay.addWidget(self.table, 1)
 
         buttons = QHBoxLayout()
         buttons.setSpacing(3)
-        self.add_button = QPushButton("Add")
-        self.add_button.setToolTip("Append a point after the last one")
-        self.insert_button = QPushButton("Insert")
-        self.insert_button.setToolTip("Insert a point midway between the current row and the next")
-        self.delete_button = QPushButton("Delete")
-        self.delete_button.setToolTip("Delete the selected rows (Delete key)")
-        self.paste_button = QPushButton("Paste")
-        self.paste_button.setToolTip("Paste rows of z, r from the clipboard (tab, comma or space separated)")
+        self.add_button = QPushButton(tr("Add"))
+        self.add_button.setToolTip(tr("Append a point after the last one"))
+        self.insert_button = QPushButton(tr("Insert"))
+        self.insert_button.setToolTip(tr("Insert a point midway between the current row and the next"))
+        self.delete_button = QPushButton(tr("Delete"))
+        self.delete_button.setToolTip(tr("Delete the selected rows (Delete key)"))
+        self.paste_button = QPushButton(tr("Paste"))
+        self.paste_button.setToolTip(tr("Paste rows of z, r from the clipboard (tab, comma or space separated)"))
         for b in (self.add_button, self.insert_button, self.delete_button, self.paste_button):
             b.setAutoDefault(False)
             b.setMinimumWidth(40)
@@ -329,8 +330,9 @@ class PointsTable(QWidget):
         left = len(cells) - len(rows)
         if left < MIN_POINTS:
             self._show_message(
-                f"Not applied: a sketched generatrix needs at least {MIN_POINTS} points "
-                f"(deleting {len(rows)} row{'s' if len(rows) > 1 else ''} would leave {left})"
+                tr("Not applied: a sketched generatrix needs at least {MIN_POINTS} points (deleting "
+                   "{v1} row{v2} would leave {left})")
+                .format(MIN_POINTS=MIN_POINTS, v1=len(rows), v2='s' if len(rows) > 1 else '', left=left)
             )
             return
         keep = [c for i, c in enumerate(cells) if i not in set(rows)]
@@ -347,7 +349,7 @@ class PointsTable(QWidget):
             text = QGuiApplication.clipboard().text()
         block = parse_block(text or "")
         if not block:
-            self._show_message("Nothing to paste: the clipboard holds no numbers")
+            self._show_message(tr("Nothing to paste: the clipboard holds no numbers"))
             return 0
         cells = [list(c) for c in self.cells()]
         r0 = self.table.currentRow() if row is None else row
@@ -427,8 +429,8 @@ class PointsTable(QWidget):
             h.setText(f"{i + 1} ◐" if zone else str(i + 1))
             h.setForeground(_CONCAVE_FG if zone else QBrush())
             h.setToolTip(
-                f"In a concave zone (r'' > 0) from z {fmt(zone[0])} to {fmt(zone[1])} mm: "
-                "the fibre bridges here unless friction holds it" if zone else ""
+                tr("In a concave zone (r'' > 0) from z {v0} to {v1} mm: the fibre bridges here "
+                   "unless friction holds it").format(v0=fmt(zone[0]), v1=fmt(zone[1])) if zone else ""
             )
 
     def _fill(self, cells: list[tuple[str, str]]) -> None:

@@ -21,6 +21,7 @@ from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import QComboBox, QFormLayout, QGroupBox, QLabel, QLineEdit, QVBoxLayout, QWidget
 
 from engine.job import Job
+from winder_gui.i18n import QT_TR_NOOP, tr
 
 
 def fmt(v: Any) -> str:
@@ -103,12 +104,12 @@ class SectionPanel(QWidget):
         self._problem = ""
         self.lay = QVBoxLayout(self)
         self.lay.setContentsMargins(6, 6, 6, 6)
-        self.lay.addWidget(QLabel(f"<b>{title}</b>"))
+        self.lay.addWidget(QLabel(f"<b>{title}</b>"))  # title: translated by the caller
         forms: dict[str, QFormLayout] = {}
         for f in fields:
-            g = f.group or "Parameters"
+            g = f.group or QT_TR_NOOP("Parameters")
             if g not in forms:
-                box = QGroupBox(g)
+                box = QGroupBox(tr(g))
                 form = QFormLayout(box)
                 form.setFieldGrowthPolicy(QFormLayout.FieldGrowthPolicy.AllNonFixedFieldsGrow)
                 form.setRowWrapPolicy(QFormLayout.RowWrapPolicy.WrapLongRows)
@@ -135,18 +136,18 @@ class SectionPanel(QWidget):
             if f.kind in ("float", "int"):
                 editor.setAlignment(Qt.AlignmentFlag.AlignRight)
             if f.optional:
-                editor.setPlaceholderText("default")
+                editor.setPlaceholderText(tr("default"))
             editor.textEdited.connect(lambda _t: self._on_edited())
         editor.setObjectName(f.name)
         editor.setMinimumWidth(90)
         if f.tip:
-            editor.setToolTip(f.tip)
+            editor.setToolTip(tr(f.tip))
         err = QLabel("")
         err.setObjectName(f"error.{f.name}")
         err.setStyleSheet("color: #c01010; font-size: 9pt; padding-left: 12px;")
         err.setWordWrap(True)
         err.hide()
-        form.addRow(f.label, editor)
+        form.addRow(tr(f.label), editor)
         form.addRow(err)
         self.rows[f.name] = _Row(f, editor, err)
 
@@ -334,60 +335,70 @@ class SectionPanel(QWidget):
 
 # ------------------------------------------------------------------------------------------------
 WINDING_FIELDS: tuple[Field, ...] = (
-    Field("band", "width_mm", "Band width [mm]", group="Band"),
-    Field("band", "thickness_mm", "Band thickness [mm]", group="Band"),
-    Field("band", "friction", "Friction μ [–]", group="Band", tip="band-on-mandrel friction: |λ| > μ slips"),
-    Field("band", "material", "Material", kind="str", group="Band"),
-    Field("winding", "mode", "Line", kind="choice",
-          choices=("auto", "geodesic", "constant-lambda", "piecewise-lambda", "minimax"), group="Winding line"),
-    Field("winding", "angles", "Required angles z [mm] : β [deg]", kind="angles", group="Winding line",
-          tip="e.g. 500:55, 200:40 — winding angle β (deg) required on the parallel at z (mm)"),
-    Field("winding", "pole_c_mm", "Pole C left [mm]", index=0, optional=True, group="Winding line"),
-    Field("winding", "pole_c_mm", "Pole C right [mm]", index=1, optional=True, group="Winding line"),
-    Field("winding", "dwell_deg", "Dwell left [deg]", index=0, group="Winding line"),
-    Field("winding", "dwell_deg", "Dwell right [deg]", index=1, group="Winding line"),
-    Field("winding", "points_per_pass", "Points per pass [–]", kind="int", group="Winding line"),
-    Field("winding", "circuits", "Circuits [–]", kind="int", optional=True, group="Pattern"),
-    Field("winding", "pattern_p", "Pattern p [–]", kind="int", optional=True, group="Pattern"),
-    Field("winding", "pattern_q", "Pattern q [–]", kind="int", optional=True, group="Pattern"),
-    Field("winding", "layers", "Layers [–]", kind="int", group="Pattern"),
-    Field("winding", "lead", "Lead", kind="choice", choices=("leading", "lagging"), group="Pattern"),
-    Field("winding", "close_by", "Close pattern by", kind="choice", choices=("dwell", "angle"), group="Pattern"),
+    Field("band", "width_mm", QT_TR_NOOP("Band width [mm]"), group=QT_TR_NOOP("Band")),
+    Field("band", "thickness_mm", QT_TR_NOOP("Band thickness [mm]"), group=QT_TR_NOOP("Band")),
+    Field("band", "friction", QT_TR_NOOP("Friction μ [–]"), group=QT_TR_NOOP("Band"),
+          tip=QT_TR_NOOP("band-on-mandrel friction: |λ| > μ slips")),
+    Field("band", "material", QT_TR_NOOP("Material"), kind="str", group=QT_TR_NOOP("Band")),
+    Field("winding", "mode", QT_TR_NOOP("Line"), kind="choice",
+          choices=("auto", "geodesic", "constant-lambda", "piecewise-lambda",
+                   "minimax"), group=QT_TR_NOOP("Winding line")),
+    Field("winding", "angles", QT_TR_NOOP("Required angles z [mm] : β [deg]"), kind="angles",
+          group=QT_TR_NOOP("Winding line"),
+          tip=QT_TR_NOOP("e.g. 500:55, 200:40 — winding angle β (deg) required on the parallel at z (mm)")),
+    Field("winding", "pole_c_mm", QT_TR_NOOP("Pole C left [mm]"), index=0, optional=True,
+          group=QT_TR_NOOP("Winding line")),
+    Field("winding", "pole_c_mm", QT_TR_NOOP("Pole C right [mm]"), index=1, optional=True,
+          group=QT_TR_NOOP("Winding line")),
+    Field("winding", "dwell_deg", QT_TR_NOOP("Dwell left [deg]"), index=0, group=QT_TR_NOOP("Winding line")),
+    Field("winding", "dwell_deg", QT_TR_NOOP("Dwell right [deg]"), index=1, group=QT_TR_NOOP("Winding line")),
+    Field("winding", "points_per_pass", QT_TR_NOOP("Points per pass [–]"), kind="int",
+          group=QT_TR_NOOP("Winding line")),
+    Field("winding", "circuits", QT_TR_NOOP("Circuits [–]"), kind="int", optional=True, group=QT_TR_NOOP("Pattern")),
+    Field("winding", "pattern_p", QT_TR_NOOP("Pattern p [–]"), kind="int", optional=True, group=QT_TR_NOOP("Pattern")),
+    Field("winding", "pattern_q", QT_TR_NOOP("Pattern q [–]"), kind="int", optional=True, group=QT_TR_NOOP("Pattern")),
+    Field("winding", "layers", QT_TR_NOOP("Layers [–]"), kind="int", group=QT_TR_NOOP("Pattern")),
+    Field("winding", "lead", QT_TR_NOOP("Lead"), kind="choice", choices=("leading", "lagging"),
+          group=QT_TR_NOOP("Pattern")),
+    Field("winding", "close_by", QT_TR_NOOP("Close pattern by"), kind="choice", choices=("dwell", "angle"),
+          group=QT_TR_NOOP("Pattern")),
 )
 
 PAYOUT_FIELDS: tuple[Field, ...] = (
-    Field("payout", "law", "Law", kind="choice",
+    Field("payout", "law", QT_TR_NOOP("Law"), kind="choice",
           choices=("parallel", "equidistant", "equal-tangent", "curve", "min-range")),
-    Field("payout", "impregnation_k", "Impregnation scheme k [–]", kind="choice", choices=("0", "1")),
-    Field("payout", "parameter", "Process parameter x", kind="choice", choices=("s", "v"),
-          tip="s: laid length (mm), v: mandrel twist (rad)"),
-    Field("payout", "clearance_mm", "Clearance [mm]"),
-    Field("payout", "eye_radius_mm", "Eye radius (parallel) [mm]", optional=True),
-    Field("payout", "offset_mm", "Offset (equidistant) [mm]", optional=True),
-    Field("payout", "free_length_mm", "Free length (eq.-tangent) [mm]", optional=True),
-    Field("payout", "free_length_max_mm", "Max free length [mm]"),
-    Field("payout", "grid_points", "Grid points [–]", kind="int"),
-    Field("payout", "u_min", "u min [– or mm/rad]"),
+    Field("payout", "impregnation_k", QT_TR_NOOP("Impregnation scheme k [–]"), kind="choice", choices=("0", "1")),
+    Field("payout", "parameter", QT_TR_NOOP("Process parameter x"), kind="choice", choices=("s", "v"),
+          tip=QT_TR_NOOP("s: laid length (mm), v: mandrel twist (rad)")),
+    Field("payout", "clearance_mm", QT_TR_NOOP("Clearance [mm]")),
+    Field("payout", "eye_radius_mm", QT_TR_NOOP("Eye radius (parallel) [mm]"), optional=True),
+    Field("payout", "offset_mm", QT_TR_NOOP("Offset (equidistant) [mm]"), optional=True),
+    Field("payout", "free_length_mm", QT_TR_NOOP("Free length (eq.-tangent) [mm]"), optional=True),
+    Field("payout", "free_length_max_mm", QT_TR_NOOP("Max free length [mm]")),
+    Field("payout", "grid_points", QT_TR_NOOP("Grid points [–]"), kind="int"),
+    Field("payout", "u_min", QT_TR_NOOP("u min [– or mm/rad]")),
 )
 
 TIMELAW_FIELDS: tuple[Field, ...] = (
-    Field("timelaw", "method", "Method (blocks: (17)/(18))", kind="choice", choices=("blocks", "tube", "dp", "toppra")),
-    Field("timelaw", "levels", "DP levels [–]", kind="int"),
-    Field("timelaw", "penalty", "Penalty weight [–]"),
-    Field("timelaw", "tube_share", "Tube share [–]"),
-    Field("timelaw", "stop_percent", "Stop when gain below [%]"),
-    Field("timelaw", "sdot_max", "Path speed limit ṡ max [mm/s]", optional=True),
-    Field("timelaw", "sddot_max", "Path acceleration limit [mm/s²]", optional=True),
+    Field("timelaw", QT_TR_NOOP("method"), QT_TR_NOOP("Method (blocks: (17)/(18))"), kind="choice", choices=("blocks",
+                                                                                                             "tube",
+                                                                                                 "dp", "toppra")),
+    Field("timelaw", "levels", QT_TR_NOOP("DP levels [–]"), kind="int"),
+    Field("timelaw", "penalty", QT_TR_NOOP("Penalty weight [–]")),
+    Field("timelaw", "tube_share", QT_TR_NOOP("Tube share [–]")),
+    Field("timelaw", "stop_percent", QT_TR_NOOP("Stop when gain below [%]")),
+    Field("timelaw", "sdot_max", QT_TR_NOOP("Path speed limit ṡ max [mm/s]"), optional=True),
+    Field("timelaw", "sddot_max", QT_TR_NOOP("Path acceleration limit [mm/s²]"), optional=True),
 )
 
 
 def winding_panel() -> SectionPanel:
-    p = SectionPanel("Winding", WINDING_FIELDS)
+    p = SectionPanel(tr("Winding"), WINDING_FIELDS)
     p.finish()
     return p
 
 
 def payout_panel() -> SectionPanel:
-    p = SectionPanel("Payout eye", PAYOUT_FIELDS)
+    p = SectionPanel(tr("Payout eye"), PAYOUT_FIELDS)
     p.finish()
     return p

@@ -42,10 +42,13 @@ from PySide6.QtWidgets import (
 )
 
 from engine.job import SegmentsSpec
+from winder_gui.i18n import QT_TR_NOOP, tr
 
 TYPES = ("line", "arc", "ellipse", "isotensoid", "spline", "smoothstep")
-COLUMNS = ("Type", "End z", "End r", "Centre z", "Centre r", "Radius", "Pole r", "Semi-axes a, b", "Spline points",
-           "Corner", "Fillet")
+COLUMNS = (QT_TR_NOOP("Type"), QT_TR_NOOP("End z"), QT_TR_NOOP("End r"), QT_TR_NOOP("Centre z"),
+           QT_TR_NOOP("Centre r"), QT_TR_NOOP("Radius"), QT_TR_NOOP("Pole r"), QT_TR_NOOP("Semi-axes a, b"),
+           QT_TR_NOOP("Spline points"),
+           QT_TR_NOOP("Corner"), QT_TR_NOOP("Fillet"))
 C_TYPE, C_Z, C_R, C_CZ, C_CR, C_RAD, C_POLE, C_AXES, C_PTS, C_CORNER, C_FILLET = range(len(COLUMNS))
 FIELD_COLUMN = {"type": C_TYPE, "to_mm": C_Z, "center_mm": C_CZ, "radius_mm": C_RAD, "pole_radius_mm": C_POLE,
                 "semi_axes_mm": C_AXES, "points_mm": C_PTS, "corner": C_CORNER, "fillet_mm": C_FILLET}
@@ -102,7 +105,7 @@ class SegmentsTable(QWidget):
         lay = QVBoxLayout(self)
         lay.setContentsMargins(0, 0, 0, 0)
         start = QHBoxLayout()
-        start.addWidget(QLabel("Start z, r [mm]"))
+        start.addWidget(QLabel(tr("Start z, r [mm]")))
         self.start_z = QLineEdit()
         self.start_r = QLineEdit()
         for ed, name in ((self.start_z, "start.z"), (self.start_r, "start.r")):
@@ -113,15 +116,15 @@ class SegmentsTable(QWidget):
         lay.addLayout(start)
         self.table = QTableWidget(0, len(COLUMNS))
         self.table.setObjectName("segmentsTable")
-        self.table.setHorizontalHeaderLabels(list(COLUMNS))
+        self.table.setHorizontalHeaderLabels([tr(c) for c in COLUMNS])
         self.table.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
         self.table.setSelectionBehavior(QAbstractItemView.SelectionBehavior.SelectRows)
         self.table.itemChanged.connect(lambda _it: self._changed())
         lay.addWidget(self.table, 1)
         buttons = QHBoxLayout()
-        self.add_button = QPushButton("Add segment")
+        self.add_button = QPushButton(tr("Add segment"))
         self.add_button.clicked.connect(self.add_row)
-        self.delete_button = QPushButton("Delete segment")
+        self.delete_button = QPushButton(tr("Delete segment"))
         self.delete_button.clicked.connect(self.delete_row)
         buttons.addWidget(self.add_button)
         buttons.addWidget(self.delete_button)
@@ -218,7 +221,7 @@ class SegmentsTable(QWidget):
             finally:
                 self.table.blockSignals(blocked)
         self.table.selectRow(row)
-        self._set_message(f"segment {row + 1}: {message.split(': ', 1)[-1]}")
+        self._set_message(tr("segment {v0}: {v1}").format(v0=row + 1, v1=message.split(': ', 1)[-1]))
         return True
 
     # -- internals -------------------------------------------------------------------------------

@@ -9,12 +9,14 @@ from __future__ import annotations
 from PySide6.QtCore import QSize, Qt, Signal
 from PySide6.QtWidgets import QListWidget, QListWidgetItem, QWidget
 
+from winder_gui.i18n import QT_TR_NOOP, tr
+
 STEPS: tuple[tuple[str, str], ...] = (
-    ("mandrel", "Mandrel"),
-    ("winding", "Winding"),
-    ("payout", "Payout"),
-    ("machine", "Machine"),
-    ("timelaw", "Time law"),
+    ("mandrel", QT_TR_NOOP("Mandrel")),
+    ("winding", QT_TR_NOOP("Winding")),
+    ("payout", QT_TR_NOOP("Payout")),
+    ("machine", QT_TR_NOOP("Machine")),
+    ("timelaw", QT_TR_NOOP("Time law")),
     ("nc", "NC"),
 )
 
@@ -37,7 +39,7 @@ class StepBar(QListWidget):
             "QListWidget#stepBar::item:disabled { color: #7b8596; }"
         )
         for i, (key, title) in enumerate(STEPS):
-            item = QListWidgetItem(f"{i + 1}  {title}")
+            item = QListWidgetItem(f"{i + 1}  {tr(title)}")
             item.setData(Qt.ItemDataRole.UserRole, key)
             self.addItem(item)
         self.set_available({"mandrel"})
@@ -51,7 +53,7 @@ class StepBar(QListWidget):
             key = item.data(Qt.ItemDataRole.UserRole)
             flags = Qt.ItemFlag.ItemIsSelectable | Qt.ItemFlag.ItemIsEnabled
             item.setFlags(flags if key in keys else Qt.ItemFlag.NoItemFlags)
-            item.setToolTip("" if key in keys else f"{item.text()[3:]}: coming in a later version")
+            item.setToolTip("" if key in keys else tr("{v0}: coming in a later version").format(v0=item.text()[3:]))
 
     def available(self) -> list[str]:
         """Keys of the enabled steps, in order."""

@@ -15,6 +15,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from winder_gui.i18n import tr
 from winder_gui.views.plots import (
     AXIS_COLOURS,
     PlotPage,
@@ -34,8 +35,8 @@ class AxesPlot(PlotPage):
         """Axes the user chose not to show."""
         self.chooser = QToolButton()
         self.chooser.setObjectName("axes.chooser")
-        self.chooser.setText("Axes…")
-        self.chooser.setToolTip("Choose the axes to show (one row each: position and speed)")
+        self.chooser.setText(tr("Axes…"))
+        self.chooser.setToolTip(tr("Choose the axes to show (one row each: position and speed)"))
         self.chooser.setPopupMode(QToolButton.ToolButtonPopupMode.InstantPopup)
         self.chooser_menu = QMenu(self.chooser)
         self.chooser.setMenu(self.chooser_menu)
@@ -146,4 +147,5 @@ class AxesPlot(PlotPage):
         steps = [step for k, ax in enumerate(machine.axes)
                  for step in (lambda k=k, ax=ax: position(k, ax), lambda k=k, ax=ax: speed(k, ax))]
         return [*self.plan(machine), start, *steps,
-                lambda: self._done(f"{blocks.n} blocks · program time {blocks.total:.2f} s · dashed red: limits")]
+                lambda: self._done(tr("{n} blocks · program time {total:.2f} s · dashed red: limits")
+                                   .format(n=blocks.n, total=blocks.total))]

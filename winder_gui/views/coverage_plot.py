@@ -10,6 +10,7 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6.QtWidgets import QWidget
 
+from winder_gui.i18n import tr
 from winder_gui.views.plots import PlotPage
 
 
@@ -29,7 +30,7 @@ class CoveragePlot(PlotPage):
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
-        p = self.add_plot("map", 0, 0, "v mod 360 [deg]", "z [mm]")
+        p = self.add_plot("map", 0, 0, tr("v mod 360 [deg]"), tr("z [mm]"))
         p.setYRange(0, 360)
         self.stride = 1
         self.image = pg.ImageItem()
@@ -70,13 +71,16 @@ class CoveragePlot(PlotPage):
 
         z0, z1 = float(cov.z_edges[0]), float(cov.z_edges[-1])
         self.image.setRect(QRectF(z0, 0.0, z1 - z0, 360.0))
-        self.plots["map"].setLabel("bottom", "meridian length m [mm]" if cov.meridian else "z [mm]")
+        self.plots["map"].setLabel("bottom", tr("meridian length m [mm]") if cov.meridian else tr("z [mm]"))
         c = self.curves.get("coverage")
         if c is not None and cov.meridian:  # the centre lines on the map's axis (m, not z)
             self._z_lines = getattr(self, "_z_lines", None) or (np.asarray(c.xData), np.asarray(c.yData))
             c.setData(cov.to_map(self._z_lines[0]), self._z_lines[1], connect="finite")
         f, b = cov.direction_fraction
         note = getattr(self, "_line_note", "")
-        self._done(f"covered {100 * cov.covered_fraction:.1f} % (gaps red {100 * cov.gap_fraction:.1f} %) · "
-                   f"each direction {100 * f:.1f} % / {100 * b:.1f} % · overlaps {100 * cov.overlap_fraction:.1f} % · "
-                   f"band {cov.band_width_mm:g} mm" + (f" · {note}" if note else ""))
+        self._done(
+                   tr("covered {v0:.1f} % (gaps red {v1:.1f} %) · each direction {v2:.1f} % / "
+                      "{v3:.1f} % · overlaps {v4:.1f} % · band {band_width_mm:g} mm")
+                   .format(v0=100 * cov.covered_fraction, v1=100 * cov.gap_fraction, v2=100 * f, v3=100 * b,
+                           v4=100 * cov.overlap_fraction, band_width_mm=cov.band_width_mm)
+                   + (f" · {note}" if note else ""))

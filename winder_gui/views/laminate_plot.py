@@ -18,6 +18,7 @@ import pyqtgraph as pg
 from PySide6.QtGui import QColor
 from PySide6.QtWidgets import QCheckBox, QWidget
 
+from winder_gui.i18n import tr
 from winder_gui.panels.layers_panel import layer_colour
 from winder_gui.views.plots import PlotPage
 
@@ -33,9 +34,10 @@ class LaminatePlots(PlotPage):
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
-        self.add_plot("section", 0, 0, "r [mm]", "z [mm]", title="Cross-section: layer boundaries", colspan=2)
-        self.add_plot("angle", 1, 0, "β [deg]", "z [mm]", title="Winding angle (first pass)")
-        self.add_plot("thickness", 1, 1, "t [mm]", "z [mm]", title="Thickness added by each layer")
+        self.add_plot("section", 0, 0, tr("r [mm]"), tr("z [mm]"), title=tr("Cross-section: layer boundaries"),
+                      colspan=2)
+        self.add_plot("angle", 1, 0, tr("β [deg]"), tr("z [mm]"), title=tr("Winding angle (first pass)"))
+        self.add_plot("thickness", 1, 1, tr("t [mm]"), tr("z [mm]"), title=tr("Thickness added by each layer"))
         self.glw.ci.layout.setRowStretchFactor(0, 3)
         self.glw.ci.layout.setRowStretchFactor(1, 2)
         leg = self.plots["section"].addLegend(brush=pg.mkBrush(255, 255, 255, 200), labelTextColor="#202020",
@@ -47,11 +49,11 @@ class LaminatePlots(PlotPage):
         self._inner: Any = None
         self._total_t = np.zeros(0)
         self.fills: dict[str, Any] = {}
-        self.buildup = QCheckBox("Build-up (height above the mandrel)")
-        self.buildup.setToolTip("plot the boundaries as r − r_mandrel(z) (mm): thin layers become visible")
+        self.buildup = QCheckBox(tr("Build-up (height above the mandrel)"))
+        self.buildup.setToolTip(tr("plot the boundaries as r − r_mandrel(z) (mm): thin layers become visible"))
         self.buildup.toggled.connect(lambda _on: self._draw())
         self.layout().itemAt(0).layout().insertWidget(1, self.buildup)
-        self.set_message("No laminate yet: run a layered job (F5).")
+        self.set_message(tr("No laminate yet: run a layered job (F5)."))
 
     def set_output(self, out: Any, selected: int | None = None) -> None:
         """Show a :class:`~winder_gui.laminate_tasks.LaminateOutput` (``None``: clear) at once."""
@@ -110,12 +112,12 @@ class LaminatePlots(PlotPage):
         self.fills.clear()
         self._inner: Any = None
         if out is None or not out.views:
-            self.clear_data("No laminate yet: run a layered job (F5).")
+            self.clear_data(tr("No laminate yet: run a layered job (F5)."))
             return
         self.clear_data("")
         bz, br = np.asarray(out.bare_z), np.asarray(out.bare_r)
         self._inner = self.set_curve("section", "bare", bz, self._y_of(bz, br), colour="#000000", width=1.5,
-                                     legend="mandrel")
+                                     legend=tr("mandrel"))
         self._total_t = np.zeros_like(bz)
 
     def _draw_layer(self, v: Any) -> None:
@@ -153,7 +155,8 @@ class LaminatePlots(PlotPage):
     def _set_summary(self) -> None:
         out = self.output
         names = [v.name for v in out.views if v.index == self.selected]
-        self.set_message(f"{len(out.views)} layers wound" + (f"; selected: {names[0]}" if names else ""))
+        self.set_message(tr("{v0} layers wound").format(v0=len(out.views)) + (tr("; selected: {v0}")
+                                                                              .format(v0=names[0]) if names else ""))
 
     def selected_pen_width(self, name: str) -> float:
         """The pen width of curve ``name`` (the selected layer's are bold)."""

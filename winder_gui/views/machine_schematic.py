@@ -37,6 +37,7 @@ from PySide6.QtCore import QPointF, QRectF, QSize, Qt, Signal
 from PySide6.QtGui import QBrush, QColor, QFont, QFontMetricsF, QPainter, QPainterPath, QPen, QPolygonF
 from PySide6.QtWidgets import QSizePolicy, QWidget
 
+from winder_gui.i18n import tr
 from winder_gui.views.schematic_model import (  # noqa: F401 - PROJECTION, place_labels: this module's API too
     EYE_COLOUR,
     MANDREL_COLOUR,
@@ -86,9 +87,9 @@ class MachineSchematic(QWidget):
         self.label_rects: dict[str, QRectF] = {}
         """Where each label was drawn last (widget pixels), for tests: none overlaps another."""
         self._map: tuple[float, float, float] = (1.0, 0.0, 0.0)    # scale, x0, y0
-        self.setToolTip("Kinematic scheme of the template drawn from its forward kinematics (mandrel "
+        self.setToolTip(tr("Kinematic scheme of the template drawn from its forward kinematics (mandrel "
                         "schematic, nominal size); each axis with its travel in controller units. "
-                        "Click an axis to select its row.")
+                        "Click an axis to select its row."))
 
     def sizeHint(self) -> QSize:
         return QSize(360, 240)

@@ -31,8 +31,9 @@ from PySide6.QtWidgets import (
 )
 
 from engine.fileio import atomic_write_text
+from winder_gui.i18n import QT_TR_NOOP, tr
 
-EXPORT_FILTER = "PNG image (*.png);;SVG drawing (*.svg);;CSV table (*.csv)"
+EXPORT_FILTER = QT_TR_NOOP("PNG image (*.png);;SVG drawing (*.svg);;CSV table (*.csv)")
 LAW_COLOURS = {"parallel": "#1f77b4", "equidistant": "#2ca02c", "equal-tangent": "#9467bd", "curve": "#8c564b",
                "min-range": "#d62728"}
 AXIS_COLOURS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf")
@@ -123,7 +124,7 @@ class PlotPage(QWidget):
         self.readout = QLabel("")
         self.readout.setObjectName("plotReadout")
         self.readout.setStyleSheet("color: #204080; padding: 2px 6px;")
-        self.readout.setToolTip("The values under the mouse pointer")
+        self.readout.setToolTip(tr("The values under the mouse pointer"))
         self._cross: dict[str, tuple[Any, Any]] = {}
         self.glw.scene().sigMouseMoved.connect(self._on_mouse)
         self.scroll = QScrollArea()
@@ -131,8 +132,8 @@ class PlotPage(QWidget):
         self.scroll.setWidgetResizable(True)
         self.scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
         self.scroll.setWidget(self.glw)
-        self.export_button = QPushButton("Export…")
-        self.export_button.setToolTip("Save this plot as PNG, SVG or CSV")
+        self.export_button = QPushButton(tr("Export…"))
+        self.export_button.setToolTip(tr("Save this plot as PNG, SVG or CSV"))
         self.export_button.clicked.connect(self._ask_export)
         self.export_button.setEnabled(False)
         top = QHBoxLayout()
@@ -146,7 +147,7 @@ class PlotPage(QWidget):
         lay.setSpacing(0)
         lay.addLayout(top)
         lay.addWidget(self.scroll, 1)
-        self.set_message("No data yet: run the pipeline (F5).")
+        self.set_message(tr("No data yet: run the pipeline (F5)."))
 
     # -- building blocks -------------------------------------------------------------------------
     @staticmethod
@@ -327,7 +328,8 @@ class PlotPage(QWidget):
         return "\n".join(lines) + "\n"
 
     def _ask_export(self) -> None:
-        path, _ = QFileDialog.getSaveFileName(self, f"Export {self.title}", f"{self.title}.png", EXPORT_FILTER)
+        path, _ = QFileDialog.getSaveFileName(self, tr("Export {title}")
+                                                    .format(title=self.title), f"{self.title}.png", tr(EXPORT_FILTER))
         if path:
             self.export(path)
 
@@ -346,11 +348,11 @@ class WindingPlots(PlotPage):
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         # no titles (the left labels say what each plot is); one x axis, shown under the last plot
-        self.add_plot("beta", 0, 0, "β [deg]", "")
-        self.add_plot("C", 1, 0, "C [mm]", "")
-        self.plots["C"].setToolTip("Clairaut function C(z) = r·sin β")
-        self.add_plot("lam", 2, 0, "λ [–]", "z [mm]")
-        self.plots["lam"].setToolTip("slip tendency λ(z); dashed: the friction limit ±μ")
+        self.add_plot("beta", 0, 0, tr("β [deg]"), "")
+        self.add_plot("C", 1, 0, tr("C [mm]"), "")
+        self.plots["C"].setToolTip(tr("Clairaut function C(z) = r·sin β"))
+        self.add_plot("lam", 2, 0, "λ [–]", tr("z [mm]"))
+        self.plots["lam"].setToolTip(tr("slip tendency λ(z); dashed: the friction limit ±μ"))
         for key in ("beta", "C"):
             self.plots[key].setXLink(self.plots["lam"])
             self.plots[key].getAxis("bottom").setStyle(showValues=False)
@@ -367,8 +369,11 @@ class WindingPlots(PlotPage):
         self.set_curve("lam", "lam", z, line.lam[sl], "#d62728")
         for sign in (1.0, -1.0):
             self.plots["lam"].addItem(pg.InfiniteLine(sign * line.mu, angle=0, pen=_pen("#888", 1, True)))
-        self._done(f"{line.mode} line · {line.circuits} circuits · pattern {line.pattern_p}/{line.pattern_q} · "
-                   f"max |λ| {line.max_abs_lambda:.3g} (μ = {line.mu:g})")
+        self._done(
+                   tr("{mode} line · {circuits} circuits · pattern {pattern_p}/{pattern_q} · max |λ| "
+                      "{max_abs_lambda:.3g} (μ = {mu:g})")
+                   .format(mode=line.mode, circuits=line.circuits, pattern_p=line.pattern_p, pattern_q=line.pattern_q,
+                           max_abs_lambda=line.max_abs_lambda, mu=line.mu))
 
 
 class EyePlot(PlotPage):
@@ -378,7 +383,7 @@ class EyePlot(PlotPage):
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
-        p = self.add_plot("zr", 0, 0, "R, r [mm]", "Z, z [mm]")
+        p = self.add_plot("zr", 0, 0, tr("R, r [mm]"), tr("Z, z [mm]"))
         p.setAspectLocked(True)
         p.addLegend(offset=(10, 10))
 
@@ -386,12 +391,13 @@ class EyePlot(PlotPage):
         """Show ``eye`` (engine.payout.EyePath of one circuit) and the generatrix of ``mandrel``."""
         self.clear_data()
         z = np.linspace(mandrel.z_min, mandrel.z_max, 400)
-        self.set_curve("zr", "mandrel", z, mandrel.r(z), "#555555", 2.0, legend="mandrel r(z)")
+        self.set_curve("zr", "mandrel", z, mandrel.r(z), "#555555", 2.0, legend=tr("mandrel r(z)"))
         self.set_curve("zr", "eye", eye.Z, eye.R, LAW_COLOURS.get(eye.law, "#d62728"), 2.0,
-                       legend=f"eye ({eye.law})")
+                       legend=tr("eye ({law})").format(law=eye.law))
         rep = eye.report
-        self._done(f"law {eye.law} · free length {float(np.min(eye.l)):.1f}…{float(np.max(eye.l)):.1f} mm"
-                   + ("" if rep.get("feasible", True) else " · violates a constraint (see NC warnings)"))
+        self._done(tr("law {law} · free length {v1:.1f}…{v2:.1f} mm")
+                   .format(law=eye.law, v1=float(np.min(eye.l)), v2=float(np.max(eye.l)))
+                   + ("" if rep.get("feasible", True) else tr(" · violates a constraint (see NC warnings)")))
 
 
 class PullSpeedPlot(PlotPage):

@@ -23,6 +23,7 @@ from PySide6.QtCore import QPointF, Qt, Signal
 from PySide6.QtGui import QKeySequence, QShortcut
 from PySide6.QtWidgets import QCheckBox, QDoubleSpinBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
+from winder_gui.i18n import QT_TR_NOOP, tr
 from winder_gui.views.geometry import FloatArray, MandrelViewData, check_points
 
 _OK_BRUSH = pg.mkBrush(30, 100, 200, 230)
@@ -34,7 +35,7 @@ SNAP_STEP_MM = 1.0
 """Default grid step of the snap (mm)."""
 SNAP_PIXELS = 6.0
 """How close (screen pixels) r must come to a neighbour's r to take it."""
-HINT = "Drag a point to move it · double-click to add one · right-click or Delete to remove it"
+HINT = QT_TR_NOOP("Drag a point to move it · double-click to add one · right-click or Delete to remove it")
 
 
 def snap_to_grid(v: float, step: float) -> float:
@@ -162,7 +163,7 @@ class PointEditor(pg.ScatterPlotItem):
     def add_point(self, z: float, r: float) -> str | None:
         """Insert a point at (z, r) mm (snapped when the snap is on) in order of z."""
         if self.segment_mode:
-            self._set_message("Not applied: add segments in the table (the points are the joints of the segments)")
+            self._set_message(tr("Not applied: add segments in the table (the points are the joints of the segments)"))
             return self.message
         i = int(np.searchsorted(self._z, z))
         z, r = self.snap(z, r, (i - 1, i))
@@ -181,7 +182,9 @@ class PointEditor(pg.ScatterPlotItem):
         if not 0 <= i < len(self._z):
             return None
         if self.segment_mode:
-            self._set_message("Not applied: delete segments in the table (the points are the joints of the segments)")
+            self._set_message(
+                              tr("Not applied: delete segments in the table (the points are the "
+                                 "joints of the segments)"))
             return self.message
         self.selected_index = -1
         return self._try(np.delete(self._z, i), np.delete(self._r, i), True, focus=None)
@@ -204,7 +207,7 @@ class PointEditor(pg.ScatterPlotItem):
             self._work_z, self._work_r = self._z.copy(), self._r.copy()
             self._bad = None
             self._set_message("")
-            self._set_message(f"Not applied: {msg}")
+            self._set_message(tr("Not applied: {msg}").format(msg=msg))
             self._redraw()
             self.moving.emit(self._work_z.copy(), self._work_r.copy())
             return msg
@@ -290,23 +293,23 @@ class ProfilePlot(QWidget):
         self.message_label.setStyleSheet("color: #c01010; font-weight: bold;")
         self.message_label.setWordWrap(True)
         self.message_label.hide()
-        self.hint_label = QLabel(HINT)
+        self.hint_label = QLabel(tr(HINT))
         self.hint_label.setStyleSheet("color: #666;")
         self.hint_label.setWordWrap(True)
-        self.snap_check = QCheckBox("Snap")
+        self.snap_check = QCheckBox(tr("Snap"))
         self.snap_check.setObjectName("snapToggle")
         self.snap_check.setToolTip(
-            "Dragged and added points land on a grid of this step;\n"
-            f"r also snaps to a neighbouring point's r within {SNAP_PIXELS:.0f} pixels"
+            tr("Dragged and added points land on a grid of this step;\nr also snaps to a "
+               "neighbouring point's r within {SNAP_PIXELS:.0f} pixels").format(SNAP_PIXELS=SNAP_PIXELS)
         )
         self.snap_spin = QDoubleSpinBox()
         self.snap_spin.setObjectName("snapStep")
         self.snap_spin.setDecimals(2)
         self.snap_spin.setRange(0.01, 1000.0)
         self.snap_spin.setSingleStep(0.5)
-        self.snap_spin.setSuffix(" mm")
+        self.snap_spin.setSuffix(tr(" mm"))
         self.snap_spin.setValue(SNAP_STEP_MM)
-        self.snap_spin.setToolTip("Grid step of the snap")
+        self.snap_spin.setToolTip(tr("Grid step of the snap"))
         self.snap_spin.setKeyboardTracking(False)
         bar = QHBoxLayout()
         bar.setContentsMargins(0, 0, 0, 0)
@@ -334,8 +337,8 @@ class ProfilePlot(QWidget):
             p.getAxis("left").setWidth(60)
             p.getAxis("left").enableAutoSIPrefix(False)
             p.getAxis("bottom").enableAutoSIPrefix(False)
-        self.plot_r.setTitle("Generatrix r(z)", size="9pt")
-        self.plot_d2.setTitle("r''(z) — concave zones (r'' > 0) shaded", size="9pt")
+        self.plot_r.setTitle(tr("Generatrix r(z)"), size="9pt")
+        self.plot_d2.setTitle(tr("r''(z) — concave zones (r'' > 0) shaded"), size="9pt")
         self.curve_r = self.plot_r.plot(pen=pg.mkPen(20, 20, 20, width=2))
         self.curve_d2 = self.plot_d2.plot(pen=pg.mkPen(120, 40, 160, width=1.5))
         self.plot_d2.addItem(pg.InfiniteLine(pos=0.0, angle=0, pen=pg.mkPen(150, 150, 150, style=Qt.PenStyle.DashLine)))
@@ -428,7 +431,8 @@ class ProfilePlot(QWidget):
         step = float(self.snap_spin.value())
         self.editor.snap_step = step if on else 0.0
         self.snap_spin.setEnabled(on)
-        self.hint_label.setText(f"{HINT} · snap to a {step:g} mm grid" if on else HINT)
+        hint = tr(HINT)
+        self.hint_label.setText(tr("{hint} · snap to a {step:g} mm grid").format(hint=hint, step=step) if on else hint)
 
     def _on_snap_changed(self) -> None:
         self._apply_snap()

@@ -17,6 +17,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from winder_gui.i18n import tr
 from winder_gui.views.plots import (
     MAX_ITERATION_CURVES,
     PlotPage,
@@ -37,34 +38,34 @@ class TimeLawPlot(PlotPage):
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
-        it = self.add_plot("iterations", 0, 0, "ṡ [mm/s]", "s [mm]", title="tube iterations ṡ(s)")
+        it = self.add_plot("iterations", 0, 0, tr("ṡ [mm/s]"), tr("s [mm]"), title=tr("tube iterations ṡ(s)"))
         # one row of legend entries at the top right, on a light background: the plots are short
         legend = {"offset": (-10, 5), "colCount": 3, "brush": pg.mkBrush(255, 255, 255, 210),
                   "labelTextColor": "#222"}
         it.addLegend(**legend)
-        fin = self.add_plot("final", 1, 0, "ṡ [mm/s]", "t [s]", title="final ṡ(t)")
+        fin = self.add_plot("final", 1, 0, tr("ṡ [mm/s]"), "t [s]", title=tr("final ṡ(t)"))
         fin.addLegend(**legend)
         self.iterations: list[Any] = []
         self.s_offset = 0.0
         """Added to the iteration log's s (mm) to place it on the law's s (the last circuit's ramp)."""
         self.law_choice = QComboBox()
         self.law_choice.setObjectName("timelaw.law")
-        self.law_choice.setToolTip("Whose time law to show: the paper's 7-axis example, or one of the laws "
-                                   "the pipeline computed for this job's axis path ([timelaw].method tube/dp/toppra)")
+        self.law_choice.setToolTip(tr("Whose time law to show: the paper's 7-axis example, or one of the laws "
+                                   "the pipeline computed for this job's axis path ([timelaw].method tube/dp/toppra)"))
         self.law_choice.addItem(self.PAPER, -1)
         self.law_choice.setSizeAdjustPolicy(QComboBox.SizeAdjustPolicy.AdjustToContents)
         self.law_choice.currentIndexChanged.connect(lambda _i: self.law_selected.emit(self.selected_law()))
         self.bounds_of = QSpinBox()
         self.bounds_of.setObjectName("timelaw.bounds_of")
-        self.bounds_of.setPrefix("tube of r = ")
-        self.bounds_of.setToolTip("Which iteration's tube bounds (dashed) and touches (W: ▲ red, O: ● blue) "
-                                  "are marked")
+        self.bounds_of.setPrefix(tr("tube of r = "))
+        self.bounds_of.setToolTip(tr("Which iteration's tube bounds (dashed) and touches (W: ▲ red, O: ● blue) "
+                                  "are marked"))
         self.bounds_of.setEnabled(False)
         self.bounds_of.valueChanged.connect(self.show_iteration)
         # a row of its own above the message: the message wraps and would squeeze the plots
         controls = QHBoxLayout()
         controls.setContentsMargins(4, 2, 4, 2)
-        law_label = QLabel("Law:")
+        law_label = QLabel(tr("Law:"))
         law_label.setBuddy(self.law_choice)
         controls.addWidget(law_label)
         controls.addWidget(self.law_choice)
@@ -80,7 +81,7 @@ class TimeLawPlot(PlotPage):
         self.law_choice.clear()
         self.law_choice.addItem(self.PAPER, -1)
         for i, lab in enumerate(labels):
-            self.law_choice.addItem(f"job: {lab}", i)
+            self.law_choice.addItem(tr("job: {lab}").format(lab=lab), i)
         self.law_choice.setCurrentIndex(max(self.law_choice.findData(current), 0))
         self.law_choice.blockSignals(False)
 
@@ -100,7 +101,7 @@ class TimeLawPlot(PlotPage):
             return
         s = log.s + self.s_offset if self.s_offset else log.s
         self.set_curve("iterations", "tube lower", s, log.lower, "#888", 1.0, True,
-                       legend="tube bounds" if "tube lower" not in self.curves else None)
+                       legend=tr("tube bounds") if "tube lower" not in self.curves else None)
         self.set_curve("iterations", "tube upper", s, log.upper, "#888", 1.0, True)
         for key, mask, sym, col in (("W touches", log.w_mask, "t", "#d62728"),
                                     ("O touches", log.o_mask, "o", "#1f77b4")):
@@ -132,8 +133,9 @@ class TimeLawPlot(PlotPage):
         def start() -> None:
             self.clear_data()
             self.s_offset = float(s_offset)
-            self.plots["iterations"].setTitle(f"{main_name} iterations ṡ(s)" if main_name != "tube"
-                                              else "tube iterations ṡ(s)")
+            self.plots["iterations"].setTitle(tr("{main_name} iterations ṡ(s)")
+                                              .format(main_name=main_name) if main_name != "tube"
+                                              else tr("tube iterations ṡ(s)"))
 
         def iteration(j: int, log: Any) -> None:
             col = pg.intColor(j, hues=max(len(shown), 2), values=1, maxValue=200)
@@ -162,5 +164,8 @@ class TimeLawPlot(PlotPage):
 
         return [start, *[lambda j=j, log=log: iteration(j, log) for j, log in enumerate(shown)],
                 tube_bounds, finals,
-                lambda: self._done(f"{source} · {n} iterations · T {main_name} {tube.total_time_s:.3f} s, "
-                                   f"DP {dp.total_time_s:.3f} s, TOPP-RA {toppra.total_time_s:.3f} s")]
+                lambda: self._done(
+                                   tr("{source} · {n} iterations · T {main_name} {total_time_s:.3f} "
+                                      "s, DP {v4:.3f} s, TOPP-RA {v5:.3f} s")
+                                   .format(source=source, n=n, main_name=main_name, total_time_s=tube.total_time_s,
+                                           v4=dp.total_time_s, v5=toppra.total_time_s))]

@@ -35,6 +35,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from winder_gui.i18n import tr
 from winder_gui.views.geometry import MandrelViewData, PathsViewData
 from winder_gui.views.playback import Timeline
 from winder_gui.views.view3d_machine import MachineMixin
@@ -121,7 +122,7 @@ class MandrelView3D(PlaybackMixin, SceneMixin, MachineMixin, QWidget):
         self._anim.timeout.connect(self._tick)
         self._machine_init()
         self._build_controls()
-        self._label = QLabel("3D view: loading…")
+        self._label = QLabel(tr("3D view: loading…"))
         self._label.setAlignment(Qt.AlignmentFlag.AlignCenter)
         self._label.setStyleSheet("color: #555; background: #eef0f4;")
         self._layout.addWidget(self._label, 1)

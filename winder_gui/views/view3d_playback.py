@@ -26,6 +26,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from winder_gui.i18n import tr
 from winder_gui.views.geometry import PathsViewData
 from winder_gui.views.playback import SPEEDS, Timeline
 
@@ -53,31 +54,31 @@ class PlaybackMixin:
         bar = QWidget()
         h = QHBoxLayout(bar)
         h.setContentsMargins(4, 2, 4, 2)
-        self.play_button = QPushButton("Play")
+        self.play_button = QPushButton(tr("Play"))
         self.play_button.setObjectName("view3d.play")
         self.play_button.setCheckable(True)
         self.play_button.setIcon(self.style().standardIcon(QStyle.StandardPixmap.SP_MediaPlay))
-        self.play_button.setToolTip("Play the program in machine time: the eye moves, the band is laid (Space)")
+        self.play_button.setToolTip(tr("Play the program in machine time: the eye moves, the band is laid (Space)"))
         self.play_button.toggled.connect(self._on_play)
         self.slider = QSlider(Qt.Orientation.Horizontal)
         self.slider.setObjectName("view3d.scrub")
-        self.slider.setToolTip("Program time: scrub to see the band laid up to that time")
+        self.slider.setToolTip(tr("Program time: scrub to see the band laid up to that time"))
         self.slider.valueChanged.connect(self._on_slider)
         self.speed_combo = QComboBox()
         self.speed_combo.setObjectName("view3d.speed")
         for sp in SPEEDS:
             self.speed_combo.addItem(f"×{sp}", sp)
         self.speed_combo.setCurrentIndex(SPEEDS.index(100))
-        self.speed_combo.setToolTip("Playback speed: machine seconds per second")
+        self.speed_combo.setToolTip(tr("Playback speed: machine seconds per second"))
         self.circuit_spin = QSpinBox()
         self.circuit_spin.setObjectName("view3d.circuit")
-        self.circuit_spin.setPrefix("circuit ")
-        self.circuit_spin.setToolTip("Jump to the start of a circuit")
+        self.circuit_spin.setPrefix(tr("circuit "))
+        self.circuit_spin.setToolTip(tr("Jump to the start of a circuit"))
         self.circuit_spin.editingFinished.connect(lambda: self.jump_to_circuit(self.circuit_spin.value()))
         self.layer_combo = QComboBox()
         self.layer_combo.setObjectName("view3d.layer")
-        self.layer_combo.setToolTip("Jump to the start of a layer of the laminate; playing goes on through the "
-                                    "layers in winding order")
+        self.layer_combo.setToolTip(tr("Jump to the start of a layer of the laminate; playing goes on through the "
+                                    "layers in winding order"))
         self.layer_combo.activated.connect(lambda i: self.jump_to_layer(int(self.layer_combo.itemData(i))))
         self.layer_combo.setVisible(False)
         self.frame_label = QLabel("")
@@ -92,23 +93,24 @@ class PlaybackMixin:
         self.colour_combo = QComboBox()
         self.colour_combo.setObjectName("view3d.colour")
         self.colour_combo.addItems(list(COLOUR_KEYS))
-        self.colour_combo.setToolTip("Colour the winding paths and the band by")
+        self.colour_combo.setToolTip(tr("Colour the winding paths and the band by"))
         self.colour_combo.currentTextChanged.connect(self.set_colour_by)
-        h2.addWidget(QLabel("colour:"))
+        h2.addWidget(QLabel(tr("colour:")))
         h2.addWidget(self.colour_combo)
         h2.addStretch(1)
-        self.machine_check = QCheckBox("machine")
+        self.machine_check = QCheckBox(tr("machine"))
         self.machine_check.setObjectName("view3d.machine")
         self.machine_check.setChecked(True)
-        self.machine_check.setToolTip("Show the carriage, cross-slide / robot links and payout head, posed by the "
-                                      "machine's forward kinematics at the current time")
+        self.machine_check.setToolTip(tr("Show the carriage, cross-slide / robot links and payout head, posed by the "
+                                      "machine's forward kinematics at the current time"))
         self.machine_check.toggled.connect(self.set_machine_visible)
         h2.addWidget(self.machine_check)
-        h2.addWidget(QLabel("view:"))
+        h2.addWidget(QLabel(tr("view:")))
         self.camera_buttons: dict[str, QToolButton] = {}
-        for key, text, tip in (("iso", "Iso", "Isometric view"), ("side", "Side", "Side view (the axis across)"),
-                               ("axis", "Axis", "Along the mandrel axis"),
-                               ("fit", "Fit", "Frame the mandrel, the eye path and the head")):
+        for key, text, tip in (("iso", tr("Iso"), tr("Isometric view")), ("side", tr("Side"),
+                                                                          tr("Side view (the axis across)")),
+                               ("axis", tr("Axis"), tr("Along the mandrel axis")),
+                               ("fit", tr("Fit"), tr("Frame the mandrel, the eye path and the head"))):
             b = QToolButton()
             b.setObjectName(f"view3d.camera.{key}")
             b.setText(text)
@@ -250,7 +252,7 @@ class PlaybackMixin:
         return self._anim.isActive()
 
     def _on_play(self, on: bool) -> None:
-        self.play_button.setText("Pause" if on else "Play")
+        self.play_button.setText(tr("Pause") if on else tr("Play"))
         self.play_button.setIcon(self.style().standardIcon(
             QStyle.StandardPixmap.SP_MediaPause if on else QStyle.StandardPixmap.SP_MediaPlay))
         if on:
