@@ -599,6 +599,10 @@ class LaminateResult:
     extension: str = ".nc"
     transitions: tuple[tuple[int, int, float], ...] = ()
     """(first block, block count, time s) of each transition move in :attr:`blocks`."""
+    transition_fibre_over_mm: tuple[float, ...] = ()
+    """Per transition: how deep the straight line from the last laid point to the eye passes inside the
+    laminate (mm; 0: the fibre stays free) - there the fibre is drawn over the surface
+    (:func:`transition_clearance`)."""
     sections: tuple[tuple[int, str], ...] = ()
     stage_times: dict[str, float] = field(default_factory=dict)
     reused: tuple[int, ...] = ()
@@ -727,6 +731,9 @@ class LaminateResult:
             rep["axis_ranges"] = {n: [float(qb[:, k].min()), float(qb[:, k].max())]
                                   for k, n in enumerate(self.machine.axis_names)}
         rep["fibre_length_mm"] = 1e3 * float(sum(lr.figures.get("fibre_length_m", 0.0) for lr in self.layers))
+        if self.transition_fibre_over_mm:
+            # where the straight fibre of a transition would pass inside the laminate it is drawn over the surface
+            rep["transition_fibre_over_laminate_mm"] = [float(x) for x in self.transition_fibre_over_mm]
         rep["violations"] = [{"kind": g.kind, "axis": g.axis, "what": g.what, "worst": g.worst, "value": g.value,
                               "limit": g.limit, "places": g.places, "count": g.points, **g.first}
                              for g in self.violation_groups()]
@@ -1122,10 +1129,12 @@ def _join(res: LaminateResult, machine: Any) -> LaminateResult:
     # as the single-line NC stage chooses it
     profile = controller_for(post.name, job.post.controller, machine)
     text = post.render(blocks, machine, profile)
+    over: list[float] = []
     problems = _joined_problems(machine, blocks, text, new_layers, transitions, placement, res.mandrel,
-                                job.machine.setup)
+                                job.machine.setup, depths=over)
     return replace(res, layers=tuple(new_layers), machine=machine, blocks=blocks, nc_text=text,
                    post_name=post.name, extension=post.extension, transitions=tuple(transitions),
+                   transition_fibre_over_mm=tuple(over),
                    sections=tuple(sections), placement=placement, program_problems=tuple(problems))
 
 
@@ -1166,16 +1175,54 @@ TRANSITION_SUBSTEPS = 16
 """Eye positions checked inside each transition block (the controller interpolates the axes linearly)."""
 
 
+def _last_laid_point(machine: Any, q_end: FloatArray, layer: LayerResult) -> FloatArray | None:
+    """The last laid point of ``layer`` (its contact at its last block) in the joined program's mandrel frame.
+
+    The joined program may shift the layer's mandrel axis (and its placement): the layer's own eye at that
+    point is turned about the axis (and moved along it) onto the eye that forward kinematics gives for the
+    joined program's row ``q_end``; the contact is moved the same way."""
+    from engine.kinematics import forward_kinematics
+
+    r = layer.result
+    if r is None or r.axes is None or r.blocks is None:
+        return None
+    i = int(np.asarray(r.blocks.index)[-1])
+    e_own = np.asarray(r.axes.eye_xyz, dtype=float)[i]
+    c_own = np.asarray(r.axes.contact_xyz, dtype=float)[i]
+    e_join = forward_kinematics(machine, np.asarray(q_end, dtype=float)[None, :], fibre=False)[0][0]
+    turn = math.atan2(e_join[1], e_join[0]) - math.atan2(e_own[1], e_own[0])
+    ct, st = math.cos(turn), math.sin(turn)
+    return np.array([ct * c_own[0] - st * c_own[1], st * c_own[0] + ct * c_own[1],
+                     c_own[2] + (e_join[2] - e_own[2])])
+
+
 def transition_clearance(machine: Any, blocks: Any, layers: list[LayerResult],
-                         transitions: list[tuple[int, int, float]], bare: Any, setup: Any) -> list[Any]:
+                         transitions: list[tuple[int, int, float]], bare: Any, setup: Any,
+                         depths: list[float] | None = None) -> list[Any]:
     """The eye along every transition move against the laminate laid so far (the surface the next layer is
-    wound on), the shafts, the chuck and the tailstock (of the bare mandrel): violations of kind
+    wound on), the shafts, the chuck and the tailstock (of the bare mandrel), and the free fibre - from the
+    last laid point of the layer before, which stays where it was laid, to the eye - against the shafts,
+    the chuck and the tailstock (``setup.clearance_mm``; the fibre would catch on them): violations of kind
     ``clearance`` located by block of the joined program.  The eye is sampled at
-    :data:`TRANSITION_SUBSTEPS` points of each block (axes interpolated linearly, as the controller
-    moves them); the first and the last point of a transition are the layers' own end points, which the
-    layers' own checks cover."""
+    :data:`TRANSITION_SUBSTEPS` points of each block (axes interpolated linearly, as the controller moves
+    them); the first and the last point of a transition are the layers' own end points, which the layers'
+    own checks cover.
+
+    Where the straight line from the last laid point to the eye would pass inside the laminate, the taut
+    fibre is drawn over its surface instead (a helical layer ending at the pole and a hoop layer starting
+    on the cylinder: the tail crosses the dome) - not a collision, but fibre laid outside the pattern: with
+    ``depths`` a list, the deepest such pass of each transition (mm, 0 when the fibre stays free; by branch
+    and bound along the line, :func:`engine.machine_setup.capsule_min_distance`, within 0.05 mm) is
+    appended to it."""
     from engine.kinematics import forward_kinematics, violations_from_mask
-    from engine.machine_setup import _rect_distance, mandrel_distance, support_obstacles
+    from engine.machine_setup import (
+        _rect_distance,
+        _segment_min_rho,
+        capsule_min_distance,
+        mandrel_distance,
+        mandrel_distance_fn,
+        support_obstacles,
+    )
 
     laid = [lr for lr in layers if lr.result is not None]
     gap = float(setup.clearance_mm) + float(getattr(setup, "head_radius_mm", 0.0))   # from the head's body
@@ -1183,15 +1230,21 @@ def transition_clearance(machine: Any, blocks: Any, layers: list[LayerResult],
     nb = q.shape[0] - 1
     d_surf = np.full(nb, np.inf)
     d_sup = {ob.name: np.full(nb, np.inf) for ob in support_obstacles(bare, setup)}
+    f_gap = float(setup.clearance_mm)
+    f_sup = {name: np.full(nb, np.inf) for name in d_sup}
     u = (np.arange(TRANSITION_SUBSTEPS) + 1.0) / TRANSITION_SUBSTEPS     # inside and at the end of each block
     for j, (b0, n, _t) in enumerate(transitions):
         if j + 1 >= len(laid) or n < 1:
+            if depths is not None:
+                depths.append(0.0)
             continue
         qq = q[b0: b0 + n + 1]
         dense = (qq[:-1, None, :] + u[None, :, None] * np.diff(qq, axis=0)[:, None, :]).reshape(-1, q.shape[1])
         blk = np.repeat(np.arange(b0, b0 + n), u.size)
         dense, blk = dense[:-1], blk[:-1]                # the next layer's first point is its own
         if dense.shape[0] == 0:
+            if depths is not None:
+                depths.append(0.0)
             continue
         eye, _ = forward_kinematics(machine, dense, fibre=False)
         z, rho = eye[:, 2], np.hypot(eye[:, 0], eye[:, 1])
@@ -1199,17 +1252,37 @@ def transition_clearance(machine: Any, blocks: Any, layers: list[LayerResult],
         np.minimum.at(d_surf, blk, dm)
         for ob in support_obstacles(bare, setup):
             np.minimum.at(d_sup[ob.name], blk, _rect_distance(z, rho, ob))
+        anchor = _last_laid_point(machine, q[b0], laid[j])
+        if anchor is None:
+            if depths is not None:
+                depths.append(0.0)
+            continue
+        if depths is not None:
+            v = anchor[None, :] - eye
+            length = np.linalg.norm(v, axis=1)
+            along = v / np.maximum(length, 1e-12)[:, None]
+            # against the surface the last laid point lies on; dips within 0.1 mm of it are the sampled
+            # surface's own roughness at the point
+            fn = mandrel_distance_fn(laid[j].surface, upto_mm=1.0)
+            dmin = capsule_min_distance(fn, eye, along, length, -0.1)
+            depths.append(float(max(0.0, -float(dmin.min()))) if float(dmin.min()) < -0.1 else 0.0)
+        a_rep = np.broadcast_to(anchor, eye.shape)
+        for ob in support_obstacles(bare, setup):
+            np.minimum.at(f_sup[ob.name], blk, _segment_min_rho(a_rep, eye, ob.z0, ob.z1) - ob.radius)
     out = violations_from_mask("clearance", None, d_surf < gap - 1e-6, d_surf, gap, " mm", where="block",
                                what="gap between the eye and the laminate on a transition")
     for name, d in d_sup.items():
         out += violations_from_mask("clearance", None, d < gap - 1e-6, d, gap, " mm", where="block",
                                     what=f"gap between the eye and the {name} on a transition")
+    for name, d in f_sup.items():
+        out += violations_from_mask("clearance", None, d < f_gap - 1e-6, d, f_gap, " mm", where="block",
+                                    what=f"gap between the free fibre and the {name} on a transition")
     return out
 
 
 def _joined_problems(machine: Any, blocks: Any, text: str, layers: list[LayerResult],
                      transitions: list[tuple[int, int, float]], placement: Any, bare: Any = None,
-                     setup: Any = None) -> list[str]:
+                     setup: Any = None, depths: list[float] | None = None) -> list[str]:
     """What the joined program breaks beyond the layers' own checks: every block of it (the layers' speed
     ramps, the transitions, the common placement) against every position, speed and speed-jump limit,
     the eye's clearance along the transitions (with ``bare`` and ``setup``), grouped and located by NC line,
@@ -1221,7 +1294,7 @@ def _joined_problems(machine: Any, blocks: Any, text: str, layers: list[LayerRes
            if v.kind != "position"}
     viol = [v for v in check_blocks(machine, blocks) if v.kind == "position" or (v.kind, v.axis) not in own]
     if bare is not None and setup is not None:
-        viol += transition_clearance(machine, blocks, layers, transitions, bare, setup)
+        viol += transition_clearance(machine, blocks, layers, transitions, bare, setup, depths=depths)
     out: list[str] = []
     if placement is not None and not placement.fits:
         out.append(placement.message())

@@ -438,9 +438,10 @@ def head_axis_q(machine: MachineTemplate, q: np.ndarray) -> np.ndarray:
     return np.stack([c * u[:, 0] + s * u[:, 1], -s * u[:, 0] + c * u[:, 1], u[:, 2]], axis=1)
 
 
-def capsule_min_distance(dist: Any, a: np.ndarray, u: np.ndarray, length_mm: float, need_mm: np.ndarray | float,
-                         tol_mm: float = 0.05) -> np.ndarray:
-    """Smallest ``dist(z, rho)`` over the segments ``a + t u``, ``0 <= t <= length_mm`` (N,), mm.
+def capsule_min_distance(dist: Any, a: np.ndarray, u: np.ndarray, length_mm: np.ndarray | float,
+                         need_mm: np.ndarray | float, tol_mm: float = 0.05) -> np.ndarray:
+    """Smallest ``dist(z, rho)`` over the segments ``a + t u``, ``0 <= t <= length_mm`` (N,), mm (``length_mm``
+    one for all or one per segment).
 
     ``dist(z, rho, upto)`` is a distance in the (z, rho) half-plane of an axisymmetric body (1-Lipschitz in
     space, as :func:`mandrel_distance_fn`; values beyond ``upto`` may be returned as ``inf``; negative
@@ -460,21 +461,19 @@ def capsule_min_distance(dist: Any, a: np.ndarray, u: np.ndarray, length_mm: flo
         p = a[i] + t[:, None] * u[i]
         return dist(p[:, 2], np.hypot(p[:, 0], p[:, 1]), upto)
 
+    length = np.broadcast_to(np.asarray(length_mm, dtype=float), (n,))
     every = np.arange(n)
-    best = np.minimum(at(every, np.zeros(n), top + 1.0), at(every, np.full(n, float(length_mm)), top + 1.0))
-    if length_mm <= 0.0 or n == 0:
-        return best
-    half = 0.5 * length_mm               # one interval per segment to start: most are cut at once
-    idx = every
-    tc = np.full(n, half)
+    best = np.minimum(at(every, np.zeros(n), top + 1.0), at(every, length.copy(), top + 1.0))
+    idx = every[length > 0.0]
+    half = 0.5 * length[idx]             # one interval per segment to start: most are cut at once
+    tc = half.copy()
     while idx.size:
-        d = at(idx, tc, top + half + 1.0)         # farther centres are cut whatever their distance
+        d = at(idx, tc, top + float(half.max()) + 1.0)    # farther centres are cut whatever their distance
         np.minimum.at(best, idx, d)
         keep = (d - half < np.minimum(best[idx], need[idx])) & (half > tol_mm)
-        idx, tc = idx[keep], tc[keep]
-        half *= 0.5
-        idx = np.repeat(idx, 2)
-        tc = np.stack([tc - half, tc + half], axis=1).ravel()
+        idx, tc, half = idx[keep], tc[keep], 0.5 * half[keep]
+        idx, half = np.repeat(idx, 2), np.repeat(half, 2)
+        tc = np.stack([tc - half[::2], tc + half[::2]], axis=1).ravel()
     return best
 
 

@@ -527,3 +527,108 @@ def test_supports_stay_those_of_the_bare_mandrel_under_the_laminate() -> None:
     for lr in res.layers:
         assert support_obstacles(lr.surface, setup) == bare, lr.index
     assert support_obstacles(res.final_surface, SetupSpec(shaft_radius_mm=12.0))[0].radius == 12.0
+
+
+def _pipe_lathe4():
+    res = run_laminate(parse_job(PIPE.replace('template = "lathe2"', 'template = "lathe4"')))
+    return res, list(res.layers), list(res.transitions)
+
+
+def test_transition_free_fibre_against_the_supports() -> None:
+    """The free fibre of a transition runs from the last laid point (it stays where it was laid) to the
+    eye: the real program keeps it clear of the shafts, chuck and tailstock; an eye driven beyond the chuck
+    at a radius below the chuck's draws it through the chuck - found, located in that transition (NC
+    line, time), with a gap no smaller than that of a dense sampling of the fibre and its blocks and no
+    larger than the gap at the driven point itself."""
+    import re
+    from dataclasses import replace as dc_replace
+
+    from engine.kinematics import forward_kinematics
+    from engine.laminate import _joined_problems, _last_laid_point, transition_clearance
+    from engine.machine_setup import support_obstacles
+
+    res, layers, trans = _pipe_lathe4()
+    setup = res.job.machine.setup
+    ok = transition_clearance(res.machine, res.blocks, layers, trans, res.mandrel, setup)
+    assert not [v for v in ok if "free fibre" in v.message]
+    m = res.machine
+    chuck = {o.name: o for o in support_obstacles(res.mandrel, setup)}["chuck"]
+    b0, n, _t = trans[0]
+    q = np.array(res.blocks.q)
+    mid = b0 + n // 2
+    qi = m.to_internal(q[mid][None, :])
+    qi[0, m.axis_index("carriage")] = chuck.z0 - 20.0       # 20 mm beyond the chuck's far face
+    qi[0, m.axis_index("cross")] = chuck.radius - 2.0       # and below its radius
+    q[mid] = m.to_controller(qi)[0]
+    bad = dc_replace(res.blocks, q=q, delta=np.diff(q, axis=0))
+    viol = [v for v in transition_clearance(m, bad, layers, trans, res.mandrel, setup) if "free fibre" in v.message]
+    assert viol and all("chuck" in v.message and b0 <= v.block < b0 + n for v in viol)
+    worst = min(v.value for v in viol)
+    anchor = _last_laid_point(m, q[b0], layers[0])
+    assert abs(math.hypot(anchor[0], anchor[1]) - 60.0) < 1e-6      # on the bare pipe, under the first layer
+
+    def gap_dense(eyes: np.ndarray) -> float:
+        t = np.linspace(0.0, 1.0, 4001)
+        g = np.inf
+        for e in eyes:
+            p = anchor[None, :] + t[:, None] * (e - anchor)[None, :]
+            inside = (p[:, 2] >= chuck.z0) & (p[:, 2] <= chuck.z1)
+            if inside.any():
+                g = min(g, float(np.hypot(p[inside, 0], p[inside, 1]).min()) - chuck.radius)
+        return g
+
+    e_mid = forward_kinematics(m, q[mid][None, :], fibre=False)[0]
+    u = np.linspace(0.0, 1.0, 65)[1:]
+    qq = q[b0: b0 + n + 1]
+    dense = (qq[:-1, None, :] + u[None, :, None] * np.diff(qq, axis=0)[:, None, :]).reshape(-1, q.shape[1])
+    e_all = forward_kinematics(m, dense, fibre=False)[0]
+    assert gap_dense(e_all) - 0.05 <= worst <= gap_dense(e_mid) + 1e-9 and worst < 0.0
+    probs = _joined_problems(m, bad, res.nc_text, layers, trans, None, res.mandrel, setup)
+    fib = [p for p in probs if "gap between the free fibre and the chuck on a transition" in p]
+    assert len(fib) == 1 and fib[0].endswith("transition to layer 2") and re.search(r"NC line \d+, t = ", fib[0])
+
+
+def test_transition_fibre_drawn_over_the_laminate_is_measured() -> None:
+    """Where the straight line from the last laid point to the eye would pass inside the laminate, the
+    fibre is drawn over its surface: the report gives how deep, per transition. The real pipe program keeps
+    it free (0); turning the mandrel half a turn in mid-transition with the eye out draws the line through
+    the pipe, by the closed form R - (distance of the chord from the axis) at the turned point at least."""
+    from dataclasses import replace as dc_replace
+
+    from engine.kinematics import forward_kinematics
+    from engine.laminate import _last_laid_point, transition_clearance
+
+    res, layers, trans = _pipe_lathe4()
+    assert res.transition_fibre_over_mm == (0.0, 0.0)
+    assert res.report()["transition_fibre_over_laminate_mm"] == [0.0, 0.0]
+    m = res.machine
+    setup = res.job.machine.setup
+    b0, n, _t = trans[0]
+    q = np.array(res.blocks.q)
+    mid = b0 + n // 2
+    qi = m.to_internal(q[mid:][None, :][0])
+    qi[:, m.axis_index("mandrel")] -= math.pi / 2        # a quarter turn from mid-transition on
+    q[mid:] = m.to_controller(qi)
+    bad = dc_replace(res.blocks, q=q, delta=np.diff(q, axis=0))
+    depths: list[float] = []
+    transition_clearance(m, bad, layers, trans, res.mandrel, setup, depths=depths)
+    anchor = _last_laid_point(m, q[b0], layers[0])
+    e = forward_kinematics(m, q[mid][None, :], fibre=False)[0][0]
+    # closed form: the chord's nearest point to the axis (in the x-y projection) at parameter s
+    d = e[:2] - anchor[:2]
+    s = float(np.clip(-np.dot(anchor[:2], d) / np.dot(d, d), 0.0, 1.0))
+    z_s = anchor[2] + s * (e[2] - anchor[2])
+    assert 0.0 <= z_s <= 400.0                          # within the pipe
+    depth_mid = 60.0 - float(np.hypot(*(anchor[:2] + s * d)))
+    assert depth_mid > 5.0 and len(depths) == 2
+    # and no deeper than a dense sampling (64 points per block, the line every 0.05 % of its length) finds
+    u = np.linspace(0.0, 1.0, 65)[1:]
+    qq = q[b0: b0 + n + 1]
+    dense = (qq[:-1, None, :] + u[None, :, None] * np.diff(qq, axis=0)[:, None, :]).reshape(-1, q.shape[1])
+    t = np.linspace(0.0, 1.0, 2001)
+    deepest = 0.0
+    for ee in forward_kinematics(m, dense, fibre=False)[0]:
+        p = anchor[None, :] + t[:, None] * (ee - anchor)[None, :]
+        inside = (p[:, 2] >= 0.0) & (p[:, 2] <= 400.0)
+        deepest = max(deepest, float((60.0 - np.hypot(p[inside, 0], p[inside, 1])).max()))
+    assert depth_mid - 0.05 <= depths[0] <= deepest + 0.05 and depths[1] == 0.0
