@@ -173,8 +173,9 @@ def make_blocks(machine: MachineTemplate, axis_path: AxisPath, tol_mm: float = 0
         raise InputError(f"axis path is for axes {axis_path.axis_names}, machine {machine.name} has "
                          f"{machine.axis_names}", field="machine")
     tau = machine.min_block_time if min_block_time is None else float(min_block_time)
+    from engine.periodic import field_rows
+
     q = np.asarray(axis_path.q, dtype=float)
-    eye = np.asarray(axis_path.eye_xyz, dtype=float)
     n = q.shape[0]
     fmax = machine.limits("max_speed")
     # time-like progress along the path (the metric of (17))
@@ -184,7 +185,8 @@ def make_blocks(machine: MachineTemplate, axis_path: AxisPath, tol_mm: float = 0
         seg_err = np.zeros(n)
         for k, (a, b) in enumerate([pieces[0], pieces[1], pieces[-1]]):
             check_cancel(state)
-            br, se = _douglas_peucker(machine, q[a:b + 1], eye[a:b + 1], w[a:b + 1] - w[a], tol_mm, None)
+            eye = np.asarray(field_rows(axis_path, "eye_xyz", a, b + 1), dtype=float)   # (a deferred one: its rows)
+            br, se = _douglas_peucker(machine, q[a:b + 1], eye, w[a:b + 1] - w[a], tol_mm, None)
             breaks[a:b + 1] |= br
             seg_err[a:b] = se[:-1]
             if k == 1:                           # the repeated circuits: the second one's blocks
@@ -194,7 +196,7 @@ def make_blocks(machine: MachineTemplate, axis_path: AxisPath, tol_mm: float = 0
             if state is not None:
                 state.progress(0.3 * (k + 1), f"linear approximation: circuit pieces {k + 1}/3")
     else:
-        breaks, seg_err = _douglas_peucker(machine, q, eye, w, tol_mm, state)
+        breaks, seg_err = _douglas_peucker(machine, q, np.asarray(axis_path.eye_xyz, dtype=float), w, tol_mm, state)
     index = np.flatnonzero(breaks)
     qb = q[index]
     delta = np.diff(qb, axis=0)

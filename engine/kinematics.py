@@ -648,6 +648,20 @@ class AxisPath:
         return "\n".join(v.message for v in self.violations)
 
 
+AXIS_PATH_FIELDS: tuple[str, ...] = ("q", "eye_xyz", "fibre_dir", "contact_xyz", "eye_shift", "x")
+"""Per-point fields of :class:`AxisPath`; a replicated program's path may keep its eye path's arrays as
+circuit 0 + rule (:class:`engine.periodic.CircuitArray`), materialised on first read."""
+
+
+def _install_axis_fields() -> None:
+    from engine.periodic import install_deferred_fields
+
+    install_deferred_fields(AxisPath, AXIS_PATH_FIELDS)
+
+
+_install_axis_fields()
+
+
 def _as_path(a: np.ndarray, name: str) -> np.ndarray:
     arr = np.asarray(a, dtype=float)
     if arr.ndim != 2 or arr.shape[1] != 3 or arr.shape[0] < 2:

@@ -512,6 +512,21 @@ class EyePath:
         return dict(self.report)
 
 
+EYE_PATH_FIELDS: tuple[str, ...] = ("x", "index", "l", "Z", "R", "V", "eye_xyz", "contact_xyz", "fibre_dir", "s",
+                                    "lam_pulled", "u", "x_mid")
+"""Per-point fields of :class:`EyePath`; the eye path of a replicated program keeps some of them as
+circuit 0 + rule (:class:`engine.periodic.CircuitArray`), materialised on first read."""
+
+
+def _install_eye_fields() -> None:
+    from engine.periodic import install_deferred_fields
+
+    install_deferred_fields(EyePath, EYE_PATH_FIELDS)
+
+
+_install_eye_fields()
+
+
 def _build(geo: _Geo, l: FloatArray, k: int, parameter: str, law: str,
            env: Envelope | None = None) -> EyePath:
     L = geo.line
@@ -764,9 +779,9 @@ def geometric_law(line: Any, mandrel: Any, law: str, spec: Any = None, *, k: int
 
 
 def _with_report(eye: EyePath, rep: dict[str, Any]) -> EyePath:
-    from dataclasses import replace
+    from engine.periodic import replace_raw
 
-    return replace(eye, report=rep)
+    return replace_raw(eye, report=rep)       # a deferred per-point array stays deferred
 
 
 def _prepare(line: Any, mandrel: Any, spec: Any, parameter: str, grid_points: int | None,
@@ -1984,51 +1999,44 @@ def _extend_replicated(eye: EyePath, line: Any) -> EyePath | None:
     if one.index.size != m + 1:      # zero-length steps dropped: evaluate point by point
         return None
 
-    def tile(a: FloatArray) -> FloatArray:
-        out = np.empty(n, dtype=a.dtype)
-        out[:-1].reshape(nc, m)[:] = a[:m]
-        out[-1] = a[m]
-        return out
+    from engine.periodic import CircuitArray, field_rows, raw_field
 
+    # the eye path's per-point arrays are kept as circuit 0 + rule (engine.periodic.CircuitArray, the
+    # arithmetic of the arrays made before: bit for bit) and materialised on first read
     ang = kk * float(twist)
-    ck, sk = np.cos(ang)[:, None], np.sin(ang)[:, None]
-    cl, sl = float(ck[-1, 0]), float(sk[-1, 0])
+    cos_k, sin_k = np.cos(ang), np.sin(ang)
 
-    def turned(a: FloatArray) -> FloatArray:
-        out = np.empty((n, 3))
-        body = out[:-1].reshape(nc, m, 3)
-        body[:, :, 0] = a[:m, 0] * ck - a[:m, 1] * sk
-        body[:, :, 1] = a[:m, 0] * sk + a[:m, 1] * ck
-        body[:, :, 2] = a[:m, 2]
-        out[-1] = (a[m, 0] * cl - a[m, 1] * sl, a[m, 0] * sl + a[m, 1] * cl, a[m, 2])
-        return out
+    def tile(a: FloatArray) -> CircuitArray:
+        return CircuitArray("tile", np.ascontiguousarray(a), nc, m)
+
+    def turned(a: FloatArray) -> CircuitArray:
+        cols = tuple(np.ascontiguousarray(a[:, i]) for i in range(3))
+        return CircuitArray("turn", cols, nc, m, cos_k=cos_k, sin_k=sin_k)
 
     # the line's own points are circuit 0's turned by the same k·Δv with the same arithmetic
     # (engine.winding._assemble): where they match bit for bit the eye path shares the line's array
-    xyz = getattr(line, "xyz", None)
-    contact = None
+    xyz = raw_field(line, "xyz") if hasattr(line, "xyz") else None
+    contact: Any = None
     if xyz is not None:
-        xyz = np.asarray(xyz)
         c0 = one.contact_xyz
+        ref = turned(c0)
 
-        def turned_k(k: int, rows: slice) -> FloatArray:
-            a, c, sn = c0[rows], ck[k, 0], sk[k, 0]
-            return np.column_stack([a[:, 0] * c - a[:, 1] * sn, a[:, 0] * sn + a[:, 1] * c, a[:, 2]])
-
-        if (xyz.shape == (n, 3) and xyz.dtype == np.float64 and np.array_equal(xyz[:m + 1], c0)
-                and all(np.array_equal(xyz[k * m:(k + 1) * m], turned_k(k, slice(0, m))) for k in (1, nc // 2))
-                and np.array_equal(xyz[-1:], turned_k(nc - 1, slice(m, m + 1)))):
+        if (tuple(xyz.shape) == (n, 3) and xyz.dtype == np.float64
+                and np.array_equal(field_rows(line, "xyz", 0, m + 1), c0)
+                and all(np.array_equal(field_rows(line, "xyz", k * m, (k + 1) * m), ref.rows(k * m, (k + 1) * m))
+                        for k in (1, nc // 2))
+                and np.array_equal(field_rows(line, "xyz", n - 1, n), ref.rows(n - 1, n))):
             contact = xyz
     if contact is None:
         contact = turned(one.contact_xyz)
     s_all = np.asarray(line.s, dtype=float)
     x = s_all if eye.parameter == "s" else v
     l, R = tile(one.l), tile(one.R)
-    V = v + tile(one.V - np.asarray(one_line.v, dtype=float))
-    lam = s_all + l - one.k * R
+    V = v + tile(one.V - np.asarray(one_line.v, dtype=float)).materialise()
+    lam = s_all + l.materialise() - one.k * R.materialise()
     out = EyePath(
-        x=x, index=np.arange(n, dtype=np.int64), l=l, Z=tile(one.Z), R=R, V=V,
-        eye_xyz=turned(one.eye_xyz), contact_xyz=contact, fibre_dir=turned(one.fibre_dir),
+        x=x, index=CircuitArray("shift", np.arange(m + 1, dtype=np.int64), nc, m, m), l=l, Z=tile(one.Z), R=R,
+        V=V, eye_xyz=turned(one.eye_xyz), contact_xyz=contact, fibre_dir=turned(one.fibre_dir),
         s=s_all, lam_pulled=lam, u=np.diff(lam) / np.diff(x), x_mid=0.5 * (x[1:] + x[:-1]), law=eye.law,
         k=one.k, parameter=eye.parameter,
     )

@@ -40,7 +40,7 @@ def replicated_circuits(line: Any, eye: Any) -> tuple[int, int] | None:
     if report.get("replicated_circuits") != nc or nc < _SHORT_CIRCUITS + 2 or m < 2:
         return None
     n = nc * m + 1
-    if np.shape(eye.s) != (n,) or np.shape(eye.eye_xyz) != (n, 3):
+    if tuple(np.shape(raw_field(eye, "s"))) != (n,) or tuple(raw_field(eye, "eye_xyz").shape) != (n, 3):
         return None
     return nc, m
 
@@ -49,8 +49,8 @@ def eye_head(eye: Any, npts: int) -> Any:
     """The first ``npts`` points of an :class:`engine.payout.EyePath` (views where possible)."""
     per_point = ("x", "index", "l", "Z", "R", "V", "eye_xyz", "contact_xyz", "fibre_dir", "s", "lam_pulled")
     per_step = ("u", "x_mid")
-    kw: dict[str, Any] = {f: getattr(eye, f)[:npts] for f in per_point}
-    kw.update({f: getattr(eye, f)[:npts - 1] for f in per_step})
+    kw: dict[str, Any] = {f: field_rows(eye, f, 0, npts) for f in per_point}
+    kw.update({f: field_rows(eye, f, 0, npts - 1) for f in per_step})
     for f in ("l_min", "l_max"):
         a = getattr(eye, f, None)
         if a is not None and np.shape(a)[:1] == np.shape(eye.s):
@@ -132,16 +132,30 @@ def replicate_axes(line: Any, eye: Any, run_axes: Callable[[Any], tuple[Any, Any
     sh_step = repeats(sh[:, None], m)
     if sh_step is None or abs(float(sh_step[0])) > PERIODIC_RTOL * (1.0 + float(np.abs(sh).max())):
         return None
-    shift = tile_circuits(sh, nc, m)
-    vec = [np.ascontiguousarray(np.asarray(getattr(eye, f), dtype=float)) for f in ("eye_xyz", "fibre_dir",
-                                                                                     "contact_xyz")]
-    rows = np.flatnonzero(shift)
-    if rows.size:       # the eye moved along its (unit) fibre direction: the same arithmetic as the slide
-        e = vec[0].copy()
-        e[rows] += shift[rows, None] * vec[1][rows]
-        vec[0] = e
-        e.flags.writeable = False
-    q.flags.writeable = shift.flags.writeable = False
+    # the eye path's arrays as stored: a CircuitArray (engine.payout's replicated eye path) stays one
+    vec: list[Any] = [raw_field(eye, f) for f in ("eye_xyz", "fibre_dir", "contact_xyz")]
+    shift: Any
+    if isinstance(vec[0], CircuitArray) and vec[0].kind == "turn" and vec[0].patch_rows is None:
+        # kept as circuit 0 + rule too: circuit k slides as circuit 1 does (in circuit 0's frame, turned
+        # by k·Δv); circuit 0's rows that differ from circuit 1's (the program's start) given as they are
+        c1 = sh[m:2 * m + 1]
+        own = np.flatnonzero(sh[:m] != c1[:m])
+        shift = CircuitArray("tile", c1.copy(), nc, m, patch_rows=own, patch_values=sh[own])
+        if np.any(c1 != 0.0) or own.size:
+            e0 = field_rows(eye, "eye_xyz", 0, m + 1) + c1[:, None] * field_rows(eye, "fibre_dir", 0, m + 1)
+            vec[0] = CircuitArray("turn", tuple(np.ascontiguousarray(e0[:, i]) for i in range(3)), nc, m,
+                                  cos_k=vec[0].cos_k, sin_k=vec[0].sin_k, patch_rows=own,
+                                  patch_values=np.asarray(axes.eye_xyz, dtype=float)[own])
+    else:
+        shift = tile_circuits(sh, nc, m)
+        rows = np.flatnonzero(shift)
+        if rows.size:       # the eye moved along its (unit) fibre direction: the same arithmetic as the slide
+            e = vec[0].materialise() if isinstance(vec[0], CircuitArray) else np.array(vec[0], dtype=float)
+            e[rows] += shift[rows, None] * field_take(eye, "fibre_dir", rows)
+            vec[0] = e
+            e.flags.writeable = False
+        shift.flags.writeable = False
+    q.flags.writeable = False
     x = None if axes.x is None else np.asarray(eye.x, dtype=float)
     full = replace(axes, q=q, eye_xyz=vec[0], fibre_dir=vec[1], contact_xyz=vec[2], eye_shift=shift, x=x,
                    circuits=(nc, m))
@@ -189,14 +203,23 @@ class CircuitArray:
     :meth:`materialise` and :meth:`rows` use the arithmetic of :func:`engine.winding._assemble`
     (bit for bit the arrays it made)."""
 
-    __slots__ = ("base", "circuits", "m", "kind", "step", "cos_k", "sin_k", "dtype")
+    __slots__ = ("base", "circuits", "m", "kind", "step", "cos_k", "sin_k", "dtype", "_full", "patch_rows",
+                 "patch_values")
 
     def __init__(self, kind: str, base: Any, circuits: int, m: int, step: Any = 0,
-                 cos_k: np.ndarray | None = None, sin_k: np.ndarray | None = None) -> None:
+                 cos_k: np.ndarray | None = None, sin_k: np.ndarray | None = None,
+                 patch_rows: np.ndarray | None = None, patch_values: np.ndarray | None = None) -> None:
         if kind not in ("tile", "shift", "circuit", "turn"):
             raise ValueError(f"CircuitArray: unknown kind {kind!r}")
         self.kind, self.base, self.circuits, self.m, self.step = kind, base, int(circuits), int(m), step
         self.cos_k, self.sin_k = cos_k, sin_k
+        self._full: np.ndarray | None = None
+        # a few rows given explicitly (e.g. circuit 0's start, where the program begins from rest)
+        self.patch_rows = self.patch_values = None
+        if patch_rows is not None:
+            rows = np.asarray(patch_rows, dtype=np.int64)
+            order = np.argsort(rows, kind="stable")
+            self.patch_rows, self.patch_values = rows[order], np.asarray(patch_values)[order]
         self.dtype = np.dtype(np.int64) if kind == "circuit" else (
             np.dtype(float) if kind == "turn" else np.asarray(base).dtype)
 
@@ -217,8 +240,20 @@ class CircuitArray:
         """Bytes the whole array takes once materialised."""
         return int(np.prod(self.shape)) * self.dtype.itemsize
 
+    def array(self) -> np.ndarray:
+        """The whole array, made once and shared by every holder of this CircuitArray."""
+        if self._full is None:
+            self._full = self.materialise()
+        return self._full
+
     def materialise(self) -> np.ndarray:
-        """The whole array (a new ndarray)."""
+        """The whole array (a new ndarray, not kept)."""
+        out = self._materialise_rule()
+        if self.patch_rows is not None and self.patch_rows.size:
+            out[self.patch_rows] = self.patch_values
+        return out
+
+    def _materialise_rule(self) -> np.ndarray:
         total, m, n = self.circuits, self.m, self.n
         k = np.arange(total)
         if self.kind == "tile":
@@ -254,9 +289,26 @@ class CircuitArray:
 
     def rows(self, start: int, stop: int) -> np.ndarray:
         """Rows ``start .. stop-1`` of the whole array (the same values as ``materialise()[start:stop]``)."""
+        start, stop, _ = slice(start, stop).indices(self.n)
+        return self.take(np.arange(start, max(stop, start)))
+
+    def take(self, i: np.ndarray) -> np.ndarray:
+        """Rows ``i`` (non-negative indices) of the whole array (the same values as ``materialise()[i]``)."""
+        i = np.asarray(i, dtype=np.int64)
+        out = self._take_rule(i)
+        if self.patch_rows is not None and self.patch_rows.size and i.size:
+            pos = np.searchsorted(self.patch_rows, i)
+            hit = (pos < self.patch_rows.size) & (self.patch_rows[np.minimum(pos, self.patch_rows.size - 1)] == i)
+            if hit.any():
+                out = np.array(out)
+                out[hit] = self.patch_values[pos[hit]]
+        return out
+
+    def _take_rule(self, i: np.ndarray) -> np.ndarray:
         n, m, total = self.n, self.m, self.circuits
-        start, stop, _ = slice(start, stop).indices(n)
-        i = np.arange(start, max(stop, start))
+        i = np.asarray(i, dtype=np.int64)
+        if i.size and (i.min() < 0 or i.max() >= n):
+            raise IndexError(f"CircuitArray: index out of range 0..{n - 1}")
         kk, j = np.divmod(i, m)
         last = i == n - 1
         j = np.where(last, m, j)
@@ -304,7 +356,7 @@ class DeferredField:
             return self
         v = obj.__dict__[self.name]
         if isinstance(v, CircuitArray):
-            v = v.materialise()
+            v = v.array()             # one array for every object that holds this CircuitArray
             obj.__dict__[self.name] = v
         return v
 
@@ -322,6 +374,26 @@ def deferred(obj: Any, name: str) -> CircuitArray | None:
     """The :class:`CircuitArray` of field ``name`` of ``obj`` while it is not materialised, else None."""
     v = getattr(obj, "__dict__", {}).get(name)
     return v if isinstance(v, CircuitArray) else None
+
+
+def raw_field(obj: Any, name: str) -> Any:
+    """Field ``name`` of ``obj`` as stored: a :class:`CircuitArray` while not materialised, else the array."""
+    v = getattr(obj, "__dict__", {}).get(name)
+    return v if isinstance(v, CircuitArray) else getattr(obj, name)
+
+
+def field_take(obj: Any, name: str, idx: np.ndarray) -> np.ndarray:
+    """Rows ``idx`` of the per-point field ``name`` of ``obj``, without materialising it."""
+    d = deferred(obj, name)
+    return np.asarray(getattr(obj, name))[idx] if d is None else d.take(idx)
+
+
+def replace_raw(obj: Any, **changes: Any) -> Any:
+    """``dataclasses.replace`` that passes the fields on as stored (a deferred one stays deferred)."""
+    from dataclasses import fields
+
+    kw = {f.name: obj.__dict__[f.name] for f in fields(obj) if f.init and f.name not in changes}
+    return type(obj)(**kw, **changes)
 
 
 def field_rows(obj: Any, name: str, start: int, stop: int) -> np.ndarray:

@@ -711,13 +711,14 @@ def _periodic_pieces(res: PipelineResult) -> list[tuple[int, int]] | None:
     """The circuits of an axis path replicated by :func:`engine.periodic.replicate_axes` (circuits 1 ..
     n-1 are circuit 1 with the mandrel advanced by a constant: nothing to check point by point), when the
     eye path maps line points to path points one to one; else None."""
-    from engine.periodic import circuit_pieces
+    from engine.periodic import circuit_pieces, field_rows, raw_field
 
     if res.axes is None or res.eye is None or getattr(res.axes, "circuits", None) is None:
         return None
-    idx = getattr(res.eye, "index", None)
+    idx = raw_field(res.eye, "index") if hasattr(res.eye, "index") else None
     n = np.shape(res.axes.q)[0]
-    if idx is None or len(idx) != n or int(idx[0]) != 0 or int(idx[-1]) != n - 1:
+    if (idx is None or len(idx) != n or int(field_rows(res.eye, "index", 0, 1)[0]) != 0
+            or int(field_rows(res.eye, "index", n - 1, n)[0]) != n - 1):
         return None
     return circuit_pieces(res.axes, res.eye.s)
 
@@ -1129,9 +1130,9 @@ def _block_errors_of(machine: Any, axes: Any, idx: np.ndarray, chosen: np.ndarra
     (``local_metric`` False) or summed within each chosen block (the same up to rounding)."""
     from engine.blocks import time_metric
     from engine.kinematics import forward_kinematics
+    from engine.periodic import field_take
 
     q = np.asarray(axes.q, dtype=float)
-    eye = np.asarray(axes.eye_xyz, dtype=float)
     fmax = machine.limits("max_speed")
     nb = idx.size - 1
     # inner points of each chosen block; the last block also counts the program's end point (as the
@@ -1163,7 +1164,7 @@ def _block_errors_of(machine: Any, axes: Any, idx: np.ndarray, chosen: np.ndarra
         u = np.where(span > 0, (w[pts] - w[a]) / np.where(span > 0, span, 1.0), (pts - a) / (b - a))
     qi = q[a] + u[:, None] * (q[b] - q[a])
     e_fk, _ = forward_kinematics(machine, qi, fibre=False)
-    e_fk -= eye[pts]
+    e_fk -= field_take(axes, "eye_xyz", pts)                 # (a deferred eye path: only these rows are made)
     err = np.linalg.norm(e_fk, axis=1)
     out[chosen] = np.maximum.reduceat(err, first)            # blk is sorted: one reduceat per block
     return out

@@ -162,8 +162,9 @@ def laminate_task(job: Job, job_path: Path | None, previous: Any, upto: str = "n
     check_cancel(state)
     from engine.periodic import materialise_all
 
-    for lr in res.layers:      # a big line's arrays are made here, not on a first read in the GUI thread
-        materialise_all(getattr(getattr(lr, "result", None), "line", None))
+    for lr in res.layers:      # a big program's arrays are made here, not on a first read in the GUI thread
+        for part in ("line", "eye", "axes"):
+            materialise_all(getattr(getattr(lr, "result", None), part, None))
     state.progress(0.9, "laminate: views of the layers")
     old = {v.key: v for v in previous_views.views} if previous_views is not None else {}
     views: list[LayerView] = []

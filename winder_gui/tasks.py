@@ -48,7 +48,8 @@ def pipeline_task(job: Job, job_path: Path | None, previous: Any, upto: str, *, 
     res = run_pipeline(job, job_path, upto=upto, previous=previous, state=state)
     check_cancel(state)
     setup = job.machine.setup
-    materialise_all(res.line)    # a big line's arrays are made here, not on a first read in the GUI thread
+    for part in (res.line, res.eye, res.axes):   # a big program's arrays are made here, not in the GUI thread
+        materialise_all(part)
     paths = (paths_view_data(res.line, res.eye, MAX_DISPLAY_POINTS, MAX_FRAMES, blocks=res.blocks,
                              axes=res.axes, machine=res.machine,
                              head_mm=(setup.head_radius_mm, setup.head_length_mm))
