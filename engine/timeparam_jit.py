@@ -589,6 +589,9 @@ def _build_hull() -> Any:
         ids = np.empty(R, np.int64)
         st = np.empty(2 * R + 1, np.int64)
         srt = np.empty(R, np.int64)
+        nbk = 64
+        bcnt = np.empty(nbk + 1, np.int64)
+        bid = np.empty(R, np.int64)
         for b in range(B):
             sx = 0.0
             sy = 0.0
@@ -610,8 +613,21 @@ def _build_hull() -> Any:
                 m[b] = c
                 continue
             # sort by x, then y, equal points in input order (a stable insertion sort: few points)
+            # (a stable counting pass into buckets of x first: the insertion sort then only fixes
+            # the order inside a bucket; the order is the same)
+            for q in range(nbk + 1):
+                bcnt[q] = 0
             for q in range(c):
-                srt[q] = q
+                v = (xs[q] + 1.0) * (0.4999 * nbk)
+                bk = 0 if not v > 0.0 else (nbk - 1 if v >= nbk - 1 else int(v))
+                bid[q] = bk
+                bcnt[bk + 1] += 1
+            for q in range(nbk):
+                bcnt[q + 1] += bcnt[q]
+            for q in range(c):
+                bk = bid[q]
+                srt[bcnt[bk]] = q
+                bcnt[bk] += 1
             for q in range(1, c):
                 v = srt[q]
                 vx = xs[v]
