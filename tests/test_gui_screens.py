@@ -190,8 +190,8 @@ def test_label_placement_keeps_labels_apart() -> None:
 
 
 def test_scrubbing_shows_the_band_laid_up_to_that_time(qt_display, qtbot) -> None:
-    """The band of true width is drawn up to the scrubbed time: the laid chunks and the chunk being
-    laid hold exactly the quads wound by then; at the end the whole band, at 0 none."""
+    """The band of true width is drawn up to the scrubbed time: the band's mesh holds exactly the quads
+    wound by then; at the end the whole band, at 0 none."""
     from winder_gui.main_window import MainWindow
 
     w = MainWindow(ROOT / "resources/examples/pipe.toml")
@@ -212,15 +212,9 @@ def test_scrubbing_shows_the_band_laid_up_to_that_time(qt_display, qtbot) -> Non
             v.set_time(t)
             k = band.quads_until(t)
             assert v.band_quads == k
-            drawn = 0
-            for j in range(len(v._band["chunks"])):
-                a = v.plotter.actors[f"band{j}"]
-                if a.GetVisibility():
-                    drawn += a.mapper.dataset.n_cells
-            now = v.plotter.actors.get("band_now")
-            if now is not None and now.GetVisibility():
-                drawn += now.mapper.dataset.n_cells
-            assert drawn == k, (frac, drawn, k)
+            a = v.plotter.actors["band"]
+            drawn = a.mapper.GetInput().GetNumberOfCells() if a.GetVisibility() else 0
+            assert drawn == k == v.band_cells(), (frac, drawn, k)
             # the eye is where the program is at that time
             assert v.timeline.times[v.frame] <= t + 1e-9
         v.set_camera("axis")
@@ -265,6 +259,9 @@ def test_laminate_plays_on_through_its_layers_and_jumps_to_a_layer(qt_display, q
         assert v.frame_label.text().startswith(f"t {last.t0:.1f} / {res.blocks.total:.1f} s")
         v.jump_to_layer(wound[0].index)
         assert v.layer_index == wound[0].index and v.time_s == 0.0 and v.band_quads == 0
+        # every layer's scene was made ahead: going from layer to layer swaps kept actors, makes none
+        assert v.scene_count("paths") == len(wound) and v.scene_count("surface") == len(wound)
+        first = {n: v.plotter.actors[n] for n in ("paths", "band", "mandrel")}
         seen: list[int] = []
         v.layer_requested.connect(seen.append)
         v.set_speed(max(SPEEDS))
@@ -274,6 +271,10 @@ def test_laminate_plays_on_through_its_layers_and_jumps_to_a_layer(qt_display, q
         assert v.layer_index == last.index and v.time_s == v.timeline.total_s
         assert abs(v.program_time_s() - (last.t0 + v.timeline.total_s)) < 1e-9
         assert v.band_quads == v.paths.band.m - 1  # the last layer's band laid whole
+        assert v.scene_count("paths") == len(wound)
+        v.jump_to_layer(wound[0].index)
+        assert all(v.plotter.actors[n] is a for n, a in first.items())
+        assert v.plotter.actors["paths"].mapper.GetInput().GetNumberOfPoints() == v.paths.line_xyz.shape[0]
         for lr in wound:  # each layer's surface and eye path framed after a jump
             v.jump_to_layer(lr.index)
             v.frame_all()

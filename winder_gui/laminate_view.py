@@ -43,6 +43,9 @@ class LaminatePresenter(QObject):
         ctl.layer_data_done.connect(self._on_coverage)
         v.layers_panel.layer_selected.connect(self.show_layer)
         v.view3d.layer_requested.connect(self._on_layer_requested)
+        v.view3d.play_button.toggled.connect(self._on_play_toggled)
+        self._after_play: dict[str, Callable[[], None]] = {}
+        """The shown layer's plot steps put off while the 3D view plays (run at the pause)."""
         doc.results_changed.connect(self._on_results)
         doc.stale_changed.connect(self._on_stale)
         v.steps.step_selected.connect(self._on_step)
@@ -62,6 +65,7 @@ class LaminatePresenter(QObject):
         """No laminate results (a single-line job, a new document): the 3D view shows the job's mandrel."""
         if self.output is not None and self.doc.view_data is not None:
             self.v.view3d.set_data(self.doc.view_data)
+        self.v.view3d.prepare_scenes([], build=False)   # the layers' kept 3D scenes go
         self.output = None
         self.shown_layer = -1
         self._laws_key = None
@@ -100,7 +104,16 @@ class LaminatePresenter(QObject):
             if k < len(pending):
                 pending[k]()
 
-        return [table, *self.v.laminate_plot.updates(out, sel), *[lambda k=k: show(k) for k in range(_SHOW_STEPS)]]
+        scenes = [(lv.surface, lv.paths) for lv in out.views if lv.paths is not None]
+
+        def prepare(k: int) -> None:  # every layer's 3D scene made ahead: playing or jumping on swaps only
+            if self.output is out:
+                if k == 0:
+                    self.v.view3d.prepare_scenes(scenes, build=False)
+                self.v.view3d.prepare_scene(*scenes[k])
+
+        return [table, *self.v.laminate_plot.updates(out, sel), *[lambda k=k: show(k) for k in range(_SHOW_STEPS)],
+                *[lambda k=k: prepare(k) for k in range(len(scenes))]]
 
     def _on_layer_requested(self, index: int) -> None:
         """The 3D view asks for layer ``index`` (its layer chooser, or playback going on to the next layer):
@@ -179,9 +192,24 @@ class LaminatePresenter(QObject):
                 v.plot_tabs.setCurrentWidget(v.laminate_plot)
             self.layer_shown.emit(index)
 
-        steps = [surface, paths, line_plots, eye, done]
+        def after_play(step: Callable[[], None]) -> Callable[[], None]:
+            """While the 3D view plays, a layer's plots wait for the pause (the next layer's frames first)."""
+            def run() -> None:
+                if v.view3d.is_playing():
+                    self._after_play[step.__name__] = step
+                else:
+                    step()
+            return run
+
+        steps = [surface, paths, after_play(line_plots), after_play(eye), done]
         assert len(steps) == _SHOW_STEPS
         return steps
+
+    def _on_play_toggled(self, playing: bool) -> None:
+        if not playing:
+            pending, self._after_play = self._after_play, {}
+            for step in pending.values():
+                step()
 
     def _on_coverage(self, out: tuple[str, Any]) -> None:
         key, cov = out

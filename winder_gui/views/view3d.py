@@ -40,6 +40,7 @@ from winder_gui.views.geometry import MandrelViewData, PathsViewData
 from winder_gui.views.playback import Timeline
 from winder_gui.views.view3d_machine import MachineMixin
 from winder_gui.views.view3d_playback import COLOUR_KEYS, FRAME_MS, SLIDER_STEPS_PER_S, PlaybackMixin, SceneMixin
+from winder_gui.views.view3d_scenes import PATH_ACTORS, SURFACE_ACTORS, SceneCacheMixin
 from winder_gui.views.vtk_widget import _preload_vtk, interactor_class
 from winder_gui.workers import JobRunner
 
@@ -81,7 +82,7 @@ def gl_available() -> bool:
     return QGuiApplication.platformName() not in HEADLESS_PLATFORMS
 
 
-class MandrelView3D(PlaybackMixin, SceneMixin, MachineMixin, QWidget):
+class MandrelView3D(PlaybackMixin, SceneMixin, SceneCacheMixin, MachineMixin, QWidget):
     """Container for the 3D view; :attr:`backend` is ``"pending"``, ``"vtk"`` or ``"placeholder"``.
 
     Signals: ``layer_requested(int)`` — show job layer ``index`` of the laminate (the layer chooser, or the
@@ -121,6 +122,7 @@ class MandrelView3D(PlaybackMixin, SceneMixin, MachineMixin, QWidget):
         self._anim.setInterval(FRAME_MS)
         self._anim.timeout.connect(self._tick)
         self._machine_init()
+        self._scenes_init()
         self._build_controls()
         self._label = QLabel(tr("3D view: loading…"))
         self._label.setAlignment(Qt.AlignmentFlag.AlignCenter)
@@ -159,6 +161,8 @@ class MandrelView3D(PlaybackMixin, SceneMixin, MachineMixin, QWidget):
             plotter.set_background("#f4f6fa", top="#c9d3e3")
             plotter.add_axes(interactive=False, line_width=2, labels_off=False)
             plotter.renderer.AddObserver("StartEvent", self._choose_detail)
+            # translucent supports blended in one pass: order-independent translucency costs llvmpipe ~4 ms a frame
+            plotter.renderer.SetUseOIT(False)
         except Exception as exc:  # noqa: BLE001 - no VTK/GL: degrade to a label, the app stays usable
             print(f"winder: 3D view disabled: {exc}", file=sys.stderr)
             self._use_placeholder(f"3D view unavailable: {exc}")
@@ -263,8 +267,11 @@ class MandrelView3D(PlaybackMixin, SceneMixin, MachineMixin, QWidget):
         self.colour_by = name
         if self.colour_combo.currentText() != name:
             self.colour_combo.setCurrentText(name)
-        if self.backend == "vtk" and self.paths is not None:
-            self._render_paths()
+        if self.backend == "vtk":
+            self.forget_scenes("paths")   # every layer's paths and band in the other colours (made again on demand)
+            self._prepared["paths"] = {(k[0], k[1], name) for k in self._prepared["paths"]}
+            if self.paths is not None:
+                self._render_paths()
         elif self.backend == "placeholder":
             self._update_label()
 
@@ -275,20 +282,53 @@ class MandrelView3D(PlaybackMixin, SceneMixin, MachineMixin, QWidget):
         return self.paths.eye_xyz[self.frame], self.paths.contact_xyz[self.frame]
 
     def _render_paths(self) -> None:
-
+        """Show :attr:`paths`: its kept scene (a visibility swap) or a new one; the eye, fibre and machine."""
         assert self.plotter is not None
-        for name in ("paths", "paths_lod", "eye_path", "eye", "fibre", "band_now", "eye_path_all",
-                     *(f"band{j}" for j in range(len(self._band["chunks"]) if self._band else 0))):
+        for name in ("eye_path", "eye", "fibre"):
             self.plotter.remove_actor(name, render=False)
-        self._band = None
         self._remove_machine()
         self._eye_meshes.clear()
-        self._path_meshes.clear()
+        self._park_scene("paths")
+        self._band = None
+        self._path_meshes = {}
+        for title in list(self.plotter.scalar_bars.keys()):
+            self.plotter.remove_scalar_bar(title, render=False)
         p = self.paths
         if p is None or p.line_xyz.shape[0] < 2:
             self.plotter.render()
             return
-        c = np.asarray(self.colour_scalars(), dtype=float)
+        # pyvista renders inside add_mesh/add_scalar_bar even with render=False (twice here, ~40 ms
+        # each at 1e5 points on software GL, on the GUI thread): build everything, then render once
+        self.plotter.suppress_rendering = True
+        try:
+            scene = self._show_scene("paths", self._paths_key(p))
+            if scene is None:
+                self._drop_unprepared("paths")   # an earlier run's paths: not shown again
+                scene = self._build_paths_scene(p)
+            self._band = scene["band"]
+            if self._band is not None:
+                self._band["last"] = None
+            self._path_meshes = scene["meshes"]
+            if scene["bar"] is not None:
+                self.plotter.add_scalar_bar(mapper=scene["actors"]["paths"].mapper, **scene["bar"])
+            self._update_eye()
+        finally:
+            self.plotter.suppress_rendering = False
+        self._redraw()
+
+    def _redraw(self) -> None:
+        """Render now, or while the animation plays in its next frame's paint (no extra frame per layer)."""
+        if self._anim.isActive() and self.gl_widget is not None:
+            self.gl_widget.update()
+        else:
+            self.plotter.render()
+
+    def _paths_key(self, p: PathsViewData) -> tuple:
+        return ("paths", id(p), self.colour_by)
+
+    def _build_paths_scene(self, p: PathsViewData) -> dict[str, Any]:
+        """Make the actors of ``p`` (line, coarse line, eye path, band) as the shown paths scene."""
+        c = np.asarray(p.scalars[COLOUR_KEYS[self.colour_by]], dtype=float)
         cmap = "tab20" if self.colour_by == "circuit" else "viridis"
         finite = c[np.isfinite(c)]
         clim = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
@@ -296,19 +336,15 @@ class MandrelView3D(PlaybackMixin, SceneMixin, MachineMixin, QWidget):
             clim = (clim[0] - 0.5, clim[0] + 0.5)
         lod = p.lod_index
         coarse = lod is not None and 2 <= lod.size < p.line_xyz.shape[0]
-        # pyvista renders inside add_mesh/add_scalar_bar even with render=False (twice here, ~40 ms
-        # each at 1e5 points on software GL, on the GUI thread): build everything, then render once
-        self.plotter.suppress_rendering = True
-        try:
-            self._add_path_actors(p, c, cmap, clim, lod if coarse else None)
-            self._add_band_actor(p, cmap, clim)
-            self._update_eye()
-        finally:
-            self.plotter.suppress_rendering = False
-        self.plotter.render()
+        self._path_meshes = {}
+        bar = self._add_path_actors(p, c, cmap, clim, lod if coarse else None)
+        band = self._add_band_actor(p, cmap, clim)
+        return self._keep_scene("paths", self._paths_key(p), PATH_ACTORS, band=band, bar=bar, paths=p,
+                                meshes=dict(self._path_meshes))
 
     def _add_path_actors(self, p: PathsViewData, c: np.ndarray, cmap: str, clim: tuple[float, float],
-                         lod: np.ndarray | None) -> None:
+                         lod: np.ndarray | None) -> dict[str, Any] | None:
+        """The line and its coarse copy; returns the scalar bar's arguments (None: one value, no bar)."""
         import pyvista as pv
 
         finite = c[np.isfinite(c)]
@@ -316,8 +352,6 @@ class MandrelView3D(PlaybackMixin, SceneMixin, MachineMixin, QWidget):
         bar = {"title": VTK_TITLES[self.colour_by], "vertical": True}
         if self.colour_by == "circuit":  # whole circuit numbers on the bar
             bar.update(fmt="%.0f", n_labels=int(min(5, round(clim[1] - clim[0]) + 1)))
-        for title in list(self.plotter.scalar_bars.keys()):
-            self.plotter.remove_scalar_bar(title, render=False)
         for name, idx in (("paths", None), ("paths_lod", lod)):
             if name == "paths_lod" and lod is None:
                 continue
@@ -326,10 +360,10 @@ class MandrelView3D(PlaybackMixin, SceneMixin, MachineMixin, QWidget):
             self._path_meshes[name] = line
             actor = self.plotter.add_mesh(
                 line, name=name, scalars="c", cmap=cmap, clim=clim, line_width=PATH_LINE_WIDTH,
-                show_scalar_bar=name == "paths" and not one_value, reset_camera=False, render=False,
-                scalar_bar_args=bar)  # one value (a hoop layer's one circuit): one colour, no bar
+                show_scalar_bar=False, reset_camera=False, render=False)
             if name == "paths_lod":
                 actor.SetVisibility(False)
+        return None if one_value else bar  # one value (a hoop layer's one circuit): one colour, no bar
 
     def set_busy(self, busy: bool) -> None:
         """Whether the engine is computing: the coarse paths are drawn meanwhile, the full ones after."""
@@ -357,6 +391,10 @@ class MandrelView3D(PlaybackMixin, SceneMixin, MachineMixin, QWidget):
             lod.SetVisibility(self.lod_active)
         if full is not None:
             full.SetVisibility(not self.lod_active)
+        e_full, e_lod = actors.get("eye_path_all"), actors.get("eye_path_lod")
+        if e_full is not None and e_lod is not None:   # the whole eye path, thinned while playing or moving
+            e_lod.SetVisibility(playing)
+            e_full.SetVisibility(not playing)
 
     def shown_path_points(self) -> np.ndarray | None:
         """Points of the winding line as drawn by the last render (the coarse copy while moving)."""
@@ -432,10 +470,30 @@ class MandrelView3D(PlaybackMixin, SceneMixin, MachineMixin, QWidget):
         return np.asarray(actor.mapper.dataset.points)
 
     def _render(self) -> None:
-        import pyvista as pv
-
+        """Show :attr:`data`: its kept surface scene (a visibility swap) or a new one."""
         d = self.data
         assert d is not None and self.plotter is not None
+        self._park_scene("surface")
+        self.plotter.suppress_rendering = True     # one render at the end, not one inside add_mesh
+        try:
+            if self._show_scene("surface", ("surface", id(d))) is None:
+                self._drop_unprepared("surface")
+                self._build_surface_scene(d)
+            if self._reset_camera:
+                # the axis runs left to right as in the r(z) plot, seen slightly from above and the front
+                self.plotter.view_xz(negative=False)
+                self.plotter.camera.elevation = 22.0
+                self.plotter.camera.azimuth = -28.0
+                self.frame_all(render=False)   # the whole mandrel (and eye path) in view, also after a STEP import
+                self._reset_camera = False
+        finally:
+            self.plotter.suppress_rendering = False
+        self._redraw()
+
+    def _build_surface_scene(self, d: MandrelViewData) -> dict[str, Any]:
+        """The revolved surface (concave zones shaded) and its coarse copy, as the shown surface scene."""
+        import pyvista as pv
+
         grid = pv.StructuredGrid(d.surface_x, d.surface_y, d.surface_z)
         # the engine's concave zones (those a fibre would bridge), not every sign change of r''
         zin = np.zeros(d.z.size, bool)
@@ -443,21 +501,17 @@ class MandrelView3D(PlaybackMixin, SceneMixin, MachineMixin, QWidget):
             zin |= (d.z >= z0) & (d.z <= z1)
         concave = np.repeat(zin.astype(float)[:, None], d.surface_x.shape[1], axis=1)
         grid.point_data["concave"] = concave.ravel(order="F")
-        self.plotter.suppress_rendering = True     # one render at the end, not one inside add_mesh
-        try:
-            self._add_mandrel_actor(grid)
-            # a coarse copy drawn while the animation plays or the camera moves (the full surface is a
-            # third of a software-GL frame)
-            step = max(1, int(np.ceil(d.surface_x.size / MANDREL_LOD_POINTS)))
-            coarse = pv.StructuredGrid(d.surface_x[::step], d.surface_y[::step], d.surface_z[::step])
-            coarse.point_data["concave"] = concave[::step].ravel(order="F")
-            self.plotter.add_mesh(coarse, name="mandrel_lod", scalars="concave", cmap=["#9fb3cf", "#e0504a"],
-                                  clim=[0.0, 1.0], show_scalar_bar=False, smooth_shading=True, specular=0.3,
-                                  reset_camera=False)
-            self.plotter.actors["mandrel_lod"].SetVisibility(False)
-        finally:
-            self.plotter.suppress_rendering = False
-        self.plotter.render()
+        style = {"scalars": "concave", "cmap": ["#9fb3cf", "#e0504a"], "clim": [0.0, 1.0], "show_scalar_bar": False,
+                 "smooth_shading": True, "specular": 0.3, "reset_camera": False, "render": False}
+        self.plotter.add_mesh(grid, name="mandrel", **style)
+        # a coarse copy drawn while the animation plays or the camera moves (the full surface is a
+        # third of a software-GL frame)
+        step = max(1, int(np.ceil(d.surface_x.size / MANDREL_LOD_POINTS)))
+        coarse = pv.StructuredGrid(d.surface_x[::step], d.surface_y[::step], d.surface_z[::step])
+        coarse.point_data["concave"] = concave[::step].ravel(order="F")
+        self.plotter.add_mesh(coarse, name="mandrel_lod", **style)
+        self.plotter.actors["mandrel_lod"].SetVisibility(False)
+        return self._keep_scene("surface", ("surface", id(d)), SURFACE_ACTORS, data=d)
 
     def set_supports(self, supports: list[tuple[str, float, float, float]]) -> None:
         """Draw the job's shafts, chuck and tailstock: ``(name, z0, z1, radius)`` (mm, mandrel frame, the
@@ -477,26 +531,6 @@ class MandrelView3D(PlaybackMixin, SceneMixin, MachineMixin, QWidget):
             self.plotter.add_mesh(cyl, name=f"support:{name}", color="#b5b5b5", opacity=0.55,
                                   smooth_shading=True, reset_camera=False)
         self.plotter.render()
-
-    def _add_mandrel_actor(self, grid: Any) -> None:
-        self.plotter.add_mesh(
-            grid,
-            name="mandrel",
-            scalars="concave",
-            cmap=["#9fb3cf", "#e0504a"],
-            clim=[0.0, 1.0],
-            show_scalar_bar=False,
-            smooth_shading=True,
-            specular=0.3,
-            reset_camera=False,
-        )
-        if self._reset_camera:
-            # the axis runs left to right as in the r(z) plot, seen slightly from above and the front
-            self.plotter.view_xz(negative=False)
-            self.plotter.camera.elevation = 22.0
-            self.plotter.camera.azimuth = -28.0
-            self.frame_all(render=False)   # the whole mandrel (and eye path) in view, also after a STEP import
-            self._reset_camera = False
 
     def render_image(self) -> QImage | None:
         """The 3D view rendered to an image (VTK draws with GL, which ``QWidget.grab`` may miss)."""

@@ -47,6 +47,8 @@ class MachineMixin:
         self.machine_visible = True
         """Whether the carriage, links and head are drawn (View -> Show the machine)."""
         self._machine: dict[str, Any] = {}
+        self._machine_frames_cache: dict[int, tuple[Any, MachineFrames]] = {}
+        """The machine's frames per path set (a laminate's layers: playing on swaps, computes none)."""
 
     def machine_pose(self) -> MachineFrames | None:
         """The machine's pose at every frame of the shown paths (view frame, mm), or ``None`` when the
@@ -55,9 +57,14 @@ class MachineMixin:
         if p is None or p.frame_q is None or p.machine is None:
             return None
         if self._machine.get("paths") is not p:
-            self._machine = {"paths": p, "size": self._machine_size(),
-                             "frames": None}
-            self._machine["frames"] = machine_frames(p.machine, p.frame_q, margin_mm=6.0 * self._machine["size"])
+            size = self._machine_size()
+            frames = self._machine_frames_cache.get(id(p))
+            if frames is None or frames[0] is not p:   # forward kinematics of every frame, once per path set
+                frames = (p, machine_frames(p.machine, p.frame_q, margin_mm=6.0 * size))
+                self._machine_frames_cache[id(p)] = frames
+                while len(self._machine_frames_cache) > 12:
+                    self._machine_frames_cache.pop(next(iter(self._machine_frames_cache)))
+            self._machine = {"paths": p, "size": size, "frames": frames[1]}
         return self._machine["frames"]
 
     def _machine_size(self) -> float:

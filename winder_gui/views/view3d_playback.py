@@ -3,7 +3,7 @@
 The program plays in machine time (:class:`winder_gui.views.playback.Timeline`): a slider in tenths
 of a second, speeds ×1…×1000, a jump to a circuit and, for a laminate, to a layer (playing goes on
 from one layer to the next, the read-out in the whole program's time); the band of true width is laid as the time
-advances (static chunks plus the chunk being laid, so a frame re-uploads only a few hundred quads);
+advances (one mesh of every quad, whose cell list is cut at the quads laid by then);
 camera presets and framing of the mandrel with the whole eye path.
 """
 
@@ -35,11 +35,8 @@ FRAME_MS = 40
 SLIDER_STEPS_PER_S = 10
 """The time slider moves in tenths of a machine second."""
 CAMERA_PRESETS = ("iso", "side", "axis")
-BAND_CHUNK = 400
-"""Least quads per static piece of the band in 3D (the piece being laid is rebuilt each frame)."""
-BAND_PIECES = 10
-"""At most about this many static pieces: each actor costs a software-GL render a few ms, more than the
-quads of the piece rebuilt per frame."""
+EYE_PATH_LOD_POINTS = 3000
+"""Points of the thinned eye path drawn while playing or moving (the whole path: up to 20 000 frames)."""
 COLOUR_KEYS = {"circuit": "circuit", "winding angle β [deg]": "beta_deg", "λ [–]": "lam", "pull speed u": "u"}
 
 
@@ -299,48 +296,42 @@ class PlaybackMixin:
 class SceneMixin:
     """The band laid so far, camera presets and framing (needs ``plotter``, ``paths``, ``data``)."""
 
-    def _add_band_actor(self, p: PathsViewData, cmap: str, clim: tuple[float, float]) -> None:
-        """The band of true width and the whole eye trajectory (thin).
+    def _add_band_actor(self, p: PathsViewData, cmap: str, clim: tuple[float, float]) -> dict[str, Any] | None:
+        """The whole eye trajectory (thin; a thinned copy drawn while playing) and the band of true width.
 
-        The band is cut into :data:`BAND_PIECES` chunks (of at least :data:`BAND_CHUNK` quads) in winding
-        order, each a static actor
-        shown once laid; only the chunk being laid is rebuilt per frame (:meth:`_update_band`), so a
-        frame re-uploads a few hundred quads, not the whole band."""
+        The band is one mesh of every quad (points and colours uploaded once); the band laid by a time is
+        its first ``k`` quads (:meth:`_update_band` replaces only the cell list).  Returns the band's state,
+        or ``None`` without a band."""
         import pyvista as pv
 
         if p.eye_xyz.shape[0] >= 2:
             self.plotter.add_mesh(pv.lines_from_points(p.eye_xyz), name="eye_path_all", color="#ecd2a8",
                                   line_width=1.0, reset_camera=False, render=False)
+            stride = max(1, -(-p.eye_xyz.shape[0] // EYE_PATH_LOD_POINTS))
+            coarse = np.vstack([p.eye_xyz[::stride], p.eye_xyz[-1:]])
+            lod = self.plotter.add_mesh(pv.lines_from_points(coarse), name="eye_path_lod", color="#ecd2a8",
+                                        line_width=1.0, reset_camera=False, render=False)
+            lod.SetVisibility(False)
         band = p.band
         if band is None or band.m < 2 or p.band_scalars is None:
-            return
+            return None
+        from vtkmodules.vtkCommonDataModel import vtkCellArray
+
         sc = np.asarray(p.band_scalars[COLOUR_KEYS[self.colour_by]], dtype=float)
         m = band.m
-        left, right = band.points[:m], band.points[m:]
-        style = {"scalars": "c", "cmap": cmap, "clim": clim, "show_scalar_bar": False, "reset_camera": False,
-                 "render": False}
-
-        def strip(a: int, b: int) -> Any:
-            """Quads a..b-1 (centre points a..b) as a mesh."""
-            pts = np.vstack([left[a:b + 1], right[a:b + 1]])
-            k = b - a
-            i = np.arange(k, dtype=np.int64)
-            faces = np.column_stack([np.full(k, 4), i, i + 1, k + 2 + i, k + 1 + i]).ravel()
-            mesh = pv.PolyData(pts, faces=faces)
-            mesh.point_data["c"] = np.concatenate([sc[a:b + 1], sc[a:b + 1]])
-            return mesh
-
-        chunks = []
-        size = max(BAND_CHUNK, -(-(m - 1) // BAND_PIECES))
-        for j, a in enumerate(range(0, m - 1, size)):
-            b = min(a + size, m - 1)
-            actor = self.plotter.add_mesh(strip(a, b), name=f"band{j}", **style)
-            chunks.append((a, b, actor))
-        self._band = {"band": band, "strip": strip, "chunks": chunks, "style": style, "last": None}
-        self._update_band()
+        i = np.arange(m - 1, dtype=np.int64)
+        conn = np.column_stack([i, i + 1, m + i + 1, m + i]).ravel()   # quad i: centre points i, i + 1
+        mesh = pv.PolyData()   # (not PolyData(points): that makes a vertex cell per point)
+        mesh.points = np.asarray(band.points, dtype=float)
+        mesh.SetPolys(vtkCellArray())
+        mesh.point_data["c"] = np.concatenate([sc, sc])
+        actor = self.plotter.add_mesh(mesh, name="band", scalars="c", cmap=cmap, clim=clim, show_scalar_bar=False,
+                                      reset_camera=False, render=False)
+        actor.SetVisibility(False)   # its quads are given when the band is shown (_update_band)
+        return {"band": band, "mesh": mesh, "conn": conn, "actor": actor, "last": None}
 
     def _update_band(self) -> None:
-        """Show the band laid by :attr:`time_s`: the chunks laid whole, and the part of the current one."""
+        """Show the band laid by :attr:`time_s`: its first quads (the cell list replaced, points kept)."""
         if self._band is None:
             return
         bd = self._band
@@ -349,22 +340,21 @@ class SceneMixin:
         if bd["last"] == k:
             return
         bd["last"] = k
-        current = None
-        for a, b, actor in bd["chunks"]:
-            actor.SetVisibility(b <= k)
-            if a < k < b:
-                current = (a, k)
-        now = bd.get("now")
-        if current is None:
-            if now is not None:
-                now.SetVisibility(False)
-            return
-        mesh = bd["strip"](*current)
-        if now is None:  # made once per band, then given each frame's mesh (add_mesh per frame costs ~8 ms)
-            bd["now"] = self.plotter.add_mesh(mesh, name="band_now", **bd["style"])
-        else:
-            now.mapper.SetInputData(mesh)
-            now.SetVisibility(True)
+        from vtkmodules.util.numpy_support import numpy_to_vtkIdTypeArray
+        from vtkmodules.vtkCommonDataModel import vtkCellArray
+
+        cells = vtkCellArray()
+        cells.SetData(numpy_to_vtkIdTypeArray(np.arange(0, 4 * k + 1, 4, dtype=np.int64), deep=True),
+                      numpy_to_vtkIdTypeArray(bd["conn"][:4 * k], deep=True))
+        bd["mesh"].SetPolys(cells)
+        bd["actor"].SetVisibility(k > 0)
+
+    def band_cells(self) -> int:
+        """Quads of the band drawn now (the band actor's cells; 0 when it is hidden)."""
+        bd = self._band
+        if bd is None or not bd["actor"].GetVisibility():
+            return 0
+        return int(bd["mesh"].GetNumberOfCells())
 
     def set_camera(self, preset: str) -> None:
         """Camera preset: ``iso`` (from above and the front), ``side`` (the axis across the view) or
