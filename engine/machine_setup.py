@@ -873,15 +873,18 @@ def _fixed_radius(machine: MachineTemplate) -> bool:
     return machine.kind == "cartesian" and machine.axis_index("cross") is None and machine.eye_radius is not None
 
 
-def carriage_need(machine: MachineTemplate, line: Any, eye_radius_mm: float | None = None
-                  ) -> tuple[float, float, str] | None:
+def carriage_need(machine: MachineTemplate, line: Any, eye_radius_mm: float | None = None,
+                  law_radius_mm: float | None = None) -> tuple[float, float, str] | None:
     """The mandrel-frame z range (mm) the eye must cover, from the winding line alone: ``(z_lo, z_hi, how)``.
 
     The eye always sits on the free fibre, the tangent ray of the line at its contact point, ahead of
     the contact.  On a fixed-radius machine (no cross feed) the eye is that ray's point at the eye radius
     (``eye_radius_mm``, default the machine's): the range is exact, whatever the payout law.  On the other
     cartesian machines it is a lower bound: where the contact is at its largest (smallest) z the ray runs
-    along the parallel or away from the mandrel, so the eye is at least as far out.  ``None`` for a robot
+    along the parallel or away from the mandrel, so the eye is at least as far out - unless the payout
+    law puts the eye at a known radius (the 'parallel' law: ``law_radius_mm``), where it is that ray's
+    point at that radius as on a fixed-radius machine (the payout interpolates its law between grid points:
+    the eye path's own range is within about a millimetre of it, mostly inside).  ``None`` for a robot
     (its arm reaches along the mandrel axis beyond the track)."""
     if machine.kind != "cartesian":
         return None
@@ -892,13 +895,16 @@ def carriage_need(machine: MachineTemplate, line: Any, eye_radius_mm: float | No
     c = np.asarray(line.xyz, dtype=float)
     if c.shape[0] == 0:
         return None
-    if _fixed_radius(machine):
+    fixed = _fixed_radius(machine)
+    if fixed or law_radius_mm is not None:
         from engine.kinematics import _slide_to_radius
 
-        r = float(eye_radius_mm if eye_radius_mm is not None else machine.eye_radius)
+        r = float(eye_radius_mm if eye_radius_mm is not None else machine.eye_radius) if fixed else float(
+            law_radius_mm)
         pts, _s, viol = _slide_to_radius(c, np.asarray(line.tau, dtype=float), c, r)
         if not viol:
-            return float(pts[:, 2].min()), float(pts[:, 2].max()), f"the eye at radius {r:g} mm"
+            how = f"the eye at radius {r:g} mm" if fixed else f"the eye on the parallel law's radius {r:g} mm"
+            return float(pts[:, 2].min()), float(pts[:, 2].max()), how
     return float(c[:, 2].min()), float(c[:, 2].max()), "the winding line (turnarounds included)"
 
 
@@ -909,7 +915,11 @@ def _precheck_carriage(job: Any, machine: MachineTemplate, mandrel: Any, line: A
     lo, hi = float(ax.min), float(ax.max)
     if not (math.isfinite(lo) and math.isfinite(hi)) or hi - lo >= 1e11:
         return
-    need = carriage_need(machine, line)
+    law_r = None
+    if not _fixed_radius(machine) and job.payout.law == "parallel":
+        law_r = (float(job.payout.eye_radius_mm) if job.payout.eye_radius_mm is not None
+                 else float(mandrel.r_max) + float(job.payout.clearance_mm))
+    need = carriage_need(machine, line, law_radius_mm=law_r)
     if need is None:
         return
     z_lo, z_hi, how = need
@@ -918,6 +928,15 @@ def _precheck_carriage(job: Any, machine: MachineTemplate, mandrel: Any, line: A
     span = z_hi - z_lo
     slack = 1e-6 * max(1.0, travel) + 1e-3            # numerical noise: only a sure misfit is refused here
     exact = how.startswith("the eye at radius")
+    if how.startswith("the eye on the parallel law"):
+        # the law is interpolated between its grid points: the eye path's range falls short of the ray's by
+        # up to about a millimetre at the default grid (1000 points a circuit); only what is sure is kept -
+        # the ray's range less a margin that grows with a coarser grid, and never less than the line's own
+        margin = max(5.0, 0.02 * span * max(1.0, 1000.0 / float(job.payout.grid_points)))
+        c_lo, c_hi, _how = carriage_need(machine, line)
+        z_lo, z_hi = min(z_lo + 0.5 * margin, c_lo), max(z_hi - 0.5 * margin, c_hi)
+        span = z_hi - z_lo
+        how += f" (less {margin:.1f} mm for the payout grid's interpolation)"
     if span > travel + slack:
         extra, fld = "", "machine.template"
         tail = (f"; no placement fits - use a machine with a longer {ax.name} axis or shorten the turnarounds "

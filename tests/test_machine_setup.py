@@ -505,3 +505,41 @@ def test_head_axis_of_a_lathe_is_radial_and_the_capsule_is_checked(monkeypatch) 
     ref = _dense_capsule_min(ms.mandrel_distance_fn(pipe), eye, lean, 60.0)
     assert ref[0] < 9.0 < ref[1] and [(x.index, x.count) for x in hit] == [(0, 1)]
     assert hit[0].value == pytest.approx(ref[0], abs=0.05) and hit[0].limit == 9.0
+
+
+def test_parallel_law_on_a_cross_feed_machine_is_prechecked_by_its_radius(new_job_line, monkeypatch) -> None:
+    """With the 'parallel' payout law the eye sits on the tangent ray at the law's radius on a cross-feed
+    machine too: the pre-check's carriage range is that ray's (less a margin for the payout grid's
+    interpolation), not the winding line's (about half of it here). Against the full run (payout, inverse
+    kinematics) on a long axis: the ray's range equals the eye's within 0.1 mm; a travel between the
+    line's range and the run's is refused before the payout with the sure lower bound; a travel that holds
+    the run's range runs and fits."""
+    import engine.payout
+    from engine.machine_setup import carriage_need
+    from engine.pipeline import run_pipeline
+
+    job, wres = new_job_line
+    job = job.replace(payout={**job.payout.model_dump(), "law": "parallel"})
+    long = job.replace(machine={"template": "lathe3", "axes": {"X": {"min": -1e4, "max": 1e4}}})
+    res = run_pipeline(long, None, upto="axes", line=wres.line, mandrel=wres.mandrel)
+    k = res.machine.axis_index("carriage")
+    ax = res.machine.axes[k]
+    z = (np.asarray(res.axes.q[:, k]) - ax.offset) / ax.scale
+    r0 = float(wres.mandrel.r_max) + float(job.payout.clearance_mm)
+    lo, hi, how = carriage_need(res.machine, wres.line, law_radius_mm=r0)
+    assert "parallel law's radius" in how
+    assert lo == pytest.approx(z.min(), abs=0.1) and hi == pytest.approx(z.max(), abs=0.1)
+    c_lo, c_hi, _ = carriage_need(res.machine, wres.line)
+    span = float(z.max() - z.min())
+    assert c_hi - c_lo < 0.6 * span                              # the old bound: the line's range
+    short = job.replace(machine={"template": "lathe3", "axes": {"X": {"min": 0.0, "max": span - 30.0}}})
+    with monkeypatch.context() as mp:
+        mp.setattr(engine.payout, "payout_for_job", lambda *a, **k: pytest.fail("the payout ran"))
+        with pytest.raises(InputError) as info:
+            run_pipeline(short, None, upto="axes", line=wres.line, mandrel=wres.mandrel)
+    msg = info.value.message
+    need = float(re.search(r"it needs at least ([0-9.]+) mm", msg).group(1))
+    assert span - 0.02 * span - 0.1 <= need <= span and "parallel law's radius" in msg
+    fits = job.replace(machine={"template": "lathe3", "axes": {"X": {"min": 0.0, "max": span + 2.0}}})
+    ok = run_pipeline(fits, None, upto="axes", line=wres.line, mandrel=wres.mandrel)
+    assert ok.placement.fits and not [v for v in ok.violations if v.kind == "position"]
