@@ -453,17 +453,22 @@ def test_joined_program_is_checked_block_by_block_and_located() -> None:
 
     from engine.laminate import _joined_problems, laminate_refusals
 
-    txt = PIPE.replace('template = "lathe2"', 'template = "lathe4"\n[machine.axes.X]\nmax = 430.0')
+    # 430 mm of X: the parallel law's eye needs at least 464.5 mm - refused before the helical layer's payout
+    with pytest.raises(InputError, match=r"layer 2 .*axis X of machine lathe4 travels 430 mm .*parallel law's "
+                                         r"radius .*needs at least 464\.5 mm"):
+        run_laminate(parse_job(PIPE.replace('template = "lathe2"', 'template = "lathe4"\n[machine.axes.X]\nmax = 430')))
+    # 470 mm passes that sure bound; the run finds the 474 mm it needs
+    txt = PIPE.replace('template = "lathe2"', 'template = "lathe4"\n[machine.axes.X]\nmax = 470.0')
     res = run_laminate(parse_job(txt))
     refusals = laminate_refusals(res)
-    assert any("needs 474.0 of X travel but the axis has 430" in r and "no placement fits" in r for r in refusals)
+    assert any("needs 474.0 of X travel but the axis has 470" in r and "no placement fits" in r for r in refusals)
     joined = [r for r in refusals if r.startswith("joined program, axis X: position")]
     assert len(joined) == 2, refusals
-    m = re.search(r"position ([0-9.]+) mm is above the limit 430 mm .*first at NC line (\d+), t = ([0-9.]+) s, "
+    m = re.search(r"position ([0-9.]+) mm is above the limit 470 mm .*first at NC line (\d+), t = ([0-9.]+) s, "
                   r"layer 2", joined[0])
     assert m, joined[0]
     nc_line = res.nc_text.splitlines()[int(m.group(2)) - 1]
-    assert float(re.search(r"X(-?[0-9.]+)", nc_line).group(1)) > 430.0
+    assert float(re.search(r"X(-?[0-9.]+)", nc_line).group(1)) > 470.0
     # a transition made too fast: the joined check finds it where the layers' own checks cannot
     ok = run_laminate(parse_job(PIPE))
     assert ok.program_problems == () and ok.violations == []
