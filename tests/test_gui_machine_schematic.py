@@ -324,3 +324,24 @@ def test_unlimited_axis_gets_a_nominal_arrow(widget, tmp_path) -> None:
     np.testing.assert_allclose(sch.eye3, forward_kinematics(m, sch.q[None, :])[0][0], atol=1e-9)
     assert math.hypot(*sch.eye3[:2]) > sch.mandrel_radius
     widget.grab()
+
+
+def test_head_body_drawn_from_the_eye_along_the_roll_axis(widget, qtbot) -> None:
+    """The set-up's head body (radius, length along the roll axis) is drawn from the eye: on a lathe the roll
+    axis is machine x away from the mandrel, so its far end is the projection of eye + length x e_x; its
+    width is the diameter at the drawing's scale; none without a body."""
+    widget.set_template("lathe3")
+    widget.grab()
+    assert widget.head_pixels is None
+    widget.set_head(12.0, 150.0)
+    widget.grab()
+    a, b, width = widget.head_pixels
+    sch = widget.schematic
+    e = widget.to_pixels(project(sch.eye3))
+    far = widget.to_pixels(project(sch.eye3 + np.array([150.0, 0.0, 0.0]) * np.sign(sch.eye3[0] or 1.0)))
+    assert (a.x(), a.y()) == pytest.approx((e.x(), e.y()), abs=1e-9)
+    assert (b.x(), b.y()) == pytest.approx((far.x(), far.y()), abs=1e-6)
+    assert width == pytest.approx(max(24.0 * widget._map[0], 2.0))
+    widget.set_head(0.0, 0.0)
+    widget.grab()
+    assert widget.head_pixels is None

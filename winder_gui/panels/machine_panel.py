@@ -260,6 +260,8 @@ class MachinePanel(SectionPanel):
             except InputError:
                 part = None
         self.schematic.set_part(part)
+        if job is not None:
+            self.schematic.set_head(job.machine.setup.head_radius_mm, job.machine.setup.head_length_mm)
         self.schematic.set_machine(machine)
 
     def _fill_table(self, job: Job) -> None:

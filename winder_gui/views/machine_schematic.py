@@ -87,6 +87,10 @@ class MachineSchematic(QWidget):
         self.label_rects: dict[str, QRectF] = {}
         """Where each label was drawn last (widget pixels), for tests: none overlaps another."""
         self._map: tuple[float, float, float] = (1.0, 0.0, 0.0)    # scale, x0, y0
+        self.head_mm: tuple[float, float] = (0.0, 0.0)
+        """The payout head's body from the job's set-up: radius and length along its roll axis (mm)."""
+        self.head_pixels: tuple[QPointF, QPointF, float] | None = None
+        """Where the head's body was drawn last: eye end, far end (widget pixels) and its width, for tests."""
         self.setToolTip(tr("Kinematic scheme of the template drawn from its forward kinematics (mandrel "
                         "schematic, nominal size); each axis with its travel in controller units. "
                         "Click an axis to select its row."))
@@ -112,6 +116,12 @@ class MachineSchematic(QWidget):
         """Draw the job's mandrel ``(z_min, z_max, r_max, supports)`` instead of the nominal one (None:
         nominal); takes effect with the next :meth:`set_machine`."""
         self.part = part
+
+    def set_head(self, radius_mm: float, length_mm: float) -> None:
+        """The payout head's body (``[machine.setup]`` head_radius_mm, head_length_mm): drawn from the eye
+        along its roll axis (engine.machine_setup.head_axis_q) when either is set."""
+        self.head_mm = (float(radius_mm), float(length_mm))
+        self.update()
 
     def set_template(self, name_or_path: str | Path) -> None:
         """Load a template by name or path and show it (or the loader's message)."""
@@ -217,6 +227,7 @@ class MachineSchematic(QWidget):
         self._label(p, "mandrel", QPointF(c.x(), c.y() + 10), boxes, QColor("#555"))
         for g in order:
             self._draw_axis(p, sch, g, boxes)
+        self._draw_head(p, sch)
         # the eye
         e = self.to_pixels(sch.eye)
         tip = self.to_pixels(project(sch.eye3 + 0.06 * sch.size * sch.eye_axis3))
@@ -229,6 +240,28 @@ class MachineSchematic(QWidget):
         self._label(p, "eye", QPointF(e.x() + 6, e.y() + 12), boxes, QColor(EYE_COLOUR))
         self._draw_labels(p, [QRectF(e.x() - 6, e.y() - 6, 12, 12)])
         p.end()
+
+    def _draw_head(self, p: QPainter, sch: Schematic) -> None:
+        """The set-up's head body: a capsule from the eye along the roll axis, at the scheme's pose."""
+        self.head_pixels = None
+        radius, length = self.head_mm
+        if radius <= 0.0 and length <= 0.0:
+            return
+        from engine.machine_setup import head_axis_q
+
+        u = head_axis_q(sch.machine, np.atleast_2d(sch.q))[0]
+        # head_axis_q gives the mandrel frame; the scheme draws the machine frame (the pose's mandrel angle)
+        th = float(sch.machine.to_internal(np.atleast_2d(sch.q))[0, sch.machine.axis_index("mandrel")])
+        c, s = math.cos(th), math.sin(th)
+        u = np.array([c * u[0] - s * u[1], s * u[0] + c * u[1], u[2]])
+        a = self.to_pixels(project(sch.eye3))
+        b = self.to_pixels(project(sch.eye3 + length * u))
+        width = max(2.0 * radius * self._map[0], 2.0)
+        pen = QPen(_alpha("#e3a21a", 150), width)
+        pen.setCapStyle(Qt.PenCapStyle.RoundCap)
+        p.setPen(pen)
+        p.drawLine(a, b)
+        self.head_pixels = (a, b, width)
 
     def _draw_mandrel(self, p: QPainter, sch: Schematic) -> None:
         pts = self._mandrel_points(sch)
