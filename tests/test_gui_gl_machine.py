@@ -142,3 +142,53 @@ def test_drawn_head_body_is_the_set_up_capsule(qtbot) -> None:
     pts = v.actor_points("machine_head")     # its own frame: the axis on x from -120 to 0, radius 8, round ends
     assert pts[:, 0].min() == pytest.approx(-128.0, abs=0.05) and pts[:, 0].max() == pytest.approx(8.0, abs=0.05)
     assert np.hypot(pts[:, 1], pts[:, 2]).max() == pytest.approx(8.0, abs=0.05)   # (tessellated spheres)
+
+
+@pytest.mark.gl
+def test_fit_frames_the_machine_and_the_supports(qtbot) -> None:
+    """Fit (and the framing after a run) keeps the machine in view when it is shown -- its links, carriage
+    and head over the whole program, so playing never runs it out of the picture -- and the shafts, chuck
+    and tailstock; hidden, the machine does not widen the view.  The bottle on its own machine in a wide,
+    low view (the main window's): framed on the eye path only, some of the machine fell outside (in the
+    main window, with the mandrel, an eighth of its points).  The vectorised projection used for it agrees with VTK's WorldToDisplay."""
+    from PySide6.QtGui import QGuiApplication
+
+    if QGuiApplication.platformName() in ("offscreen", "minimal"):
+        pytest.skip("needs a real display (xvfb-run with QT_QPA_PLATFORM=xcb)")
+    from winder_gui.views.view3d import MandrelView3D
+
+    job = load_job(ROOT / "resources/examples/bottle.toml")
+    res = run_pipeline(job, None, upto="axes")
+    paths = paths_view_data(res.line, res.eye, 20_000, 300, axes=res.axes, machine=res.machine)
+    v = MandrelView3D()
+    qtbot.addWidget(v)
+    v.resize(792, 400)
+    v.show()
+    assert v.ensure_backend() == "vtk"
+    v.set_paths(paths)
+    qtbot.waitUntil(lambda: v.plotter.render_window.GetSize()[0] > 0, timeout=10000)
+    qtbot.wait(50)
+    w, h = v.plotter.render_window.GetSize()
+    assert w > 2 * h   # wide and low, as in the main window
+    v.set_supports([("left shaft", -400.0, -150.0, 20.0), ("chuck", -150.0, -100.0, 60.0)])
+    v.set_camera("iso")
+    machine = v.machine_points()
+    assert machine.shape[0] > 100
+    assert v.points_in_view(machine).all()
+    assert v.points_in_view(v.scene_points()).all()
+    ren = v.plotter.renderer
+    x, y = v.project_points(machine[::37])
+    for p, xi, yi in zip(machine[::37], x, y, strict=True):
+        ren.SetWorldPoint(*p, 1.0)
+        ren.WorldToDisplay()
+        dx, dy, _ = ren.GetDisplayPoint()
+        assert abs(dx - xi) < 1e-6 and abs(dy - yi) < 1e-6
+    with_machine = v.plotter.camera.distance
+    v.set_machine_visible(False)
+    v.frame_all()
+    assert v.points_in_view(v.scene_points()).all()
+    assert not v.points_in_view(machine).all()   # framing without the machine cuts some of it off
+    assert v.plotter.camera.distance <= with_machine + 1e-9
+    v.set_machine_visible(True)
+    v.frame_all()
+    assert v.points_in_view(machine).all()

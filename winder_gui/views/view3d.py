@@ -529,7 +529,9 @@ class MandrelView3D(PlaybackMixin, SceneMixin, SceneCacheMixin, MachineMixin, QW
             cyl = pv.Cylinder(center=(0.5 * (z0 + z1), 0.0, 0.0), direction=(1.0, 0.0, 0.0), radius=r,
                               height=z1 - z0, resolution=48)
             self.plotter.add_mesh(cyl, name=f"support:{name}", color="#b5b5b5", opacity=0.55,
-                                  smooth_shading=True, reset_camera=False)
+                                  smooth_shading=True, reset_camera=False, render=False)
+        if self.paths is not None and not self.is_playing():
+            self.frame_all(render=False)   # they come after the run's paths: framed with them
         self.plotter.render()
 
     def render_image(self) -> QImage | None:

@@ -374,15 +374,38 @@ class SceneMixin:
         self.frame_all()
 
     def scene_points(self) -> np.ndarray:
-        """Points that must be in view (view frame, mm): the mandrel's surface, the eye trajectory and
-        the winding paths' extremes."""
+        """Points that must be in view (view frame, mm): the mandrel's surface, the eye trajectory, the
+        shafts, chuck and tailstock, and -- when the machine is shown -- the machine over the whole program
+        (:meth:`machine_points`: playing, it stays in view)."""
         pts = []
         if self.data is not None:
             d = self.data
             pts.append(np.column_stack([d.surface_x.ravel(), d.surface_y.ravel(), d.surface_z.ravel()])[::7])
         if self.paths is not None and self.paths.eye_xyz.size:
             pts.append(self.paths.eye_xyz)
+        for _name, z0, z1, r in self.supports:
+            if z1 > z0 and r > 0:   # the cylinder's extreme points (the axis is the view's x)
+                ring = np.array([[0.0, r, 0.0], [0.0, -r, 0.0], [0.0, 0.0, r], [0.0, 0.0, -r]])
+                pts += [ring + [z0, 0.0, 0.0], ring + [z1, 0.0, 0.0]]
+        if self.machine_visible:
+            pts.append(self.machine_points())
         return np.vstack(pts) if pts else np.zeros((0, 3))
+
+    def machine_points(self, max_frames: int = 240) -> np.ndarray:
+        """The machine drawn over the program (view frame, mm): the link chain, the carriage box's reach
+        and the head's far end at up to ``max_frames`` frames spread over it; empty without a machine."""
+        fr = self.machine_pose()
+        if fr is None or fr.links.shape[0] == 0:
+            return np.zeros((0, 3))
+        n = fr.links.shape[0]
+        idx = np.unique(np.linspace(0, n - 1, min(n, max_frames)).round().astype(np.int64))
+        h = float(self._machine.get("size", 0.0))
+        box = 6.0 * h * np.vstack([np.eye(3), -np.eye(3)])   # the carriage box: at most 6 h from its centre
+        out = [fr.links[idx].reshape(-1, 3), (fr.carriage[idx][:, None, :] + box[None]).reshape(-1, 3)]
+        if fr.head_axis is not None:   # the head's body behind the eye, along its roll axis
+            length = float(self.paths.head_mm[1]) if self.paths is not None and self.paths.head_mm[1] > 0 else 10.0 * h
+            out.append(fr.eye[idx] + length * fr.head_axis[idx])
+        return np.vstack(out)
 
     def frame_all(self, render: bool = True) -> None:
         """Frame the mandrel, the whole eye trajectory and the head (auto-framing after a run; View ->
@@ -411,12 +434,21 @@ class SceneMixin:
         ``margin``, a fraction of its size, on every side)."""
         if self.plotter is None:
             return np.zeros(len(pts), dtype=bool)
-        ren = self.plotter.renderer
+        x, y = self.project_points(pts)
         w, h = self.plotter.render_window.GetSize()
-        out = np.zeros(len(pts), dtype=bool)
-        for i, p in enumerate(np.asarray(pts, dtype=float)):
-            ren.SetWorldPoint(float(p[0]), float(p[1]), float(p[2]), 1.0)
-            ren.WorldToDisplay()
-            x, y, _z = ren.GetDisplayPoint()
-            out[i] = margin * w <= x <= (1 - margin) * w and margin * h <= y <= (1 - margin) * h
-        return out
+        return (margin * w <= x) & (x <= (1 - margin) * w) & (margin * h <= y) & (y <= (1 - margin) * h)
+
+    def project_points(self, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Display coordinates (px) of points (view frame, mm) by the camera's projection, all at once
+        (what ``vtkRenderer.WorldToDisplay`` gives one point at a time)."""
+        ren = self.plotter.renderer
+        m = ren.GetActiveCamera().GetCompositeProjectionTransformMatrix(ren.GetTiledAspectRatio(), -1.0, 1.0)
+        mat = np.array([[m.GetElement(i, j) for j in range(4)] for i in range(4)])
+        p = np.asarray(pts, dtype=float).reshape(-1, 3)
+        hom = np.column_stack([p, np.ones(len(p))]) @ mat.T
+        ndc = hom[:, :2] / hom[:, 3:4]
+        vx0, vy0, vx1, vy1 = ren.GetViewport()
+        w, h = self.plotter.render_window.GetSize()
+        x = (vx0 + (ndc[:, 0] + 1.0) * 0.5 * (vx1 - vx0)) * w
+        y = (vy0 + (ndc[:, 1] + 1.0) * 0.5 * (vy1 - vy0)) * h
+        return x, y
