@@ -150,7 +150,8 @@ def test_fit_frames_the_machine_and_the_supports(qtbot) -> None:
     and head over the whole program, so playing never runs it out of the picture -- and the shafts, chuck
     and tailstock; hidden, the machine does not widen the view.  The bottle on its own machine in a wide,
     low view (the main window's): framed on the eye path only, some of the machine fell outside (in the
-    main window, with the mandrel, an eighth of its points).  The vectorised projection used for it agrees with VTK's WorldToDisplay."""
+    main window, with the mandrel, an eighth of its points).  The vectorised projection used for it agrees
+    with VTK's WorldToDisplay."""
     from PySide6.QtGui import QGuiApplication
 
     if QGuiApplication.platformName() in ("offscreen", "minimal"):
