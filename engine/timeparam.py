@@ -428,7 +428,7 @@ class _Problem:
     hull_rows: np.ndarray | None = None   # rows with the provably redundant ones zeroed (for the hull)
     ipos: np.ndarray | None = None        # the ± pairs of rows: rows[:, ineg] == -rows[:, ipos]
     ineg: np.ndarray | None = None
-    slopes: tuple | None = None   # the compiled pass's: chain slopes, 2h, K/4h², uniform h, work arrays
+    slopes: tuple | None = None   # the compiled pass's constants: chain slopes, 2h, K/4h², uniform h
 
 
 MAX_PATH_VALUE = 1e9
@@ -1169,12 +1169,12 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
             h = prob.h
             with np.errstate(divide="ignore", invalid="ignore"):
                 prob.slopes = (np.diff(prob.rk) / np.diff(prob.rq), np.diff(prob.lk) / np.diff(prob.lq), 2.0 * h,
-                               (K / 4.0) / (h * h), bool(np.ptp(h) <= 1e-12 * h.max()), [])
-        rs, ls, two_h, kq_h, uniform_h, work = prob.slopes
+                               (K / 4.0) / (h * h), bool(np.ptp(h) <= 1e-12 * h.max()))
+        rs, ls, two_h, kq_h, uniform_h = prob.slopes
         fused = timeparam_jit.dp_pass((plo, span, phi, frac), prob.xn, (prob.rq, prob.rk, prob.lq, prob.lk, rs, ls), L,
                                       prob.xjb,
                                       prob.xjt, degenerate, plo, sp_p, t_lo, t_hi, nb, two_h, kq_h, uniform_h,
-                                      _CHUNK, K > 0, int(_LOMASK), int(_HIMASK), work)
+                                      _CHUNK, K > 0, int(_LOMASK), int(_HIMASK))
         if fused is not None:                # windows, forward and backward pass in one call: the same bits
             _STATS["candidates"], bad_node, final_ok, jidx, sdot = fused
             if bad_node >= 0:

@@ -444,16 +444,13 @@ def _build_fused() -> Any:
 def dp_pass(levels: tuple[np.ndarray, ...], xn: np.ndarray, ch: tuple[np.ndarray, ...], L: int,
             xjb: np.ndarray, xjt: np.ndarray, degenerate: np.ndarray, plo: np.ndarray, sp_p: np.ndarray,
             t_lo: np.ndarray, t_hi: np.ndarray, nb: int, two_h: np.ndarray, kq_h: np.ndarray, uniform_h: bool,
-            chunk: int, use_k: bool, lomask: int, himask: int, work: list[np.ndarray] | None = None
-            ) -> tuple[int, int, bool, np.ndarray, np.ndarray] | None:
+            chunk: int, use_k: bool, lomask: int, himask: int) -> tuple[int, int, bool, np.ndarray, np.ndarray] | None:
     """One whole DP pass of :func:`engine.timeparam._dp` (levels uniform in ṡ) in one compiled call:
     the levels, the windows, the forward pass and the backward pass, bit for bit the numpy code's.
     ``levels`` = ``(plo, span, phi, frac)``: level ``k`` at node ``i`` is ``min(plo_i + span_i·frac_k,
     phi_i)`` (mm/s).  ``ch`` =
     ``(rq, rk, lq, lk, rs, ls)``: the chains and their segment slopes ``diff(rk)/diff(rq)``,
-    ``diff(lk)/diff(lq)`` (numpy's ``interp`` computes the same quotients).  ``work``: a list the
-    caller keeps between passes of one problem (one thread): the ``(N, M)`` work arrays are kept in it
-    and reused.
+    ``diff(lk)/diff(lq)`` (numpy's ``interp`` computes the same quotients).
 
     Returns ``(candidates, unreachable node or -1, final speed reached, jidx, sdot)`` (``jidx``, ``sdot``
     valid only when the pass succeeded: node -1 and final reached), or ``None`` without numba."""
@@ -468,12 +465,9 @@ def dp_pass(levels: tuple[np.ndarray, ...], xn: np.ndarray, ch: tuple[np.ndarray
         return None
     plo_, span, phi, frac = levels
     n, M = plo_.size, frac.size
-    if work is not None and work and work[0].shape == (n, M):
-        lev, xall, Jraw = work
-    else:
-        lev, xall, Jraw = np.empty((n, M)), np.empty((n, M)), np.empty(n * M, np.int64)
-        if work is not None:
-            work[:] = [lev, xall, Jraw]
+    lev = np.empty((n, M))
+    xall = np.empty((n, M))
+    Jraw = np.empty(n * M, np.int64)
     jidx = np.empty(n, np.int64)
     sdot = np.empty(n)
     rq, rk, lq, lk, rs, ls = ch
