@@ -1,13 +1,20 @@
-"""Programs whose circuits repeat: compute a few circuits, replicate the rest (issue 16, docs/speed.md).
+"""Programs whose circuits repeat: compute a few circuits, keep and replicate the rest (issue 16,
+docs/speed.md).
 
 The winding line of a program is circuit 0 turned by k·Δv about the mandrel axis
 (:func:`engine.winding._assemble`) and the payout stage turns circuit 0's eye path the same way
 (:func:`engine.payout.extend_to_line`, from :data:`engine.payout.REPLICATE_MIN_CIRCUITS` circuits on).
-The machine sees the same motion every circuit then: every axis repeats, the mandrel axis advanced by a
-constant angle per circuit.  :func:`replicate_axes` runs the axes stage on the first three circuits
-only, checks that circuits 1 and 2 repeat (every axis equal, the mandrel advanced by one constant)
-and builds the whole axis path from them; whenever the check fails (or the short path reports any
-violation, slides the eye, ...) it returns None and the caller computes every point.
+
+* :class:`CircuitArray` keeps a per-point array as circuit 0 + the rule that makes circuit k;
+  :class:`DeferredField` makes a dataclass field hold one and materialise it on first read (the line,
+  the eye path and the axis path of a program of :data:`DEFER_MIN_CIRCUITS` circuits or more);
+  :func:`field_rows`, :func:`field_take`, :func:`raw_field` and :func:`replace_raw` read such fields
+  without materialising them.
+* The machine sees the same motion every circuit: every axis repeats, the mandrel axis advanced by a
+  constant angle per circuit.  :func:`replicate_axes` runs the axes stage on the first three circuits
+  only, checks that circuits 1 and 2 repeat (every axis equal, the mandrel advanced by one constant)
+  and builds the whole axis path from them; whenever the check fails (or the short path reports any
+  violation, ...) it returns None and the caller computes every point.
 """
 
 from __future__ import annotations
