@@ -309,6 +309,16 @@ def test_selecting_a_layer_shows_its_surface_line_and_plots(ran) -> None:
     lp.buildup.setChecked(True)  # build-up: height above the mandrel
     x, y = lp.curve_data("boundary 3")
     assert float(np.max(y)) == pytest.approx(sum(t), abs=0.02)
+    # the legend (mandrel + one entry per layer) sits beside the cross-section, never over its data
+    assert len(lp.legend.items) == 1 + 3
+    assert [lab.text.split()[0] for _s, lab in lp.legend.items] == ["mandrel", "1", "2", "3"]
+    lp.resize(1000, 700)
+    from PySide6.QtWidgets import QApplication
+    QApplication.processEvents()
+    legend = lp.legend.sceneBoundingRect()
+    data = lp.plots["section"].getViewBox().sceneBoundingRect()
+    assert legend.width() > 20 and data.width() > 300 and not legend.intersects(data)
+    assert legend.left() >= data.right() and legend.top() < data.bottom()
 
 
 def test_edit_of_the_last_layer_reuses_the_others(ran) -> None:

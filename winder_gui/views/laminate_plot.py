@@ -15,8 +15,9 @@ from typing import Any
 
 import numpy as np
 import pyqtgraph as pg
+from PySide6.QtCore import Qt
 from PySide6.QtGui import QColor
-from PySide6.QtWidgets import QCheckBox, QWidget
+from PySide6.QtWidgets import QCheckBox, QSizePolicy, QWidget
 
 from winder_gui.i18n import tr
 from winder_gui.panels.layers_panel import layer_colour
@@ -37,13 +38,21 @@ class LaminatePlots(PlotPage):
         self.add_plot("section", 0, 0, tr("r [mm]"), tr("z [mm]"), title=tr("Cross-section: layer boundaries"),
                       colspan=2)
         self.add_plot("angle", 1, 0, tr("β [deg]"), tr("z [mm]"), title=tr("Winding angle (first pass)"))
-        self.add_plot("thickness", 1, 1, tr("t [mm]"), tr("z [mm]"), title=tr("Thickness added by each layer"))
-        self.glw.ci.layout.setRowStretchFactor(0, 3)
-        self.glw.ci.layout.setRowStretchFactor(1, 2)
-        leg = self.plots["section"].addLegend(brush=pg.mkBrush(255, 255, 255, 200), labelTextColor="#202020",
-                                              colCount=3)
-        # bottom centre: clear of the domes at both ends and of the cylinder's boundaries at the top
-        leg.anchor(itemPos=(0.5, 1.0), parentPos=(0.5, 1.0), offset=(0, -8))
+        self.add_plot("thickness", 1, 1, tr("t [mm]"), tr("z [mm]"), title=tr("Thickness added by each layer"),
+                      colspan=2)
+        lay = self.glw.ci.layout
+        lay.setRowStretchFactor(0, 3)
+        lay.setRowStretchFactor(1, 2)
+        # the cross-section's legend beside it, in its own cell: never over the boundaries or the fills
+        # (the build-up view fills the whole plot); the thickness plot spans the cell below it
+        self.legend = pg.LegendItem(brush=pg.mkBrush(255, 255, 255, 0), labelTextColor="#202020", colCount=1,
+                                    verSpacing=-4)
+        self.legend.setSizePolicy(QSizePolicy.Policy.Preferred, QSizePolicy.Policy.Maximum)   # its own height, top
+        self.glw.addItem(self.legend, row=0, col=2)
+        lay.setAlignment(self.legend, Qt.AlignmentFlag.AlignTop | Qt.AlignmentFlag.AlignLeft)
+        lay.setColumnStretchFactor(0, 1)
+        lay.setColumnStretchFactor(1, 1)
+        lay.setColumnStretchFactor(2, 0)
         self.output: Any = None
         self.selected = -1
         self._inner: Any = None
@@ -105,6 +114,12 @@ class LaminatePlots(PlotPage):
         out = self.output
         return r - np.interp(z, np.asarray(out.bare_z), np.asarray(out.bare_r)) if self.buildup.isChecked() else r
 
+    def clear_data(self, message: str = "") -> None:
+        """Remove every curve and the legend's entries; show ``message``."""
+        super().clear_data(message)
+        if hasattr(self, "legend"):
+            self.legend.clear()
+
     def _begin(self) -> None:
         out = self.output
         for item in self.fills.values():
@@ -116,8 +131,9 @@ class LaminatePlots(PlotPage):
             return
         self.clear_data("")
         bz, br = np.asarray(out.bare_z), np.asarray(out.bare_r)
-        self._inner = self.set_curve("section", "bare", bz, self._y_of(bz, br), colour="#000000", width=1.5,
-                                     legend=tr("mandrel"))
+        self._inner = self.set_curve("section", "bare", bz, self._y_of(bz, br), colour="#000000", width=1.5)
+        self.legend.addItem(self._inner, tr("mandrel"))
+        self.legend.setColumnCount(1 if len(out.views) < 9 else 2)
         self._total_t = np.zeros_like(bz)
 
     def _draw_layer(self, v: Any) -> None:
@@ -128,7 +144,8 @@ class LaminatePlots(PlotPage):
         sel = v.index == self.selected
         w = 3.0 if sel else 1.2
         outer = self.set_curve("section", f"boundary {n}", v.outer_z, self._y_of(v.outer_z, v.outer_r), colour=col,
-                               width=w, legend=f"{n} {v.name}" if v.name != f"{n} {v.kind}" else f"{n} {v.kind}")
+                               width=w)
+        self.legend.addItem(outer, f"{n} {v.name}" if v.name != f"{n} {v.kind}" else f"{n} {v.kind}")
         c = QColor(col)
         c.setAlpha(150 if sel else 70)
         fill = pg.FillBetweenItem(self._inner, outer, brush=pg.mkBrush(c))
