@@ -50,7 +50,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from engine.errors import InfeasibleError, InputError
-from engine.state import State, check_cancel
+from engine.state import State, SubState, check_cancel
 
 FloatArray = NDArray[np.float64]
 
@@ -230,16 +230,30 @@ def _parameter(line: ContactLine, parameter: str) -> FloatArray:
     raise InputError(f"process parameter must be 's' or 'v', got {parameter!r}", field="payout.parameter")
 
 
-def _grid(line: ContactLine, parameter: str, n: int | None) -> _Geo:
-    """Grid points: line points spread as evenly in x as the line allows (ends included)."""
+def _nearest(m: FloatArray, targets: FloatArray) -> NDArray[np.int64]:
+    """Index of the entry of the non-decreasing ``m`` nearest to each target."""
+    pos = np.clip(np.searchsorted(m, targets), 0, m.size - 1)
+    prev = np.clip(pos - 1, 0, m.size - 1)
+    return np.where(np.abs(m[prev] - targets) < np.abs(m[pos] - targets), prev, pos)
+
+
+def _grid(line: ContactLine, parameter: str, n: int | None, extra: NDArray[np.int64] | None = None) -> _Geo:
+    """Grid points: line points spread as evenly in x as the line allows (ends included), plus the line
+    points ``extra`` (indices into the line: where the line-resolution check asked for them)."""
     x = _parameter(line, parameter)
     keep = np.concatenate([[True], np.diff(x) > 1e-12 * max(1.0, abs(x[-1] - x[0]))])
     idx = np.flatnonzero(keep)
     if n is not None and n < idx.size:
-        targets = np.linspace(x[idx[0]], x[idx[-1]], n)
-        pos = np.clip(np.searchsorted(x[idx], targets), 0, idx.size - 1)
-        prev = np.clip(pos - 1, 0, idx.size - 1)
-        pick = np.where(np.abs(x[idx[prev]] - targets) < np.abs(x[idx[pos]] - targets), prev, pos)
+        # n points evenly in x, and _GRID_TURN·n more spread evenly over the turning of the winding angle:
+        # the turnarounds, where the free fibre swings and u changes fastest, get points by their turning
+        xi = x[idx]
+        picks = [_nearest(xi, np.linspace(xi[0], xi[-1], n))]
+        turn = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(line.beta[idx])))])
+        if turn[-1] > 0 and _GRID_TURN > 0:
+            picks.append(_nearest(turn, np.linspace(0.0, turn[-1], max(2, int(_GRID_TURN * n)))))
+        pick = np.concatenate(picks)
+        if extra is not None and extra.size:
+            pick = np.concatenate([pick, np.flatnonzero(np.isin(idx, extra))])
         idx = idx[np.unique(np.concatenate([[0], pick, [idx.size - 1]]))]
     if idx.size < 3:
         raise InputError(f"the process parameter '{parameter}' does not increase along the winding line")
@@ -733,8 +747,12 @@ def _curve_function(points: Sequence[tuple[float, float]]) -> Callable[[FloatArr
 def geometric_law(line: Any, mandrel: Any, law: str, spec: Any = None, *, k: int | None = None,
                   parameter: str | None = None, grid_points: int | None = None, workspace: Workspace | None = None,
                   curve: Callable[[FloatArray, FloatArray], FloatArray] | None = None,
-                  state: State | None = None) -> EyePath:
+                  state: State | None = None, refine: bool = True) -> EyePath:
     """Eye path of a geometric law (11): solve (10) + (11) for l(x) at each grid point.
+
+    The program uses l interpolated linearly between grid points at every line point; where that
+    breaks a constraint the law is also solved at those line points (:func:`_refined`), and the
+    report's ``line`` section checks the eye path at every line point.
 
     Parameters
     ----------
@@ -753,7 +771,15 @@ def geometric_law(line: Any, mandrel: Any, law: str, spec: Any = None, *, k: int
         raise InputError(f"unknown geometric law {law!r}; use one of {', '.join(GEOMETRIC_LAWS)}", field="payout.law")
     k = spec.impregnation_k if k is None else k
     parameter = spec.parameter if parameter is None else parameter
-    geo, env, contour = _prepare(line, mandrel, spec, parameter, grid_points, workspace, state)
+    return _refined(line, mandrel, spec, workspace, state, refine, lambda extra, st: _geometric_grid(
+        line, mandrel, law, spec, k, parameter, grid_points, workspace, curve, st, extra))
+
+
+def _geometric_grid(line: Any, mandrel: Any, law: str, spec: Any, k: int, parameter: str, grid_points: int | None,
+                    workspace: Workspace | None, curve: Callable[[FloatArray, FloatArray], FloatArray] | None,
+                    state: State | None, extra: NDArray[np.int64] | None) -> EyePath:
+    """:func:`geometric_law` on the grid (plus the line points ``extra``)."""
+    geo, env, contour = _prepare(line, mandrel, spec, parameter, grid_points, workspace, state, extra)
     l_cap = spec.free_length_max_mm
     if law == "parallel":
         R0 = spec.eye_radius_mm if spec.eye_radius_mm is not None else mandrel.r_max + spec.clearance_mm
@@ -784,11 +810,128 @@ def _with_report(eye: EyePath, rep: dict[str, Any]) -> EyePath:
     return replace_raw(eye, report=rep)       # a deferred per-point array stays deferred
 
 
+_REFINE_ROUNDS = 6
+_REFINE_NEAR = 4
+"""Line points on each side of a failing one that join the grid with it."""
+_REFINE_BAND = 1e-3
+"""u between grid points may leave the grid's band by this share of its width before points are added."""
+_GRID_TURN = 0.0
+"""Rounds of adding the line points where the interpolated eye path breaks a constraint to the grid."""
+
+
+def _line_check(cl: ContactLine, contour: _Contour, spec: Any, eye: EyePath, workspace: Workspace | None,
+                tol: float = CHECK_TOL) -> tuple[dict[str, Any], NDArray[np.int64]]:
+    """Check the eye path as the program uses it: l interpolated linearly in x at every line point.
+
+    Checks the clearance (distance of the eye to the mandrel body), the free fibre staying out of the
+    body, the workspace and free_length_max, no sag, no reverse rotation and u >= u_min, with the
+    tolerance of the grid's exact check.  Returns the summary (``feasible``, u figures at line
+    resolution, ``constraints`` shaped as the grid report's) and the line indices to add to the grid
+    where a check fails or u leaves the grid's band (each with its neighbours).
+    """
+    geo = _grid(cl, eye.parameter, None)
+    l = np.interp(geo.x, eye.x, eye.l)
+    Z, R, V, _ = geo.eye(l)
+    L = geo.line
+    x, z = geo.x, L.z
+    xm, zm = 0.5 * (x[1:] + x[:-1]), 0.5 * (z[1:] + z[:-1])
+    dx = np.diff(x)
+    h = float(spec.clearance_mm)
+    far = max(h, 0.01)
+    dist = np.minimum(contour.distance(Z, R, far=far), far + 1.0)  # "far" is all the check needs to know
+    fibre = np.full(geo.n, far + 1.0)
+    for t in (0.125, 0.25, 0.375, 0.5, 0.625, 0.75, 0.875):  # the free fibre from the contact to the eye
+        Zt, Rt, _, _ = geo.eye(l * t)
+        fibre = np.minimum(fibre, contour.distance(Zt, Rt, far=far))
+    if workspace is None and (spec.workspace_z_mm is not None or spec.workspace_r_mm is not None):
+        workspace = BoxWorkspace(spec.workspace_z_mm, spec.workspace_r_mm)
+    reach = float(spec.free_length_max_mm) - l
+    if workspace is not None:
+        reach = np.where(workspace.contains(Z, R), reach, np.minimum(reach, -1.0))
+    lam = L.s + l - eye.k * R
+    u = np.diff(lam) / dx
+    point = {"clearance": dist - h, "fibre_outside_mandrel": fibre + 0.01, "workspace": reach}
+    mid = {"no_sag": np.diff(L.s + l) / dx, "no_reverse_rotation": np.diff(V) / dx, "u_floor": u - float(spec.u_min)}
+    bad = np.zeros(geo.n, dtype=bool)
+    constraints: dict[str, Any] = {}
+    for name, slack in point.items():
+        viol = slack < -tol
+        bad |= viol
+        w = int(np.argmin(slack))
+        constraints[name] = {"ok": not bool(viol.any()), "min_slack": float(slack[w]), "at_x": float(x[w]),
+                             "at_z": float(z[w]), "violated": _runs(viol, x, z)}
+    for name, slack in mid.items():
+        viol = slack < -tol
+        bad[:-1] |= viol
+        bad[1:] |= viol
+        w = int(np.argmin(slack))
+        constraints[name] = {"ok": not bool(viol.any()), "min_slack": float(slack[w]), "at_x": float(xm[w]),
+                             "at_z": float(zm[w]), "violated": _runs(viol, xm, zm)}
+    # the band itself: u between grid points outside the grid's [u_min, u_max] widens the program's band
+    ug = eye.u
+    give = _REFINE_BAND * max(float(ug.max() - ug.min()), tol)
+    wide = (u < float(ug.min()) - give) | (u > float(ug.max()) + give)
+    grow = bad.copy()
+    grow[:-1] |= wide
+    grow[1:] |= wide
+    i = geo.index[np.flatnonzero(grow)]
+    near = np.arange(-_REFINE_NEAR, _REFINE_NEAR + 1)
+    add = np.unique(np.clip((i[:, None] + near[None, :]).ravel(), 0, cl.z.size - 1)) if i.size else i
+    umin, umax = float(u.min()), float(u.max())
+    summary = {"points": int(geo.n), "feasible": not bool(bad.any()), "u_min": umin, "u_max": umax,
+               "u_range": umax - umin, "clearance_min_mm": float(dist.min()), "constraints": constraints}
+    return summary, add.astype(np.int64)
+
+
+def _refined(line: Any, mandrel: Any, spec: Any, workspace: Workspace | None, state: State | None, refine: bool,
+             solve: Callable[[NDArray[np.int64] | None, State | None], EyePath]) -> EyePath:
+    """Solve on the grid, check at every line point (:func:`_line_check`), add the line points where the
+    interpolated path breaks a constraint or leaves the grid's pull-speed band to the grid and solve
+    again (at most :data:`_REFINE_ROUNDS` times).  Without ``refine``: the grid's answer alone (solver
+    comparisons on one grid).  The report gets the line
+    check as ``line``; its ``feasible`` needs both checks, and a constraint broken only between grid
+    points is listed as ``<name> (between grid points)``."""
+    if not refine:
+        return solve(None, state)
+    cl = ContactLine.from_line(line)
+    contour = _Contour(mandrel)
+    extra: NDArray[np.int64] | None = None
+    added = 0
+    rounds = _REFINE_ROUNDS
+    for rnd in range(rounds + 1):
+        # progress: the first solve to 0.75, each refinement half of what is left
+        a, b = (0.0, 0.75) if rnd == 0 else (1.0 - 0.25 * 0.5 ** (rnd - 1), 1.0 - 0.25 * 0.5 ** rnd)
+        eye = solve(extra, None if state is None else SubState(state, a, b))
+        check_cancel(state)
+        chk, add = _line_check(cl, contour, spec, eye, workspace)
+        # a law already infeasible on the grid stays so: refining would only re-solve it at more points
+        if not add.size or not eye.report.get("feasible", True) or rnd == rounds:
+            break
+        new = add if extra is None else np.union1d(extra, add)
+        if extra is not None and new.size == extra.size:
+            break  # nothing new to add: the grid already holds these points
+        added, extra = new.size, new
+    rep = dict(eye.report)
+    chk["refinements"] = rnd
+    chk["grid_points_added"] = added
+    rep["line"] = chk
+    cons = dict(rep.get("constraints") or {})
+    for name, c in chk["constraints"].items():
+        if not c["ok"] and cons.get(name, {}).get("ok", True):
+            cons[f"{name} (between grid points)"] = c
+    rep["constraints"] = cons
+    rep["feasible"] = bool(rep.get("feasible", True)) and chk["feasible"]
+    if state is not None:
+        state.progress(1.0, f"{eye.law} law checked at {chk['points']} line points")
+    return _with_report(eye, rep)
+
+
 def _prepare(line: Any, mandrel: Any, spec: Any, parameter: str, grid_points: int | None,
-             workspace: Workspace | None, state: State | None) -> tuple[_Geo, Envelope, _Contour]:
+             workspace: Workspace | None, state: State | None, extra: NDArray[np.int64] | None = None
+             ) -> tuple[_Geo, Envelope, _Contour]:
     cl = ContactLine.from_line(line)
     n = spec.grid_points if grid_points is None else grid_points
-    geo = _grid(cl, parameter, n)
+    geo = _grid(cl, parameter, n, extra)
     if workspace is None and (spec.workspace_z_mm is not None or spec.workspace_r_mm is not None):
         workspace = BoxWorkspace(spec.workspace_z_mm, spec.workspace_r_mm)
     check_cancel(state)
@@ -1754,13 +1897,15 @@ def _fast_qp_stage(prob: _Problem, u_lo: float, u_hi: float, mu0: FloatArray, st
 
 def min_range_law(line: Any, mandrel: Any, spec: Any = None, workspace: Workspace | None = None,
                   state: State | None = None, *, k: int | None = None, parameter: str | None = None,
-                  grid_points: int | None = None, solver: str = "fast") -> EyePath:
+                  grid_points: int | None = None, solver: str = "fast", refine: bool = True) -> EyePath:
     """The technological law (13)–(15): the free length with the narrowest, smoothest pull speed.
 
     Solves, on ``spec.grid_points`` points of x: (13) max min u → u_min*; (14) min max u with
     u >= u_min* → u_max*; (15) min ∫(u − U)² dx with u_min* <= u <= u_max*.  All subject to
     cyclicity, no sag, no reverse rotation and the clearance/workspace envelope.  The final answer is
-    checked with the exact nonlinear formulas (``report['constraints']``).
+    checked with the exact nonlinear formulas (``report['constraints']``), and again at every line point
+    with l interpolated as the program uses it; where that fails (or u leaves the band) those line
+    points join the grid and the law is solved again (``refine``; ``report['line']``).
 
     Raises
     ------
@@ -1773,14 +1918,22 @@ def min_range_law(line: Any, mandrel: Any, spec: Any = None, workspace: Workspac
     spec = spec if spec is not None else PayoutSpec()
     k = spec.impregnation_k if k is None else int(k)
     parameter = spec.parameter if parameter is None else parameter
-    geo, env, _ = _prepare(line, mandrel, spec, parameter, grid_points, workspace, state)
+    if solver not in ("fast", "highs"):
+        raise InputError(f"solver must be 'fast' or 'highs', got {solver!r}")
+    return _refined(line, mandrel, spec, workspace, state, refine, lambda extra, st: _min_range_grid(
+        line, mandrel, spec, workspace, st, k, parameter, grid_points, solver, extra))
+
+
+def _min_range_grid(line: Any, mandrel: Any, spec: Any, workspace: Workspace | None, state: State | None, k: int,
+                    parameter: str, grid_points: int | None, solver: str, extra: NDArray[np.int64] | None
+                    ) -> EyePath:
+    """:func:`min_range_law` on the grid (plus the line points ``extra``)."""
+    geo, env, _ = _prepare(line, mandrel, spec, parameter, grid_points, workspace, state, extra)
     prob = _Problem(geo, env, k)
     tol = 0.1 * CHECK_TOL  # exact violation accepted by the cutting-plane loops (speed or rad/mm units)
     # start: the lower envelope (admissible), made cyclic by the larger end value
     mu0 = prob.mu_lo.copy()
     t_start = time.perf_counter()
-    if solver not in ("fast", "highs"):
-        raise InputError(f"solver must be 'fast' or 'highs', got {solver!r}")
     fallback: list[str] = []
     s13: _Stage | None = None
     if solver == "fast":

@@ -88,8 +88,8 @@ def _job_circuit(name: str, points: int):
 def test_fast_path_matches_highs_on_examples(name: str, k: int) -> None:
     job, mandrel, circ = _job_circuit(name, 300)
     spec = job.payout.model_copy(update={"impregnation_k": k})
-    fast = min_range_law(circ, mandrel, spec)
-    ref = min_range_law(circ, mandrel, spec, solver="highs")
+    fast = min_range_law(circ, mandrel, spec, refine=False)
+    ref = min_range_law(circ, mandrel, spec, solver="highs", refine=False)
     sol = fast.report["solver"]
     assert sol["fallback"] == [], sol["fallback"]  # no HiGHS fallback on the examples
     assert "interval propagation" in sol["lp"] and "HiGHS" in ref.report["solver"]["lp"]
@@ -102,7 +102,8 @@ def test_fast_path_twist_parameter() -> None:
     vessel = Mandrel.vessel(100.0, 300.0, "hemisphere", pole_radii=30.0)
     circ = reference_vessel_circuit(100.0, 300.0, 40.0, 1200)
     spec = PayoutSpec(grid_points=150, parameter="v")
-    fast, ref = min_range_law(circ, vessel, spec), min_range_law(circ, vessel, spec, solver="highs")
+    fast = min_range_law(circ, vessel, spec, refine=False)
+    ref = min_range_law(circ, vessel, spec, solver="highs", refine=False)
     _agree(fast, ref)
     _check_all_constraints(fast)
 
@@ -113,10 +114,10 @@ def test_open_line_falls_back_to_highs() -> None:
     circ = reference_vessel_circuit(100.0, 300.0, 40.0, 1200)
     part = circ.take(np.arange(int(0.8 * circ.z.size)))
     spec = PayoutSpec(grid_points=120)
-    fast = min_range_law(part, vessel, spec)
+    fast = min_range_law(part, vessel, spec, refine=False)
     sol = fast.report["solver"]
     assert sol["fallback"] and "HiGHS" in sol["lp"]
-    ref = min_range_law(part, vessel, spec, solver="highs")
+    ref = min_range_law(part, vessel, spec, solver="highs", refine=False)
     _agree(fast, ref)
 
 
@@ -142,12 +143,12 @@ def test_fast_path_matches_highs_random(radius: float, length: float, c_frac: fl
     payout._QP_TIME_LIMIT = 1.0  # HiGHS' QP stalls on some of these small problems; _agree allows for it
     try:
         try:
-            ref = min_range_law(circ, vessel, spec, grid_points=points, solver="highs")
+            ref = min_range_law(circ, vessel, spec, grid_points=points, solver="highs", refine=False)
         except InfeasibleError:
             with pytest.raises(InfeasibleError):
-                min_range_law(circ, vessel, spec, grid_points=points)
+                min_range_law(circ, vessel, spec, grid_points=points, refine=False)
             return
-        fast = min_range_law(circ, vessel, spec, grid_points=points)
+        fast = min_range_law(circ, vessel, spec, grid_points=points, refine=False)
         _agree(fast, ref, tol=1e-5)
         _check_all_constraints(fast)
         _same_band_jerk(circ, vessel, spec, points, fast)
