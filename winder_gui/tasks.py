@@ -38,6 +38,29 @@ class RunOutput:
     """:class:`engine.coverage.CoverageMap` of a new winding line (``None``: the line did not change)."""
 
 
+class _MaterialisingState:
+    """Forwards a worker's state; a partial pipeline result gets a big program's arrays (kept as circuit 0 +
+    rule, :mod:`engine.periodic`) made here in the worker, before the GUI thread draws it."""
+
+    def __init__(self, state: Any) -> None:
+        self._state = state
+
+    def progress(self, fraction: float, message: str = "") -> None:
+        if self._state is not None:
+            self._state.progress(fraction, message)
+
+    def cancelled(self) -> bool:
+        return self._state is not None and self._state.cancelled()
+
+    def partial(self, result: Any) -> None:
+        from engine.periodic import materialise_all
+
+        for part in ("line", "eye", "axes"):
+            materialise_all(getattr(result, part, None))
+        if self._state is not None:
+            self._state.partial(result)
+
+
 def pipeline_task(job: Job, job_path: Path | None, previous: Any, upto: str, *, state: Any) -> RunOutput:
     """:func:`engine.pipeline.run_pipeline` up to ``upto``, re-using the unchanged stages of ``previous``."""
     from engine.periodic import materialise_all
@@ -45,7 +68,7 @@ def pipeline_task(job: Job, job_path: Path | None, previous: Any, upto: str, *, 
     from winder_gui.views.geometry import paths_view_data
     from winder_gui.views.view3d import MAX_DISPLAY_POINTS, MAX_FRAMES
 
-    res = run_pipeline(job, job_path, upto=upto, previous=previous, state=state)
+    res = run_pipeline(job, job_path, upto=upto, previous=previous, state=_MaterialisingState(state))
     check_cancel(state)
     setup = job.machine.setup
     for part in (res.line, res.eye, res.axes):   # a big program's arrays are made here, not in the GUI thread
@@ -89,7 +112,7 @@ def readback_task(path: Path, job: Job, job_path: Path | None, result: Any, *, s
     if job.is_single_line:
         line = getattr(result, "line", None)
         if line is None:
-            line = run_pipeline(job, job_path, upto="winding", state=state).line
+            line = run_pipeline(job, job_path, upto="winding", state=_MaterialisingState(state)).line
     else:   # a laminate: every layer's line as the joined program lays it
         from engine.laminate import laid_line, run_laminate
 
