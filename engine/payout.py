@@ -244,14 +244,8 @@ def _grid(line: ContactLine, parameter: str, n: int | None, extra: NDArray[np.in
     keep = np.concatenate([[True], np.diff(x) > 1e-12 * max(1.0, abs(x[-1] - x[0]))])
     idx = np.flatnonzero(keep)
     if n is not None and n < idx.size:
-        # n points evenly in x, and _GRID_TURN·n more spread evenly over the turning of the winding angle:
-        # the turnarounds, where the free fibre swings and u changes fastest, get points by their turning
         xi = x[idx]
-        picks = [_nearest(xi, np.linspace(xi[0], xi[-1], n))]
-        turn = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(line.beta[idx])))])
-        if turn[-1] > 0 and _GRID_TURN > 0:
-            picks.append(_nearest(turn, np.linspace(0.0, turn[-1], max(2, int(_GRID_TURN * n)))))
-        pick = np.concatenate(picks)
+        pick = _nearest(xi, np.linspace(xi[0], xi[-1], n))
         if extra is not None and extra.size:
             pick = np.concatenate([pick, np.flatnonzero(np.isin(idx, extra))])
         idx = idx[np.unique(np.concatenate([[0], pick, [idx.size - 1]]))]
@@ -815,7 +809,6 @@ _REFINE_NEAR = 4
 """Line points on each side of a failing one that join the grid with it."""
 _REFINE_BAND = 1e-3
 """u between grid points may leave the grid's band by this share of its width before points are added."""
-_GRID_TURN = 0.0
 """Rounds of adding the line points where the interpolated eye path breaks a constraint to the grid."""
 
 
