@@ -106,14 +106,15 @@ class LaminatePresenter(QObject):
 
         scenes = [(lv.surface, lv.paths) for lv in out.views if lv.paths is not None]
 
-        def prepare(k: int) -> None:  # every layer's 3D scene made ahead: playing or jumping on swaps only
+        def prepare(k: int, part: int) -> None:  # every layer's 3D scenes made ahead: playing or jumping swaps only
             if self.output is out:
-                if k == 0:
+                if k == 0 and part == 0:
                     self.v.view3d.prepare_scenes(scenes, build=False)
-                self.v.view3d.prepare_scene(*scenes[k])
+                data, paths = scenes[k]
+                self.v.view3d.prepare_scene(data if part == 0 else None, paths if part == 1 else None)
 
         return [table, *self.v.laminate_plot.updates(out, sel), *[lambda k=k: show(k) for k in range(_SHOW_STEPS)],
-                *[lambda k=k: prepare(k) for k in range(len(scenes))]]
+                *[lambda k=k, part=part: prepare(k, part) for k in range(len(scenes)) for part in (0, 1)]]
 
     def _on_layer_requested(self, index: int) -> None:
         """The 3D view asks for layer ``index`` (its layer chooser, or playback going on to the next layer):
