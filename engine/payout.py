@@ -765,15 +765,15 @@ def geometric_law(line: Any, mandrel: Any, law: str, spec: Any = None, *, k: int
         raise InputError(f"unknown geometric law {law!r}; use one of {', '.join(GEOMETRIC_LAWS)}", field="payout.law")
     k = spec.impregnation_k if k is None else k
     parameter = spec.parameter if parameter is None else parameter
-    return _refined(line, mandrel, spec, workspace, state, refine, lambda extra, st: _geometric_grid(
-        line, mandrel, law, spec, k, parameter, grid_points, workspace, curve, st, extra))
+    return _refined(line, mandrel, spec, workspace, state, refine, lambda extra, st, con: _geometric_grid(
+        line, mandrel, law, spec, k, parameter, grid_points, workspace, curve, st, extra, con))
 
 
 def _geometric_grid(line: Any, mandrel: Any, law: str, spec: Any, k: int, parameter: str, grid_points: int | None,
                     workspace: Workspace | None, curve: Callable[[FloatArray, FloatArray], FloatArray] | None,
-                    state: State | None, extra: NDArray[np.int64] | None) -> EyePath:
+                    state: State | None, extra: NDArray[np.int64] | None, contour: _Contour) -> EyePath:
     """:func:`geometric_law` on the grid (plus the line points ``extra``)."""
-    geo, env, contour = _prepare(line, mandrel, spec, parameter, grid_points, workspace, state, extra)
+    geo, env, contour = _prepare(line, mandrel, spec, parameter, grid_points, workspace, state, extra, contour)
     l_cap = spec.free_length_max_mm
     if law == "parallel":
         R0 = spec.eye_radius_mm if spec.eye_radius_mm is not None else mandrel.r_max + spec.clearance_mm
@@ -804,6 +804,8 @@ def _with_report(eye: EyePath, rep: dict[str, Any]) -> EyePath:
     return replace_raw(eye, report=rep)       # a deferred per-point array stays deferred
 
 
+LINE_TOL_MM = 1e-3
+"""Clearance, fibre and workspace tolerance of the check at every line point (mm): a micrometre."""
 _REFINE_ROUNDS = 6
 _REFINE_NEAR = 4
 """Line points on each side of a failing one that join the grid with it."""
@@ -817,8 +819,8 @@ def _line_check(cl: ContactLine, contour: _Contour, spec: Any, eye: EyePath, wor
     """Check the eye path as the program uses it: l interpolated linearly in x at every line point.
 
     Checks the clearance (distance of the eye to the mandrel body), the free fibre staying out of the
-    body, the workspace and free_length_max, no sag, no reverse rotation and u >= u_min, with the
-    tolerance of the grid's exact check.  Returns the summary (``feasible``, u figures at line
+    body, the workspace and free_length_max (to :data:`LINE_TOL_MM`), no sag, no reverse rotation and
+    u >= u_min (with the tolerance of the grid's exact check).  Returns the summary (``feasible``, u figures at line
     resolution, ``constraints`` shaped as the grid report's) and the line indices to add to the grid
     where a check fails or u leaves the grid's band (each with its neighbours).
     """
@@ -848,7 +850,7 @@ def _line_check(cl: ContactLine, contour: _Contour, spec: Any, eye: EyePath, wor
     bad = np.zeros(geo.n, dtype=bool)
     constraints: dict[str, Any] = {}
     for name, slack in point.items():
-        viol = slack < -tol
+        viol = slack < -max(tol, LINE_TOL_MM)
         bad |= viol
         w = int(np.argmin(slack))
         constraints[name] = {"ok": not bool(viol.any()), "min_slack": float(slack[w]), "at_x": float(x[w]),
@@ -877,24 +879,24 @@ def _line_check(cl: ContactLine, contour: _Contour, spec: Any, eye: EyePath, wor
 
 
 def _refined(line: Any, mandrel: Any, spec: Any, workspace: Workspace | None, state: State | None, refine: bool,
-             solve: Callable[[NDArray[np.int64] | None, State | None], EyePath]) -> EyePath:
+             solve: Callable[[NDArray[np.int64] | None, State | None, _Contour], EyePath]) -> EyePath:
     """Solve on the grid, check at every line point (:func:`_line_check`), add the line points where the
     interpolated path breaks a constraint or leaves the grid's pull-speed band to the grid and solve
     again (at most :data:`_REFINE_ROUNDS` times).  Without ``refine``: the grid's answer alone (solver
     comparisons on one grid).  The report gets the line
     check as ``line``; its ``feasible`` needs both checks, and a constraint broken only between grid
     points is listed as ``<name> (between grid points)``."""
-    if not refine:
-        return solve(None, state)
-    cl = ContactLine.from_line(line)
     contour = _Contour(mandrel)
+    if not refine:
+        return solve(None, state, contour)
+    cl = ContactLine.from_line(line)
     extra: NDArray[np.int64] | None = None
     added = 0
     rounds = _REFINE_ROUNDS
     for rnd in range(rounds + 1):
         # progress: the first solve to 0.75, each refinement half of what is left
         a, b = (0.0, 0.75) if rnd == 0 else (1.0 - 0.25 * 0.5 ** (rnd - 1), 1.0 - 0.25 * 0.5 ** rnd)
-        eye = solve(extra, None if state is None else SubState(state, a, b))
+        eye = solve(extra, None if state is None else SubState(state, a, b), contour)
         check_cancel(state)
         chk, add = _line_check(cl, contour, spec, eye, workspace)
         # a law already infeasible on the grid stays so: refining would only re-solve it at more points
@@ -920,15 +922,15 @@ def _refined(line: Any, mandrel: Any, spec: Any, workspace: Workspace | None, st
 
 
 def _prepare(line: Any, mandrel: Any, spec: Any, parameter: str, grid_points: int | None,
-             workspace: Workspace | None, state: State | None, extra: NDArray[np.int64] | None = None
-             ) -> tuple[_Geo, Envelope, _Contour]:
+             workspace: Workspace | None, state: State | None, extra: NDArray[np.int64] | None = None,
+             contour: _Contour | None = None) -> tuple[_Geo, Envelope, _Contour]:
     cl = ContactLine.from_line(line)
     n = spec.grid_points if grid_points is None else grid_points
     geo = _grid(cl, parameter, n, extra)
     if workspace is None and (spec.workspace_z_mm is not None or spec.workspace_r_mm is not None):
         workspace = BoxWorkspace(spec.workspace_z_mm, spec.workspace_r_mm)
     check_cancel(state)
-    contour = _Contour(mandrel)
+    contour = _Contour(mandrel) if contour is None else contour
     env = envelope(geo, contour, spec.clearance_mm, spec.free_length_max_mm, workspace, state)
     if state is not None:
         state.progress(0.2, "clearance envelope")
@@ -1913,15 +1915,15 @@ def min_range_law(line: Any, mandrel: Any, spec: Any = None, workspace: Workspac
     parameter = spec.parameter if parameter is None else parameter
     if solver not in ("fast", "highs"):
         raise InputError(f"solver must be 'fast' or 'highs', got {solver!r}")
-    return _refined(line, mandrel, spec, workspace, state, refine, lambda extra, st: _min_range_grid(
-        line, mandrel, spec, workspace, st, k, parameter, grid_points, solver, extra))
+    return _refined(line, mandrel, spec, workspace, state, refine, lambda extra, st, con: _min_range_grid(
+        line, mandrel, spec, workspace, st, k, parameter, grid_points, solver, extra, con))
 
 
 def _min_range_grid(line: Any, mandrel: Any, spec: Any, workspace: Workspace | None, state: State | None, k: int,
-                    parameter: str, grid_points: int | None, solver: str, extra: NDArray[np.int64] | None
-                    ) -> EyePath:
+                    parameter: str, grid_points: int | None, solver: str, extra: NDArray[np.int64] | None,
+                    contour: _Contour) -> EyePath:
     """:func:`min_range_law` on the grid (plus the line points ``extra``)."""
-    geo, env, _ = _prepare(line, mandrel, spec, parameter, grid_points, workspace, state, extra)
+    geo, env, _ = _prepare(line, mandrel, spec, parameter, grid_points, workspace, state, extra, contour)
     prob = _Problem(geo, env, k)
     tol = 0.1 * CHECK_TOL  # exact violation accepted by the cutting-plane loops (speed or rad/mm units)
     # start: the lower envelope (admissible), made cyclic by the larger end value
