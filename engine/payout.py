@@ -809,8 +809,9 @@ LINE_TOL_MM = 1e-3
 _REFINE_ROUNDS = 6
 _REFINE_NEAR = 4
 """Line points on each side of a failing one that join the grid with it."""
-_REFINE_BAND = 1e-3
-"""u between grid points may leave the grid's band by this share of its width before points are added."""
+_REFINE_BAND = 1e-2
+"""u between grid points may leave the grid's band by this share of its width before points are added
+(the line's own band is reported either way)."""
 """Rounds of adding the line points where the interpolated eye path breaks a constraint to the grid."""
 
 
@@ -1652,7 +1653,7 @@ def _fast_lp13(prob: _Problem, state: State | None, tol: float) -> _Stage:
         # the warm-started fixed point can keep a recursion residual that the turnarounds' large
         # dl/dμ magnify: solve once more from μ_lo
         mu13 = tube.solve(t_star - 1e-9 * max(1.0, abs(t_star)), None)
-        if mu13 is None or not _fast_check(prob, mu13, t_star - 1e-9, None, tol):
+        if mu13 is None or not _fast_check(prob, mu13, t_star - 1e-9, None, CHECK_TOL):  # as in (14)
             raise _FastFail("(13) point failed the exact check")
     s13 = _Stage("maxmin", mu13, t_star, f13.calls, time.perf_counter() - t0)
     prob.update_rows(mu13, margin=10 * tol)
@@ -1675,7 +1676,9 @@ def _fast_lp14(prob: _Problem, u_lo: float, mu13: FloatArray, state: State | Non
     assert mu is not None
     if not _fast_check(prob, mu, u_lo, T_star + 1e-9, tol):
         mu = tube.solve(u_lo, T_star)  # as in (13): once more from μ_lo
-        if mu is None or not _fast_check(prob, mu, u_lo, T_star + 1e-9, tol):
+        # the closed-form l(μ) round trip can leave ~1e-7 where dl/dμ is large; the report's own check
+        # (CHECK_TOL) is what the answer must pass, and HiGHS would cost seconds on a refined grid
+        if mu is None or not _fast_check(prob, mu, u_lo, T_star + 1e-9, CHECK_TOL):
             raise _FastFail("(14) point failed the exact check")
     prob.update_rows(mu, margin=10 * tol)
     return _Stage("minmax", mu, T_star, f14.calls, time.perf_counter() - t0)
