@@ -807,12 +807,12 @@ def _with_report(eye: EyePath, rep: dict[str, Any]) -> EyePath:
 LINE_TOL_MM = 1e-3
 """Clearance, fibre and workspace tolerance of the check at every line point (mm): a micrometre."""
 _REFINE_ROUNDS = 6
+"""Rounds of adding the line points where the interpolated eye path breaks a constraint to the grid."""
 _REFINE_NEAR = 4
 """Line points on each side of a failing one that join the grid with it."""
 _REFINE_BAND = 1e-2
 """u between grid points may leave the grid's band by this share of its width before points are added
 (the line's own band is reported either way)."""
-"""Rounds of adding the line points where the interpolated eye path breaks a constraint to the grid."""
 
 
 def _line_check(cl: ContactLine, contour: _Contour, spec: Any, eye: EyePath, workspace: Workspace | None,
@@ -821,9 +821,9 @@ def _line_check(cl: ContactLine, contour: _Contour, spec: Any, eye: EyePath, wor
 
     Checks the clearance (distance of the eye to the mandrel body), the free fibre staying out of the
     body, the workspace and free_length_max (to :data:`LINE_TOL_MM`), no sag, no reverse rotation and
-    u >= u_min (with the tolerance of the grid's exact check).  Returns the summary (``feasible``, u figures at line
-    resolution, ``constraints`` shaped as the grid report's) and the line indices to add to the grid
-    where a check fails or u leaves the grid's band (each with its neighbours).
+    u >= u_min (with the tolerance of the grid's exact check).  Returns the summary (``feasible``, u
+    figures at line resolution, ``constraints`` shaped as the grid report's) and the line indices to add
+    to the grid where a check fails or u leaves the grid's band (each with its neighbours).
     """
     geo = _grid(cl, eye.parameter, None)
     l = np.interp(geo.x, eye.x, eye.l)
@@ -884,24 +884,23 @@ def _refined(line: Any, mandrel: Any, spec: Any, workspace: Workspace | None, st
     """Solve on the grid, check at every line point (:func:`_line_check`), add the line points where the
     interpolated path breaks a constraint or leaves the grid's pull-speed band to the grid and solve
     again (at most :data:`_REFINE_ROUNDS` times).  Without ``refine``: the grid's answer alone (solver
-    comparisons on one grid).  The report gets the line
-    check as ``line``; its ``feasible`` needs both checks, and a constraint broken only between grid
-    points is listed as ``<name> (between grid points)``."""
+    comparisons on one grid).  The report gets the line check as ``line``; its ``feasible`` needs both
+    checks, and a constraint broken only between grid points is listed as ``<name> (between grid
+    points)``."""
     contour = _Contour(mandrel)
     if not refine:
         return solve(None, state, contour)
     cl = ContactLine.from_line(line)
     extra: NDArray[np.int64] | None = None
     added = 0
-    rounds = _REFINE_ROUNDS
-    for rnd in range(rounds + 1):
+    for rnd in range(_REFINE_ROUNDS + 1):
         # progress: the first solve to 0.75, each refinement half of what is left
         a, b = (0.0, 0.75) if rnd == 0 else (1.0 - 0.25 * 0.5 ** (rnd - 1), 1.0 - 0.25 * 0.5 ** rnd)
         eye = solve(extra, None if state is None else SubState(state, a, b), contour)
         check_cancel(state)
         chk, add = _line_check(cl, contour, spec, eye, workspace)
         # a law already infeasible on the grid stays so: refining would only re-solve it at more points
-        if not add.size or not eye.report.get("feasible", True) or rnd == rounds:
+        if not add.size or not eye.report.get("feasible", True) or rnd == _REFINE_ROUNDS:
             break
         new = add if extra is None else np.union1d(extra, add)
         if extra is not None and new.size == extra.size:
