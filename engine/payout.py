@@ -765,15 +765,17 @@ def geometric_law(line: Any, mandrel: Any, law: str, spec: Any = None, *, k: int
         raise InputError(f"unknown geometric law {law!r}; use one of {', '.join(GEOMETRIC_LAWS)}", field="payout.law")
     k = spec.impregnation_k if k is None else k
     parameter = spec.parameter if parameter is None else parameter
-    return _refined(line, mandrel, spec, workspace, state, refine, lambda extra, st, con: _geometric_grid(
-        line, mandrel, law, spec, k, parameter, grid_points, workspace, curve, st, extra, con))
+    return _refined(line, mandrel, spec, workspace, state, refine, lambda extra, st, con, cache: _geometric_grid(
+        line, mandrel, law, spec, k, parameter, grid_points, workspace, curve, st, extra, con, cache))
 
 
 def _geometric_grid(line: Any, mandrel: Any, law: str, spec: Any, k: int, parameter: str, grid_points: int | None,
                     workspace: Workspace | None, curve: Callable[[FloatArray, FloatArray], FloatArray] | None,
-                    state: State | None, extra: NDArray[np.int64] | None, contour: _Contour) -> EyePath:
+                    state: State | None, extra: NDArray[np.int64] | None, contour: _Contour,
+                    cache: _EnvCache | None = None) -> EyePath:
     """:func:`geometric_law` on the grid (plus the line points ``extra``)."""
-    geo, env, contour = _prepare(line, mandrel, spec, parameter, grid_points, workspace, state, extra, contour)
+    geo, env, contour = _prepare(line, mandrel, spec, parameter, grid_points, workspace, state, extra, contour,
+                                 cache)
     l_cap = spec.free_length_max_mm
     if law == "parallel":
         R0 = spec.eye_radius_mm if spec.eye_radius_mm is not None else mandrel.r_max + spec.clearance_mm
@@ -880,7 +882,8 @@ def _line_check(cl: ContactLine, contour: _Contour, spec: Any, eye: EyePath, wor
 
 
 def _refined(line: Any, mandrel: Any, spec: Any, workspace: Workspace | None, state: State | None, refine: bool,
-             solve: Callable[[NDArray[np.int64] | None, State | None, _Contour], EyePath]) -> EyePath:
+             solve: Callable[[NDArray[np.int64] | None, State | None, _Contour, _EnvCache | None], EyePath]
+             ) -> EyePath:
     """Solve on the grid, check at every line point (:func:`_line_check`), add the line points where the
     interpolated path breaks a constraint or leaves the grid's pull-speed band to the grid and solve
     again (at most :data:`_REFINE_ROUNDS` times).  Without ``refine``: the grid's answer alone (solver
@@ -889,14 +892,15 @@ def _refined(line: Any, mandrel: Any, spec: Any, workspace: Workspace | None, st
     points)``."""
     contour = _Contour(mandrel)
     if not refine:
-        return solve(None, state, contour)
+        return solve(None, state, contour, None)
     cl = ContactLine.from_line(line)
+    cache = _EnvCache()  # the envelope of the grid points already solved: a refined grid adds only its new points
     extra: NDArray[np.int64] | None = None
     added = 0
     for rnd in range(_REFINE_ROUNDS + 1):
         # progress: the first solve to 0.75, each refinement half of what is left
         a, b = (0.0, 0.75) if rnd == 0 else (1.0 - 0.25 * 0.5 ** (rnd - 1), 1.0 - 0.25 * 0.5 ** rnd)
-        eye = solve(extra, None if state is None else SubState(state, a, b), contour)
+        eye = solve(extra, None if state is None else SubState(state, a, b), contour, cache)
         check_cancel(state)
         chk, add = _line_check(cl, contour, spec, eye, workspace)
         # a law already infeasible on the grid stays so: refining would only re-solve it at more points
@@ -921,9 +925,42 @@ def _refined(line: Any, mandrel: Any, spec: Any, workspace: Workspace | None, st
     return _with_report(eye, rep)
 
 
+class _EnvCache:
+    """The envelope at the line points of the grids solved so far in one :func:`_refined` call (same line,
+    mandrel, spec and workspace): each grid point's envelope depends on that point alone, so a refined
+    grid computes it only at its new points (bit for bit the same numbers)."""
+
+    def __init__(self) -> None:
+        self.index: NDArray[np.int64] | None = None  # sorted line indices
+        self.l_min: FloatArray | None = None
+        self.l_max: FloatArray | None = None
+
+    def envelope(self, geo: _Geo, contour: _Contour, clearance: float, l_cap: float,
+                 workspace: Workspace | None, state: State | None) -> Envelope:
+        """:func:`envelope` of ``geo``, computed at the grid points not seen before."""
+        if self.index is None or self.l_min is None or self.l_max is None:
+            env = envelope(geo, contour, clearance, l_cap, workspace, state)
+        else:
+            pos = np.clip(np.searchsorted(self.index, geo.index), 0, self.index.size - 1)
+            have = self.index[pos] == geo.index
+            lo, hi = np.empty(geo.n), np.empty(geo.n)
+            lo[have], hi[have] = self.l_min[pos[have]], self.l_max[pos[have]]
+            new = np.flatnonzero(~have)
+            if new.size:
+                sub = _Geo(geo.line.take(new), geo.x[new], geo.a[new], geo.b[new], geo.c[new], geo.index[new])
+                try:
+                    part = envelope(sub, contour, clearance, l_cap, workspace, state)
+                except InfeasibleError:  # the whole grid again: the message names the grid point
+                    return envelope(geo, contour, clearance, l_cap, workspace, state)
+                lo[new], hi[new] = part.l_min, part.l_max
+            env = Envelope(lo, hi, clearance, l_cap, workspace.describe() if workspace is not None else "unlimited")
+        self.index, self.l_min, self.l_max = geo.index, env.l_min, env.l_max
+        return env
+
+
 def _prepare(line: Any, mandrel: Any, spec: Any, parameter: str, grid_points: int | None,
              workspace: Workspace | None, state: State | None, extra: NDArray[np.int64] | None = None,
-             contour: _Contour | None = None) -> tuple[_Geo, Envelope, _Contour]:
+             contour: _Contour | None = None, cache: _EnvCache | None = None) -> tuple[_Geo, Envelope, _Contour]:
     cl = ContactLine.from_line(line)
     n = spec.grid_points if grid_points is None else grid_points
     geo = _grid(cl, parameter, n, extra)
@@ -931,7 +968,10 @@ def _prepare(line: Any, mandrel: Any, spec: Any, parameter: str, grid_points: in
         workspace = BoxWorkspace(spec.workspace_z_mm, spec.workspace_r_mm)
     check_cancel(state)
     contour = _Contour(mandrel) if contour is None else contour
-    env = envelope(geo, contour, spec.clearance_mm, spec.free_length_max_mm, workspace, state)
+    if cache is not None:
+        env = cache.envelope(geo, contour, spec.clearance_mm, spec.free_length_max_mm, workspace, state)
+    else:
+        env = envelope(geo, contour, spec.clearance_mm, spec.free_length_max_mm, workspace, state)
     if state is not None:
         state.progress(0.2, "clearance envelope")
     check_cancel(state)
@@ -1917,15 +1957,15 @@ def min_range_law(line: Any, mandrel: Any, spec: Any = None, workspace: Workspac
     parameter = spec.parameter if parameter is None else parameter
     if solver not in ("fast", "highs"):
         raise InputError(f"solver must be 'fast' or 'highs', got {solver!r}")
-    return _refined(line, mandrel, spec, workspace, state, refine, lambda extra, st, con: _min_range_grid(
-        line, mandrel, spec, workspace, st, k, parameter, grid_points, solver, extra, con))
+    return _refined(line, mandrel, spec, workspace, state, refine, lambda extra, st, con, cache: _min_range_grid(
+        line, mandrel, spec, workspace, st, k, parameter, grid_points, solver, extra, con, cache))
 
 
 def _min_range_grid(line: Any, mandrel: Any, spec: Any, workspace: Workspace | None, state: State | None, k: int,
                     parameter: str, grid_points: int | None, solver: str, extra: NDArray[np.int64] | None,
-                    contour: _Contour) -> EyePath:
+                    contour: _Contour, cache: _EnvCache | None = None) -> EyePath:
     """:func:`min_range_law` on the grid (plus the line points ``extra``)."""
-    geo, env, _ = _prepare(line, mandrel, spec, parameter, grid_points, workspace, state, extra, contour)
+    geo, env, _ = _prepare(line, mandrel, spec, parameter, grid_points, workspace, state, extra, contour, cache)
     prob = _Problem(geo, env, k)
     tol = 0.1 * CHECK_TOL  # exact violation accepted by the cutting-plane loops (speed or rad/mm units)
     # start: the lower envelope (admissible), made cyclic by the larger end value
