@@ -790,14 +790,14 @@ def _block_pieces(res: PipelineResult, X: np.ndarray | None = None) -> list[tupl
 def _piece_arrays(s: np.ndarray, X: np.ndarray, a: int, b: int, V: np.ndarray, A: np.ndarray
                   ) -> tuple[np.ndarray, ...]:
     """Nodes of the piece of the path a..b: local s (from 0), X, X', X'' (cubic spline of the whole
-    piece at full resolution, evaluated at the refined nodes)."""
-    from scipy.interpolate import CubicSpline
+    piece at full resolution, evaluated at the refined nodes; :func:`engine.knot_spline.knot_derivatives`
+    gives SciPy's ``CubicSpline`` derivatives bit for bit without importing ``scipy.interpolate``)."""
+    from engine.knot_spline import knot_derivatives
 
     sp, Xp = s[a:b + 1] - s[a], X[a:b + 1]
     keep = np.concatenate([[True], np.diff(sp) > 0])         # s must increase strictly
     sp, Xp = sp[keep], Xp[keep]
-    cs = CubicSpline(sp, Xp, axis=0)
-    D1, D2 = cs(sp, 1), cs(sp, 2)
+    D1, D2 = knot_derivatives(sp, Xp)
     # derivatives at round-off level are exact zeros (an axis at rest), not noise
     scale1 = np.abs(D1).max(axis=0) + 1e-300
     D1 = np.where(np.abs(D1) < 1e-12 * scale1, 0.0, D1)
