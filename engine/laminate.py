@@ -644,11 +644,13 @@ class LaminateResult:
         program, circuit and layer."""
         from engine.machine_setup import Locator, group_violations, nc_move_lines
 
-        lines = nc_move_lines(self.nc_text) if self.nc_text else np.zeros(0, dtype=np.int64)
         out: list[Any] = []
+        lines: np.ndarray | None = None
         for lr in self.layers:
             if lr.result is None or not lr.result.violations:
                 continue
+            if lines is None:
+                lines = nc_move_lines(self.nc_text) if self.nc_text else np.zeros(0, dtype=np.int64)
             loc = Locator(lr.result, layer=lr.index + 1)
             if self.nc_text is not None and loc.block_start is not None:
                 nb = int(lr.result.blocks.n)
@@ -1143,9 +1145,8 @@ class _JoinedLocator:
 
     def __init__(self, blocks: Any, text: str, layers: list[LayerResult], transitions: list[tuple[int, int, float]]
                  ) -> None:
-        from engine.machine_setup import nc_move_lines
-
-        self.lines = nc_move_lines(text)
+        self._text = text
+        self._lines: np.ndarray | None = None
         self.start = np.concatenate(([0.0], np.cumsum(np.asarray(blocks.time, dtype=float))))
         # (first block, label) of every section in program order: layer, transition, layer, ...
         laid = [lr for lr in layers if lr.result is not None]
@@ -1154,6 +1155,15 @@ class _JoinedLocator:
             nxt = str(laid[j + 1].index + 1) if j + 1 < len(laid) else "?"
             spans += [(b0, f"transition to layer {nxt}"), (b0 + n, nxt)]
         self.spans = sorted(spans)
+
+    @property
+    def lines(self) -> np.ndarray:
+        """1-based NC line of every block of the joined program (read on first use)."""
+        if self._lines is None:
+            from engine.machine_setup import nc_move_lines
+
+            self._lines = nc_move_lines(self._text)
+        return self._lines
 
     def locate(self, point: int | None = None, block: int | None = None) -> dict[str, Any]:
         out: dict[str, Any] = {"layer": None, "circuit": None, "time_s": None, "nc_line": None, "block": block,

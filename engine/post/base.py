@@ -268,21 +268,52 @@ def fmt(x: float, decimals: int, force_point: bool = False) -> str:
     return s
 
 
+def fmt_many(values: Any, decimals: int, force_point: bool = False) -> list[str]:
+    """:func:`fmt` of every value (the same strings, one format spec for the whole list)."""
+    spec = f"{{:.{decimals}f}}".format
+    out: list[str] = []
+    append = out.append
+    for x in np.asarray(values, dtype=float).tolist():
+        s = spec(x)
+        if "." in s:
+            s = s.rstrip("0")
+            if s[-1] == "." and not force_point:
+                s = s[:-1]
+        elif force_point:
+            s += "."
+        if s in ("-0", "-0.", "-"):
+            s = "0." if force_point else "0"
+        elif s == "":
+            s = "0"
+        append(s)
+    return out
+
+
+def format_column(col: Any, d: int, force_point: bool = False) -> list[str]:
+    """One column of :func:`format_columns`: rounded to ``d`` decimals, no trailing zeros, no ``-0``."""
+    c = np.round(np.asarray(col, dtype=float), d)
+    vals = np.where(c == 0, 0.0, c).tolist()                        # no "-0"
+    if d == 0:
+        spec0 = ("{:.0f}." if force_point else "{:.0f}").format
+        return [spec0(v) for v in vals]
+    spec = f"{{:.{d}f}}".format
+    strs = [spec(v).rstrip("0") for v in vals]
+    if not force_point:
+        strs = [s[:-1] if s[-1] == "." else s for s in strs]
+    bad = ("-0.", "-0", "-")
+    if any(s in bad for s in strs):
+        strs = ["0." if s in ("-0.", "-0") and force_point else ("0" if s in bad else s) for s in strs]
+    return strs
+
+
+def format_columns_by_axis(values: np.ndarray, decimals: list[int], force_point: bool = False) -> list[list[str]]:
+    """:func:`format_columns` as one list per column (no transposition)."""
+    return [format_column(values[:, k], d, force_point) for k, d in enumerate(decimals)]
+
+
 def format_columns(values: np.ndarray, decimals: list[int], force_point: bool = False) -> list[list[str]]:
     """Format a (n, m) array column-wise (same rules as :func:`fmt`); returns rows of strings."""
-    cols = []
-    for k, d in enumerate(decimals):
-        col = np.round(np.asarray(values[:, k], dtype=float), d)
-        col = np.where(col == 0, 0.0, col)                      # no "-0"
-        if d == 0:
-            strs = [f"{v:.0f}" + ("." if force_point else "") for v in col.tolist()]
-        else:
-            strs = [f"{v:.{d}f}".rstrip("0") for v in col.tolist()]
-            if not force_point:
-                strs = [s[:-1] if s[-1] == "." else s for s in strs]
-            strs = ["0." if s in ("-0.", "-0") and force_point else ("0" if s in ("-0", "-0.", "-") else s)
-                    for s in strs]
-        cols.append(strs)
+    cols = format_columns_by_axis(values, decimals, force_point)
     return [list(r) for r in zip(*cols)] if cols else []
 
 
