@@ -1401,6 +1401,8 @@ class _Tube:
         self.rt, self.at, self.bt, self.ct, self.vt = L.r[1:], geo.a[1:], geo.b[1:], geo.c[1:], L.v[1:]
         self.sf, self.st = L.s[:-1], L.s[1:]
         self.theta_t = np.arctan2(self.ct, self.at)  # sup of V − v over l >= 0 at the second point
+        self._last: tuple[FloatArray, FloatArray, FloatArray] | None = None  # (y, A, μ_hi) of the last solution
+        self._cap: FloatArray | None = None
 
     # exact per-point maps --------------------------------------------------------------------
     def _l_of_mu(self, mu: FloatArray, r: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
@@ -1433,6 +1435,18 @@ class _Tube:
             l_rot = np.where(phi <= 0, 0.0, np.where(ok, rt * sp / np.where(ok, den, 1.0), np.inf))
         need = np.maximum(np.maximum(l_sag, l_rot), 0.0)
         return self._mu_of_l(need, rt, at, ct)
+
+    def rotation_cap(self) -> FloatArray:
+        """μ_i above which g_i is infinite (no μ_{i+1} keeps the eye from turning back): the eye's azimuth
+        lead over the contact point, φ(l) = v_i + atan2(c·l, r + a·l) − v_{i+1}, reaches the second point's
+        θ at l = r·sin ψ/(c·cos ψ − a·sin ψ), ψ = θ + v_{i+1} − v_i (no cap where that has no solution)."""
+        if self._cap is None:
+            psi = self.theta_t + self.vt - self.vf
+            den = self.cf * np.cos(psi) - self.af * np.sin(psi)
+            ok = (psi > 0.0) & (psi < np.pi) & (den > 0.0)
+            l = np.where(ok, self.rf * np.sin(psi) / np.where(ok, den, 1.0), np.inf)
+            self._cap = self._mu_of_l(l, self.rf, self.af, self.cf)
+        return self._cap
 
     def implied_hi(self, B: FloatArray) -> FloatArray | None:
         """μ_hi tightened by the implied bound g_i(μ_i) <= μ_{i+1} <= μ_i + B_i (None: empty somewhere).
@@ -1583,9 +1597,24 @@ class _Tube:
             if (y > hi + tol).any():
                 return None
             if np.abs(y - x).max() <= 1e-13 * self.scale:
-                return self._polish(y, A, B, hi)
+                out = self._polish(y, A, B, hi)
+                if out is not None:
+                    self._last = (out, A, hi)
+                return out
             x = y
         raise _FastFail("cyclic closure did not settle")
+
+    def margin(self) -> float:
+        """How far the last solution :meth:`solve` returned is from infeasible (mm), continuous in the
+        bounds: the smallest of its distance to μ_hi, to the rotation cap (:meth:`rotation_cap`) and the
+        slack of the cycle, −Σ max(A_i, g_i(y_i) − y_i) (the forced increments around the closed cycle must
+        not add up to more than 0; (13) is often limited there, with y far below μ_hi)."""
+        if self._last is None:
+            return math.nan
+        y, A, hi = self._last
+        with np.errstate(invalid="ignore"):
+            cycle = -float(np.sum(np.maximum(A, self.g(y[:-1]) - y[:-1])))
+            return float(min(np.min(hi - y), np.min(self.rotation_cap() - y[:-1]), cycle))
 
     def _steps(self, t: float | None, T: float | None) -> tuple[FloatArray, FloatArray | None]:
         A = (t * self.dx - self.ds) if t is not None else np.full(self.dx.size, -1e3 * self.scale)
@@ -1623,20 +1652,61 @@ def _fast_check(prob: _Problem, mu: FloatArray, t: float | None, T: float | None
     return ok and abs(float(l[0] - l[-1])) <= tol
 
 
-def _bisect(feasible: Callable[[float], FloatArray | None], good: float, bad: float, rel: float = 1e-12
+def _bisect(feasible: Callable[[float], FloatArray | None], good: float, bad: float, rel: float = 1e-12,
+            margin: Callable[[], float] | None = None, peek: Callable[[float], bool | None] | None = None
             ) -> tuple[float, FloatArray]:
-    """Largest (or smallest, if bad < good) feasible parameter between good and bad; good must be feasible."""
+    """Largest (or smallest, if bad < good) feasible parameter between good and bad; good must be feasible.
+
+    Bisection to ``|bad − good| <= rel·scale``.  With ``margin`` (how far the last feasible answer is from
+    infeasible, continuous and about 0 where the test flips) and ``peek`` (the feasibility test without
+    its side effects: the warm start of later probes is not moved), midpoints that are certainly
+    infeasible are not solved: the secant root ``e`` of the margin through the last two feasible points
+    estimates the flip, one peek at ``e + 2·guard`` (guard = 1e-9·scale, ~100× the flip's dependence on
+    the warm start) that fails marks every later midpoint at least ``guard`` beyond it infeasible at
+    once.  The probes that are solved, their order and their warm starts are those of plain bisection,
+    so the answer is bit for bit the same; only the certainly-infeasible solves are saved.
+    """
     mu = feasible(good)
     if mu is None:
         raise _FastFail("bracket start is not feasible")
     scale = max(1.0, abs(good), abs(bad))
-    while abs(bad - good) > rel * scale:
+    tol = rel * scale
+    guard = 1e-9 * scale
+    pts: list[tuple[float, float]] = [(good, margin())] if margin is not None and peek is not None else []
+    certain: float | None = None  # a parameter known infeasible (from a peek)
+    peeks = 0
+    step = 1e-6 * scale
+    while abs(bad - good) > tol:
         mid = 0.5 * (good + bad)
+        d = 1.0 if bad > good else -1.0
+        if certain is not None and d * (mid - certain) >= guard:
+            bad = mid
+            continue
+        if pts and peeks < 6 and peek is not None:
+            p: float | None = None
+            (t1, m1), (t2, m2) = pts[-2] if len(pts) > 1 else (math.nan, math.nan), pts[-1]
+            if len(pts) > 1 and m1 != m2 and math.isfinite(m1) and math.isfinite(m2):
+                p = t2 + m2 * (t2 - t1) / (m1 - m2) + 2.0 * guard * d
+            elif certain is None:  # no estimate yet: steps from good growing 16-fold
+                p = good + step * d
+                step *= 16.0
+            if (p is not None and d * (p - good) > 0.0 and d * (mid - p) >= guard
+                    and (certain is None or d * (certain - p) > 0.0)):
+                peeks += 1
+                ok = peek(p)
+                if ok is False:
+                    certain = p
+                    bad = mid
+                    continue
+                if ok:
+                    pts.append((p, margin()))  # type: ignore[misc]
         m = feasible(mid)
         if m is None:
             bad = mid
         else:
             good, mu = mid, m
+            if pts:
+                pts.append((good, margin()))  # type: ignore[misc]
     return good, mu
 
 
@@ -1663,6 +1733,20 @@ class _WarmProbe:
             self.warm = mu
         return mu
 
+    def margin(self) -> float:
+        """How far the last feasible answer is from infeasible (mm): :meth:`_Tube.margin`."""
+        return float(self.tube.margin())
+
+    def peek(self, x: float) -> bool | None:
+        """Feasibility at ``x`` without moving the warm start (None: the test could not settle)."""
+        self.calls += 1
+        check_cancel(self.state)
+        lo, hi = self.bounds(x)
+        try:
+            return self.tube.solve(lo, hi, below=self.warm) is not None
+        except _FastFail:
+            return None
+
 
 def _fast_lp13(prob: _Problem, state: State | None, tol: float) -> _Stage:
     """(13) by bisection on the lower u bound with the interval-propagation feasibility test."""
@@ -1686,7 +1770,7 @@ def _fast_lp13(prob: _Problem, state: State | None, tol: float) -> _Stage:
             gap *= 4.0
             if gap > 1e7:
                 raise _FastFail("no finite lower pull-speed bound found")
-        t_star, mu13 = _bisect(f13, U - gap, U if gap == 1.0 else U - gap / 4.0)
+        t_star, mu13 = _bisect(f13, U - gap, U if gap == 1.0 else U - gap / 4.0, margin=f13.margin, peek=f13.peek)
     assert mu13 is not None
     if not _fast_check(prob, mu13, t_star - 1e-9, None, tol):
         # the warm-started fixed point can keep a recursion residual that the turnarounds' large
@@ -1711,7 +1795,7 @@ def _fast_lp14(prob: _Problem, u_lo: float, mu13: FloatArray, state: State | Non
     if f14(prob.U) is not None:
         T_star, mu = prob.U, tube.solve(u_lo, prob.U)
     else:
-        T_star, mu = _bisect(f14, hi, prob.U)
+        T_star, mu = _bisect(f14, hi, prob.U, margin=f14.margin, peek=f14.peek)
     assert mu is not None
     if not _fast_check(prob, mu, u_lo, T_star + 1e-9, tol):
         mu = tube.solve(u_lo, T_star)  # as in (13): once more from μ_lo

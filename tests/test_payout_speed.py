@@ -61,3 +61,49 @@ def test_refined_min_range_law_unchanged_by_the_cache(monkeypatch: pytest.Monkey
     b = payout.min_range_law(line, mandrel, job.payout)
     assert np.array_equal(a.l, b.l) and np.array_equal(a.x, b.x)
     assert a.report["line"]["u_range"] == b.report["line"]["u_range"]
+
+
+@pytest.mark.parametrize("name", ["pipe", "pressure_vessel"])
+def test_bisection_skipping_certain_failures_is_bit_for_bit_bisection(name: str, monkeypatch: pytest.MonkeyPatch
+                                                                       ) -> None:
+    """(13) and (14) with the peeks (midpoints certainly infeasible are not solved) against plain bisection
+    (every midpoint solved): the same bounds and the same law bit for bit, with fewer solves."""
+    path = ROOT / "resources" / "examples" / f"{name}.toml"
+    job = load_job(path)
+    job = job.replace(winding=job.winding.model_copy(update={"points_per_pass": 600}),
+                      payout=job.payout.model_copy(update={"grid_points": 300}))
+    mandrel = build_mandrel(job, path)
+    line = ContactLine.from_line(winding_line_for_job(job, path).one_circuit)
+    a = payout.min_range_law(line, mandrel, job.payout, refine=False)
+    monkeypatch.setattr(payout._WarmProbe, "peek", lambda self, x: None)  # nothing is ever certain
+    b = payout.min_range_law(line, mandrel, job.payout, refine=False)
+    sa, sb = a.report["solver"], b.report["solver"]
+    assert sa["fallback"] == sb["fallback"] == []
+    assert sa["u_min_13"] == sb["u_min_13"] and sa["u_max_14"] == sb["u_max_14"]
+    assert np.array_equal(a.l, b.l)
+    # the iterations count every solve, peeks included: at most 6 peeks per bisection are wasted
+    na, nb = sa["iterations"]["13"] + sa["iterations"]["14"], sb["iterations"]["13"] + sb["iterations"]["14"]
+    assert na <= nb + 12
+    if name == "pipe":
+        assert na < nb - 10, (na, nb)
+
+
+def test_tube_margin_closes_at_the_optimum() -> None:
+    """The margin the peeks extrapolate is positive on feasible bounds and about 0 at the (13) optimum."""
+    path = ROOT / "resources" / "examples" / "pipe.toml"
+    job = load_job(path)
+    job = job.replace(winding=job.winding.model_copy(update={"points_per_pass": 600}),
+                      payout=job.payout.model_copy(update={"grid_points": 300}))
+    mandrel = build_mandrel(job, path)
+    line = ContactLine.from_line(winding_line_for_job(job, path).one_circuit)
+    eye = payout.min_range_law(line, mandrel, job.payout, refine=False)
+    t13 = eye.report["solver"]["u_min_13"]
+    geo, env, _ = payout._prepare(line, mandrel, job.payout, job.payout.parameter, 300, None, None)
+    tube = payout._Tube(payout._Problem(geo, env, job.payout.impregnation_k))
+    margins = []
+    for t in (t13 - 1e-2, t13 - 1e-4, t13 - 1e-6, t13):
+        assert tube.solve(t, None) is not None
+        margins.append(tube.margin())
+    assert all(m1 > m2 for m1, m2 in zip(margins, margins[1:], strict=False))
+    assert margins[-1] < 1e-6 * margins[0]
+    assert tube.solve(t13 + 1e-6, None) is None
