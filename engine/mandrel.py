@@ -293,11 +293,11 @@ class IsotensoidSegment(Segment):
     def _t_of_z(self, z: FloatArray) -> FloatArray:
         zeta_c, dzeta_c, length = self._series(self.rho_p)
         zeta = np.clip(self.direction * (z - self.zc) / self.R, 0.0, length)
-        t_tab = np.linspace(0.0, math.pi, 513)
-        t = np.interp(zeta, C.chebval(_to_cheb(t_tab), zeta_c), t_tab)
+        t_tab, zeta_tab = _zeta_table(round(float(self.rho_p), 15))
+        t = np.interp(zeta, zeta_tab, t_tab)
         for _ in range(6):
-            f = C.chebval(_to_cheb(t), zeta_c) - zeta
-            t = np.clip(t - f / C.chebval(_to_cheb(t), dzeta_c), 0.0, math.pi)
+            f = _chebval(_to_cheb(t), zeta_c) - zeta
+            t = np.clip(t - f / _chebval(_to_cheb(t), dzeta_c), 0.0, math.pi)
         return t
 
     def eval(self, z: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -307,8 +307,8 @@ class IsotensoidSegment(Segment):
         rho = 1.0 - h * (1.0 - np.cos(t))
         drho = -h * np.sin(t)
         d2rho = -h * np.cos(t)
-        zt = C.chebval(_to_cheb(t), dzeta_c)
-        ztt = C.chebval(_to_cheb(t), C.chebder(dzeta_c)) * (2.0 / math.pi)
+        zt = _chebval(_to_cheb(t), dzeta_c)
+        ztt = _chebval(_to_cheb(t), C.chebder(dzeta_c)) * (2.0 / math.pi)
         slope = drho / zt  # dρ/dζ
         curv = (d2rho * zt - drho * ztt) / zt**3  # d²ρ/dζ²
         d = self.direction
@@ -329,6 +329,44 @@ class IsotensoidSegment(Segment):
 
 def _to_cheb(t: FloatArray) -> FloatArray:
     return np.asarray(t) * (2.0 / math.pi) - 1.0
+
+
+_SMALL_CHEBVAL = 24
+"""Arrays up to this size are summed with Python floats in :func:`_chebval` (numpy's per-coefficient
+array operations cost ~1 µs each whatever the size: a few points of an 81-term series took ~0.3 ms)."""
+
+
+def _chebval(x: FloatArray, c: FloatArray) -> FloatArray:
+    """``numpy.polynomial.chebyshev.chebval(x, c)`` for a 1-D series, bit for bit (the same Clenshaw
+    recurrence in the same order; IEEE double arithmetic is the same in Python floats and numpy)."""
+    x = np.asarray(x, dtype=float)
+    if x.size > _SMALL_CHEBVAL or len(c) < 3:
+        return C.chebval(x, c)
+    cs = [float(v) for v in c]
+    out = np.empty(x.shape)
+    flat = out.reshape(-1)
+    for k, xv in enumerate(x.reshape(-1).tolist()):
+        x2 = 2 * xv
+        c0, c1 = cs[-2], cs[-1]
+        for i in range(3, len(cs) + 1):
+            tmp = c0
+            c0 = cs[-i] - c1
+            c1 = tmp + c1 * x2
+        flat[k] = c0 + c1 * xv
+    return out
+
+
+_ZETA_TABLES: dict[float, tuple[FloatArray, FloatArray]] = {}
+
+
+def _zeta_table(rho_p: float) -> tuple[FloatArray, FloatArray]:
+    """t on 513 points of [0, π] and ζ(t) there: the start of the Newton inversion of ζ(t) (cached)."""
+    tab = _ZETA_TABLES.get(rho_p)
+    if tab is None:
+        t_tab = np.linspace(0.0, math.pi, 513)
+        tab = (t_tab, C.chebval(_to_cheb(t_tab), _isotensoid_series(rho_p)[0]))
+        _ZETA_TABLES[rho_p] = tab
+    return tab
 
 
 _ISO_CACHE: dict[float, tuple[Any, Any, float]] = {}
