@@ -541,12 +541,18 @@ def _build(geo: _Geo, l: FloatArray, k: int, parameter: str, law: str,
     l = np.asarray(l, dtype=float)
     Z, R, V, _ = geo.eye(l)
     cv, sv = np.cos(L.v), np.sin(L.v)
-    contact = np.column_stack([L.r * cv, L.r * sv, L.z])
-    e_rho = np.column_stack([cv, sv, np.zeros_like(cv)])
-    e_v = np.column_stack([-sv, cv, np.zeros_like(cv)])
-    kk = np.array([0.0, 0.0, 1.0])
-    tau = geo.a[:, None] * e_rho + geo.b[:, None] * kk[None, :] + geo.c[:, None] * e_v
-    tau /= np.linalg.norm(tau, axis=1)[:, None]
+    a, b, c = geo.a, geo.b, geo.c
+    contact = np.empty((cv.size, 3))
+    np.multiply(L.r, cv, out=contact[:, 0])
+    np.multiply(L.r, sv, out=contact[:, 1])
+    contact[:, 2] = L.z
+    # τ = a·e_ρ + b·k + c·e_v column by column, with e_ρ = (cos v, sin v, 0), e_v = (−sin v, cos v, 0):
+    # the same products and sums in the same order as the (N, 3) broadcast, without its temporaries
+    tau = np.empty((cv.size, 3))
+    tau[:, 0] = a * cv + b * 0.0 + c * -sv
+    tau[:, 1] = a * sv + b * 0.0 + c * cv
+    tau[:, 2] = a * 0.0 + b * 1.0 + c * 0.0
+    tau /= np.sqrt(tau[:, 0] * tau[:, 0] + tau[:, 1] * tau[:, 1] + tau[:, 2] * tau[:, 2])[:, None]
     eye = contact + l[:, None] * tau
     lam = L.s + l - k * R
     dx = np.diff(geo.x)

@@ -107,3 +107,27 @@ def test_tube_margin_closes_at_the_optimum() -> None:
     assert all(m1 > m2 for m1, m2 in zip(margins, margins[1:], strict=False))
     assert margins[-1] < 1e-6 * margins[0]
     assert tube.solve(t13 + 1e-6, None) is None
+
+
+def test_build_equals_the_broadcast_formula() -> None:
+    """The eye path's contact points, fibre directions and eye points, computed column by column, equal the
+    (N, 3) broadcast formula a·e_ρ + b·k + c·e_v (normalised) bit for bit."""
+    rng = np.random.default_rng(3)
+    line = payout.reference_vessel_circuit(n=800)
+    geo = payout._grid(ContactLine.from_line(line), "s", None)
+    l = rng.uniform(0.0, 60.0, geo.n)
+    eye = payout._build(geo, l, 1, "s", "given")
+    L = geo.line
+    cv, sv = np.cos(L.v), np.sin(L.v)
+    contact = np.column_stack([L.r * cv, L.r * sv, L.z])
+    e_rho = np.column_stack([cv, sv, np.zeros_like(cv)])
+    e_v = np.column_stack([-sv, cv, np.zeros_like(cv)])
+    kk = np.array([0.0, 0.0, 1.0])
+    tau = geo.a[:, None] * e_rho + geo.b[:, None] * kk[None, :] + geo.c[:, None] * e_v
+    tau /= np.linalg.norm(tau, axis=1)[:, None]
+    assert np.array_equal(eye.contact_xyz, contact)
+    assert np.array_equal(eye.fibre_dir, tau)
+    assert np.array_equal(eye.eye_xyz, contact + l[:, None] * tau)
+    # and an independent check: τ is the unit tangent, the eye is l along it from the contact point
+    assert np.allclose(np.linalg.norm(eye.fibre_dir, axis=1), 1.0, atol=1e-14)
+    assert np.allclose(np.linalg.norm(eye.eye_xyz - eye.contact_xyz, axis=1), l, atol=1e-9)
