@@ -702,7 +702,7 @@ def _hulls(allr: np.ndarray, ipos: np.ndarray, ineg: np.ndarray, compiled: bool)
     if compiled and _NUMBA:
         from engine import timeparam_jit
 
-        out = timeparam_jit.hulls(allr)
+        out = timeparam_jit.hulls(allr, (ipos, ineg))
         if out is not None:
             return out
     return _hull_sym(allr, ipos, ineg)

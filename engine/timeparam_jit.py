@@ -582,7 +582,7 @@ def _build_hull() -> Any:
     import numba
 
     @numba.njit(cache=True, nogil=True, error_model="numpy")
-    def _hulls(pts, order, m):  # pragma: no cover - compiled
+    def _hulls(pts, order, m, posr, partner):  # pragma: no cover - compiled
         B, R = pts.shape[0], pts.shape[1]
         xs = np.empty(R)
         ys = np.empty(R)
@@ -592,7 +592,123 @@ def _build_hull() -> Any:
         nbk = 64
         bcnt = np.empty(nbk + 1, np.int64)
         bid = np.empty(R, np.int64)
+        # the merged (sorted) full point set of the symmetric path: coordinates and row ids
+        mx_ = np.empty(R)
+        my_ = np.empty(R)
+        mid = np.empty(R, np.int64)
+        npos = posr.shape[0]
         for b in range(B):
+            # --- centrally symmetric rows (every row r in posr has its mirror partner[r], pts[partner]
+            # == -pts[r] exactly, and the two sets cover the rows): the monotone chain below on half
+            # the points.  Its result is the full chain's, vertex for vertex: the full sorted order is
+            # the merge of the half's sorted order with its mirror image reversed, the lower pass runs
+            # over it as before, and the upper pass of the full chain visits the mirror images of the
+            # lower pass's points in the same order, with the same turn tests (the cross products and
+            # tolerances are unchanged by a sign flip of every coordinate), so it is the mirror image
+            # of the lower chain.  Exact duplicate points (whose order the full sort breaks by row
+            # number) and fewer than 3 points go to the full chain.
+            sym = npos > 0 and 2 * npos == R
+            if sym:
+                sx = 0.0
+                sy = 0.0
+                for t in range(npos):
+                    r = posr[t]
+                    q = partner[r]
+                    if not (pts[b, q, 0] == -pts[b, r, 0] and pts[b, q, 1] == -pts[b, r, 1]):
+                        sym = False
+                        break
+                    sx = max(sx, abs(pts[b, r, 0]))
+                    sy = max(sy, abs(pts[b, r, 1]))
+            if sym:
+                sx = sx if sx > 0 else 1.0
+                sy = sy if sy > 0 else 1.0
+                c = 0
+                for t in range(npos):
+                    r = posr[t]
+                    if pts[b, r, 0] != 0.0 or pts[b, r, 1] != 0.0:
+                        xs[c] = pts[b, r, 0] / sx
+                        ys[c] = pts[b, r, 1] / sy
+                        ids[c] = r
+                        c += 1
+                if 2 * c < 3:
+                    sym = False
+            if sym:
+                for q in range(nbk + 1):
+                    bcnt[q] = 0
+                for q in range(c):
+                    v = (xs[q] + 1.0) * (0.4999 * nbk)
+                    bk = 0 if not v > 0.0 else (nbk - 1 if v >= nbk - 1 else int(v))
+                    bid[q] = bk
+                    bcnt[bk + 1] += 1
+                for q in range(nbk):
+                    bcnt[q + 1] += bcnt[q]
+                for q in range(c):
+                    bk = bid[q]
+                    srt[bcnt[bk]] = q
+                    bcnt[bk] += 1
+                for q in range(1, c):
+                    v = srt[q]
+                    vx = xs[v]
+                    vy = ys[v]
+                    r = q - 1
+                    while r >= 0 and (xs[srt[r]] > vx or (xs[srt[r]] == vx and ys[srt[r]] > vy)):
+                        srt[r + 1] = srt[r]
+                        r -= 1
+                    srt[r + 1] = v
+                # merge the half (ascending) with its mirror image (the half descending, negated)
+                a = 0
+                d = c - 1
+                for q in range(2 * c):
+                    take_a = d < 0
+                    if a < c and d >= 0:
+                        pa = srt[a]
+                        pd = srt[d]
+                        ax = xs[pa]
+                        ay = ys[pa]
+                        dx = -xs[pd]
+                        dy = -ys[pd]
+                        if ax == dx and ay == dy:
+                            sym = False                      # an exact duplicate: the full chain
+                            break
+                        take_a = ax < dx or (ax == dx and ay < dy)
+                    if take_a:
+                        pa = srt[a]
+                        mx_[q] = xs[pa]
+                        my_[q] = ys[pa]
+                        mid[q] = ids[pa]
+                        a += 1
+                    else:
+                        pd = srt[d]
+                        mx_[q] = -xs[pd]
+                        my_[q] = -ys[pd]
+                        mid[q] = partner[ids[pd]]
+                        d -= 1
+                    if q > 0 and mx_[q] == mx_[q - 1] and my_[q] == my_[q - 1]:
+                        sym = False
+                        break
+            if sym:
+                k = 0
+                for q in range(2 * c):
+                    while k >= 2:
+                        a = st[k - 2]
+                        bb = st[k - 1]
+                        ax = mx_[bb] - mx_[a]
+                        ay = my_[bb] - my_[a]
+                        bx = mx_[q] - mx_[a]
+                        by = my_[q] - my_[a]
+                        cr = ax * by - ay * bx
+                        if cr > 1e-12 * (abs(ax) + abs(ay)) * (abs(bx) + abs(by)) + 1e-15:
+                            break
+                        k -= 1
+                    st[k] = q
+                    k += 1
+                k -= 1
+                for q in range(k):
+                    order[b, q] = mid[st[q]]
+                    order[b, k + q] = partner[mid[st[q]]]
+                m[b] = 2 * k
+                continue
+            # --- the full monotone chain -----------------------------------------------------------
             sx = 0.0
             sy = 0.0
             for r in range(R):
@@ -667,10 +783,15 @@ def _build_hull() -> Any:
     return _hulls
 
 
-def hulls(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+def hulls(pts: np.ndarray, pairs: tuple[np.ndarray, np.ndarray] | None = None
+          ) -> tuple[np.ndarray, np.ndarray] | None:
     """Convex hull (counter-clockwise vertex rows, strictly convex) of each row of ``pts`` (B, R, 2),
     zero points ignored; ``(order, m)`` as :func:`engine.timeparam._hull_sym` returns them, or ``None``
-    without numba.  Any start vertex."""
+    without numba.  Starts at the lowest-x vertex (the monotone chain's order).
+
+    ``pairs = (ipos, ineg)``: the rows are centrally symmetric, ``pts[:, ineg] == -pts[:, ipos]``
+    (checked exactly, per row): the chain then runs on the ``ipos`` half and mirrors its result, the
+    same vertices in the same order as on every point."""
     if not _HULL:
         if kernel(0) is None:
             _HULL.append(None)
@@ -684,7 +805,16 @@ def hulls(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     B, R = pts.shape[0], pts.shape[1]
     order = np.zeros((B, max(R, 1)), np.int64)
     m = np.zeros(B, np.int64)
-    _HULL[0](np.ascontiguousarray(pts, float), order, m)
+    partner = np.full(R, -1, np.int64)
+    posr = np.zeros(0, np.int64)
+    if pairs is not None:
+        ipos = np.asarray(pairs[0], np.int64)
+        ineg = np.asarray(pairs[1], np.int64)
+        partner[ipos] = ineg
+        partner[ineg] = ipos
+        if ipos.size == ineg.size and 2 * ipos.size == R and np.all(partner >= 0):
+            posr = ipos
+    _HULL[0](np.ascontiguousarray(pts, float), order, m, posr, partner)
     return order, m
 
 

@@ -131,6 +131,38 @@ def test_compiled_hull_matches_qhull() -> None:
         assert area > 0
 
 
+def test_compiled_hull_on_the_symmetric_half_equals_the_full_chain() -> None:
+    """The compiled hull given the ± pairs of the rows runs the monotone chain on half the points and
+    mirrors it: the same vertex rows in the same order as on every point -- on the example's
+    intervals, on node groups, and on random symmetric sets with exact and near duplicates, mirror
+    duplicates (the full chain then runs), collinear points, zero rows and nearly flat sets."""
+    from engine import timeparam_jit
+
+    sets = []
+    for n in (None, 3000):
+        s, X, dX, ddX = example_path(n) if n else example_path()
+        prob = tp._prepare(s, X, dX, ddX, replace(example_limits(), levels=100), chains=False)
+        xn = (1.5 * np.minimum(prob.cap, 1e9)) ** 2 + 1.0
+        sets.append(tp._box_rows(prob.hull_rows, prob.h, xn[:-1], xn[1:], prob.ipos, prob.ineg))
+    rng = np.random.default_rng(5)
+    B, H = 600, 20
+    P = rng.normal(size=(B, H, 2)) * rng.uniform(1e-6, 1e3, size=(B, 1, 2))
+    P[:100, 5] = P[:100, 3]                                  # duplicates
+    P[100:200, 6] = -P[100:200, 2]                           # a mirror duplicate
+    P[200:300, 7] = 2.0 * P[200:300, 1]                      # on a ray
+    P[300:400, 8] = P[300:400, 4] * (1 + 1e-15)              # near-duplicates
+    P[400:450, :, 1] = 1e-17 * P[400:450, :, 0]              # nearly flat
+    P[450:500, 3:] = 0.0                                     # zero rows
+    P[500:] = np.round(P[500:] * 2) / 2                      # a lattice: collinear and duplicate points
+    sets.append((np.concatenate([P, -P], axis=1), np.arange(H), np.arange(H, 2 * H)))
+    for pts, ipos, ineg in sets:
+        full = timeparam_jit.hulls(pts)
+        half = timeparam_jit.hulls(pts, (ipos, ineg))
+        assert np.array_equal(full[1], half[1])
+        for b in range(pts.shape[0]):
+            assert np.array_equal(full[0][b, :full[1][b]], half[0][b, :half[1][b]]), b
+
+
 def test_compiled_pass_reports_infeasibility_as_the_numpy_pass() -> None:
     """The fused compiled pass finds the same unreachable node (its reach checks and backward pass
     are compiled too): the same error text with and without numba."""
