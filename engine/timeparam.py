@@ -429,6 +429,7 @@ class _Problem:
     ipos: np.ndarray | None = None        # the ± pairs of rows: rows[:, ineg] == -rows[:, ipos]
     ineg: np.ndarray | None = None
     slopes: tuple | None = None   # the compiled pass's constants: chain slopes, 2h, K/4h², uniform h
+    work: list = field(default_factory=list, repr=False)   # the compiled pass's (N, M) arrays, kept between passes
 
 
 MAX_PATH_VALUE = 1e9
@@ -1048,7 +1049,7 @@ def _with_chains(prob: _Problem) -> _Problem:
 
     xn, cap_dp, ch = _polygons(prob.cap, prob.h, prob.hull_rows, prob.ipos, prob.ineg, prob.limits, True,
                                compiled=True)
-    return dc_replace(prob, xn=xn[1:], cap_dp=cap_dp, slopes=None, **ch)
+    return dc_replace(prob, xn=xn[1:], cap_dp=cap_dp, slopes=None, work=[], **ch)
 
 
 def _refine_to_nodes(s: np.ndarray, idx: np.ndarray, sdot_c: np.ndarray) -> np.ndarray:
@@ -1174,7 +1175,7 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
         fused = timeparam_jit.dp_pass((plo, span, phi, frac), prob.xn, (prob.rq, prob.rk, prob.lq, prob.lk, rs, ls), L,
                                       prob.xjb,
                                       prob.xjt, degenerate, plo, sp_p, t_lo, t_hi, nb, two_h, kq_h, uniform_h,
-                                      _CHUNK, K > 0, int(_LOMASK), int(_HIMASK))
+                                      _CHUNK, K > 0, int(_LOMASK), int(_HIMASK), work=prob.work)
         if fused is not None:                # windows, forward and backward pass in one call: the same bits
             _STATS["candidates"], bad_node, final_ok, jidx, sdot = fused
             if bad_node >= 0:

@@ -2,8 +2,9 @@
 
 The numpy pass in :mod:`engine.timeparam` is the tested reference; this kernel computes the same
 candidates in the same floating-point order and the same integer minimum (the departure level rides
-in the low 12 bits of the float cost), so ``J`` and the argmins are bit for bit those of the numpy
-pass (``tests/test_timeparam_speed.py`` compares both).
+in the low 12 bits of the float cost), so every finite ``J`` and its argmin are bit for bit those of
+the numpy pass; a state no law reaches is not finite in both, possibly with other bits
+(``tests/test_timeparam_speed.py`` compares both).
 
 numba is imported lazily and only when it pays: the kernels are not used (the caller then runs the
 numpy code) when numba is not installed or cannot compile/cache here (the frozen build leaves numba
@@ -209,7 +210,7 @@ def _build_fused() -> Any:
     import numba
 
     @numba.njit(cache=True, nogil=True, error_model="numpy")
-    def _dp_pass(plo_, span, phi, frac, lev, xall, xn, rq, rk, lq, lk, rs, ls, L, xjb, xjt, degenerate, plo,
+    def _dp_pass(plo_, span, phi, frac, lev, xn, rq, rk, lq, lk, rs, ls, L, xjb, xjt, degenerate, plo,
                  sp_p, t_lo, t_hi, nb, two_h, kq_h, uniform_h, chunk, use_k, lomask, himask, Jraw, jidx,
                  sdot):  # pragma: no cover
         # One whole DP pass: per interval the windows (as _windows), the chunk bookkeeping of the numpy
@@ -227,7 +228,6 @@ def _build_fused() -> Any:
                 if ph < v:
                     v = ph
                 lev[i, k] = v
-                xall[i, k] = v * v
         levf = lev.reshape(-1)
         Jf = Jraw.view(np.float64)
         for q0 in range(n * M):
@@ -239,6 +239,7 @@ def _build_fused() -> Any:
         cnt = np.empty(M, np.int64)
         bad = np.empty(M, np.bool_)
         qq = np.empty(M)
+        xq = np.empty(M)                 # ṡ² of the levels at the arrival node
         okj = np.empty(M, np.bool_)
         lbv = np.empty(M)
         ubv = np.empty(M)
@@ -267,11 +268,13 @@ def _build_fused() -> Any:
             xhi = xjt[i]
             degn = degenerate[i + 1]
             for j in range(M):                      # vectorisable: abscissae of the chain queries
-                xj = xall[i + 1, j]
+                v = lev[i + 1, j]
+                xj = v * v
+                xq[j] = xj
                 qq[j] = xj / xni + off
             e = s0 + L - 1
             for j in range(M):                      # the chain walks (np.interp's arithmetic)
-                xj = xall[i + 1, j]
+                xj = xq[j]
                 good = xj >= xlo and xj <= xhi and not (degn and j >= 1)
                 ub = 0.0
                 lb = 0.0
@@ -378,11 +381,14 @@ def _build_fused() -> Any:
             # one) every remaining candidate's key does too: the same minimum, fewer candidates.
             base = i * M
             m = Jraw[base]
+            kf = -1                          # the fastest departure level with a finite J
             for k in range(M):
                 x = Jraw[base + k]
                 if x < m:
                     m = x
                 pmi[k] = m
+                if x < infbits:
+                    kf = k
             for j in range(M):
                 vj = levf[base + M + j]
                 best = np.int64(0x7FFFFFFFFFFFFFFF)
@@ -391,8 +397,15 @@ def _build_fused() -> Any:
                     fb[0] = Jf[g] + np.inf
                     best = (ib[0] & himask) | (g & lomask)
                 else:
+                    # Departures above kf have no finite J: their keys are above every finite key, so
+                    # the scan starts at kf when the window reaches above it.  A window without a
+                    # finite J keeps the largest key (not finite, as its minimum would be: a state no
+                    # law reaches; only finite J are the numpy pass's bit for bit).
                     k0 = klo[j]
-                    for w in range(cnt[j] - 1, -1, -1):
+                    top = cnt[j] - 1
+                    if kf - k0 < top:
+                        top = kf - k0
+                    for w in range(top, -1, -1):
                         k = k0 + w
                         g = base + k
                         vk = levf[g]
@@ -444,13 +457,18 @@ def _build_fused() -> Any:
 def dp_pass(levels: tuple[np.ndarray, ...], xn: np.ndarray, ch: tuple[np.ndarray, ...], L: int,
             xjb: np.ndarray, xjt: np.ndarray, degenerate: np.ndarray, plo: np.ndarray, sp_p: np.ndarray,
             t_lo: np.ndarray, t_hi: np.ndarray, nb: int, two_h: np.ndarray, kq_h: np.ndarray, uniform_h: bool,
-            chunk: int, use_k: bool, lomask: int, himask: int) -> tuple[int, int, bool, np.ndarray, np.ndarray] | None:
+            chunk: int, use_k: bool, lomask: int, himask: int, work: list | None = None
+            ) -> tuple[int, int, bool, np.ndarray, np.ndarray] | None:
     """One whole DP pass of :func:`engine.timeparam._dp` (levels uniform in ṡ) in one compiled call:
     the levels, the windows, the forward pass and the backward pass, bit for bit the numpy code's.
     ``levels`` = ``(plo, span, phi, frac)``: level ``k`` at node ``i`` is ``min(plo_i + span_i·frac_k,
     phi_i)`` (mm/s).  ``ch`` =
     ``(rq, rk, lq, lk, rs, ls)``: the chains and their segment slopes ``diff(rk)/diff(rq)``,
     ``diff(lk)/diff(lq)`` (numpy's ``interp`` computes the same quotients).
+
+    ``work``: a list that keeps the pass's (N, M) work arrays (levels, J) for the next pass of the same
+    problem (every element is written before it is read); fresh arrays cost their first touch (page
+    faults: ~0.7 ms a pass at N = 893, M = 100, a fifth of the pass).
 
     Returns ``(candidates, unreachable node or -1, final speed reached, jidx, sdot)`` (``jidx``, ``sdot``
     valid only when the pass succeeded: node -1 and final reached), or ``None`` without numba."""
@@ -465,13 +483,17 @@ def dp_pass(levels: tuple[np.ndarray, ...], xn: np.ndarray, ch: tuple[np.ndarray
         return None
     plo_, span, phi, frac = levels
     n, M = plo_.size, frac.size
-    lev = np.empty((n, M))
-    xall = np.empty((n, M))
-    Jraw = np.empty(n * M, np.int64)
+    if work and work[0].shape == (n, M):
+        lev, Jraw = work
+    else:
+        lev = np.empty((n, M))
+        Jraw = np.empty(n * M, np.int64)
+        if work is not None:
+            work[:] = [lev, Jraw]
     jidx = np.empty(n, np.int64)
     sdot = np.empty(n)
     rq, rk, lq, lk, rs, ls = ch
-    total, bad_node, final_ok = _FUSED[0](plo_, span, phi, frac, lev, xall, xn, rq, rk, lq, lk, rs, ls, int(L),
+    total, bad_node, final_ok = _FUSED[0](plo_, span, phi, frac, lev, xn, rq, rk, lq, lk, rs, ls, int(L),
                                           xjb, xjt, degenerate, plo, sp_p, t_lo, t_hi, int(nb), two_h, kq_h,
                                           bool(uniform_h), int(chunk), bool(use_k), np.int64(lomask),
                                           np.int64(himask), Jraw, jidx, sdot)

@@ -1,6 +1,6 @@
 """The compiled DP pass (engine.timeparam_jit, numba) against the numpy reference pass (issue 16).
 
-Both passes must give the same J bits and argmins, hence the same laws bit for bit: on the paper's
+Both passes must give the same bits of every finite J and its argmin, hence the same laws bit for bit: on the paper's
 example (uniform node spacing, every tube iteration) and on a non-uniform path without the penalty
 term.  Without numba (the frozen build leaves it out) the numpy pass runs and gives the same answer.
 """
