@@ -391,11 +391,46 @@ def mandrel_distance_fn(mandrel: Any, step_mm: float = 0.05, upto_mm: float = np
     ends = [np.stack([np.full(m, zz), np.linspace(0.0, rr, m)], axis=1)
             for zz, rr in ((prof[0, 0], prof[0, 1]), (prof[-1, 0], prof[-1, 1]))
             for m in (max(int(rr / step_mm) + 2, 2),)]
-    tree = cKDTree(np.vstack([prof, *ends]))
+    pts = np.vstack([prof, *ends])
+    tree = cKDTree(pts)
     zlo, zhi = float(mandrel.z_min), float(mandrel.z_max)
+    bins: dict[float, np.ndarray] = {}
+
+    def far_mask(z: np.ndarray, rho: np.ndarray, ub: float) -> np.ndarray:
+        """Points certainly farther than ``ub`` from every sample (the k-d tree would answer inf): beyond
+        the samples' z range grown by ``ub``, or above the largest sample radius of the three bins of
+        width ``ub`` around them (those hold every sample within ``ub`` in z)."""
+        w = max(ub, 4.0 * step_mm)
+        rmax = bins.get(w)
+        if rmax is None:
+            nb = int((pts[:, 0].max() - zlo) // w) + 3
+            k = np.clip(((pts[:, 0] - zlo) // w).astype(np.int64) + 1, 0, nb - 1)
+            per = np.full(nb, -np.inf)
+            np.maximum.at(per, k, pts[:, 1])
+            rmax = np.maximum(np.maximum(per, np.concatenate([[-np.inf], per[:-1]])),
+                              np.concatenate([per[1:], [-np.inf]]))
+            bins[w] = rmax
+        margin = ub * (1.0 + 1e-9) + 1e-9
+        kq = np.floor((z - zlo) / w) + 1.0
+        outside = (kq < 0) | (kq > rmax.size - 1) | ~np.isfinite(kq)
+        kq = np.clip(np.where(np.isfinite(kq), kq, 0.0), 0, rmax.size - 1).astype(np.int64)
+        far = (outside & ((z < zlo - margin) | (z > zhi + margin))) | (rho - rmax[kq] > margin)
+        return far & np.isfinite(z) & np.isfinite(rho)
 
     def dist(z: np.ndarray, rho: np.ndarray, upto: float | None = None) -> np.ndarray:
-        d, _ = tree.query(np.stack([z, rho], axis=1), distance_upper_bound=upto_mm if upto is None else upto)
+        ub = upto_mm if upto is None else upto
+        z, rho = np.asarray(z, dtype=float), np.asarray(rho, dtype=float)
+        if np.isfinite(ub) and ub > 0 and z.size > 64:
+            far = far_mask(z, rho, float(ub))
+            if far.any():        # the same answer without the k-d tree for the points it would not find
+                out = np.full(z.shape, np.inf)
+                near = ~far
+                out[near] = dist_all(z[near], rho[near], ub)
+                return out
+        return dist_all(z, rho, ub)
+
+    def dist_all(z: np.ndarray, rho: np.ndarray, ub: float) -> np.ndarray:
+        d, _ = tree.query(np.stack([z, rho], axis=1), distance_upper_bound=ub)
         inside = (z >= zlo) & (z <= zhi)
         rin = np.interp(z, zd, prof[:, 1])
         body = inside & (rho < rin)
