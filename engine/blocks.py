@@ -251,14 +251,24 @@ def _split_level(machine: MachineTemplate, q: np.ndarray, eye: np.ndarray, w: np
         starts = np.concatenate(([0], np.cumsum(lengths)[:-1]))
         pos = np.arange(lengths.sum()) - np.repeat(starts - a - 1, lengths)
         pts = P[pos]
-        pa, pb = P[a][seg_id], P[b][seg_id]
-        span = w[pb] - w[pa]
-        u = np.where(span > 0, (w[pts] - w[pa]) / np.where(span > 0, span, 1.0), (pts - pa) / (pb - pa))
-        qa = q[pa]
-        qi = qa + u[:, None] * (q[pb] - qa)
+        # per segment, then repeated for its points: the same operands as point by point
+        sa, sb = P[a], P[b]
+        wa_s = w[sa]
+        span_s = w[sb] - wa_s
+        flat_s = ~(span_s > 0)
+        u = (w[pts] - np.repeat(wa_s, lengths)) / np.repeat(np.where(flat_s, 1.0, span_s), lengths)
+        if flat_s.any():   # no time-like progress over the segment: by point count (rare)
+            flat = np.repeat(flat_s, lengths)
+            pa, pb = np.repeat(sa, lengths)[flat], np.repeat(sb, lengths)[flat]
+            u[flat] = (pts[flat] - pa) / (pb - pa)
+        qa_s = q[sa]
+        qi = np.repeat(q[sb] - qa_s, lengths, axis=0)
+        qi *= u[:, None]
+        qi += np.repeat(qa_s, lengths, axis=0)
         e_fk, _ = forward_kinematics(machine, qi, fibre=False)
         e_fk -= eye[pts]
-        err = np.linalg.norm(e_fk, axis=1)
+        e_fk *= e_fk
+        err = np.sqrt(np.add.reduce(e_fk, axis=1))  # numpy.linalg.norm(·, axis=1), bit for bit
         smax = np.maximum.reduceat(err, starts)
         ok = smax <= tol
         seg_err[P[a[ok]]] = smax[ok]
@@ -267,9 +277,10 @@ def _split_level(machine: MachineTemplate, q: np.ndarray, eye: np.ndarray, w: np
             break
         # first position of the maximum in each bad segment
         cand = np.flatnonzero(err == smax[seg_id])
-        uniq, first = np.unique(seg_id[cand], return_index=True)
+        sc = seg_id[cand]                        # non-decreasing: the first of each run
+        first = np.flatnonzero(np.concatenate(([True], sc[1:] != sc[:-1])))
         split_of = np.full(a.size, -1)
-        split_of[uniq] = pos[cand[first]]
+        split_of[sc[first]] = pos[cand[first]]
         split = split_of[bad]
         breaks[P[split]] = True
         active = np.concatenate([np.stack([a[bad], split], axis=1), np.stack([split, b[bad]], axis=1)])

@@ -349,3 +349,82 @@ def test_time_metric_is_the_17_metric_bit_for_bit():
     ref = np.concatenate(([0.0], np.cumsum(np.max(np.abs(np.diff(q, axis=0)) / fmax, axis=1))))
     assert np.array_equal(time_metric(q, fmax), ref)
     assert np.array_equal(time_metric(q[:1], fmax), [0.0])
+
+
+def _split_level_pointwise(machine, q, eye, w, P, breaks, seg_err, tol):  # noqa: ANN001, ANN202
+    """The Douglas–Peucker level as it was written point by point (gathers per point, both branches of
+    the time fraction, ``numpy.unique``, ``numpy.linalg.norm``): the reference for the per-segment form."""
+    bpos = np.flatnonzero(breaks[P])
+    active = np.stack([bpos[:-1], bpos[1:]], axis=1)
+    while active.size:
+        a, b = active[:, 0], active[:, 1]
+        lengths = b - a - 1
+        has = lengths > 0
+        seg_err[P[a[~has]]] = 0.0
+        a, b, lengths = a[has], b[has], lengths[has]
+        if a.size == 0:
+            break
+        seg_id = np.repeat(np.arange(a.size), lengths)
+        starts = np.concatenate(([0], np.cumsum(lengths)[:-1]))
+        pos = np.arange(lengths.sum()) - np.repeat(starts - a - 1, lengths)
+        pts = P[pos]
+        pa, pb = P[a][seg_id], P[b][seg_id]
+        span = w[pb] - w[pa]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = np.where(span > 0, (w[pts] - w[pa]) / np.where(span > 0, span, 1.0), (pts - pa) / (pb - pa))
+        qa = q[pa]
+        qi = qa + u[:, None] * (q[pb] - qa)
+        e_fk, _ = forward_kinematics(machine, qi, fibre=False)
+        err = np.linalg.norm(e_fk - eye[pts], axis=1)
+        smax = np.maximum.reduceat(err, starts)
+        ok = smax <= tol
+        seg_err[P[a[ok]]] = smax[ok]
+        bad = np.flatnonzero(~ok)
+        if bad.size == 0:
+            break
+        cand = np.flatnonzero(err == smax[seg_id])
+        uniq, first = np.unique(seg_id[cand], return_index=True)
+        split_of = np.full(a.size, -1)
+        split_of[uniq] = pos[cand[first]]
+        split = split_of[bad]
+        breaks[P[split]] = True
+        active = np.concatenate([np.stack([a[bad], split], axis=1), np.stack([split, b[bad]], axis=1)])
+
+
+@pytest.mark.parametrize("name", MACHINES)
+def test_linear_approximation_per_segment_equals_point_by_point(name, monkeypatch):
+    """The per-segment Douglas–Peucker (segment ends gathered once, repeated for their points) makes the
+    same block ends and errors bit for bit as the point-by-point form, also where the path rests
+    (no time-like progress over a segment: the time fraction falls back to the point count)."""
+    import engine.blocks as blocks_mod
+    from engine.blocks import time_metric
+
+    m, p, ap = _setup(name, n=3000)
+    q = np.asarray(ap.q, dtype=float)
+    eye = np.asarray(ap.eye_xyz, dtype=float)
+    rest = np.r_[np.arange(0, 700), np.full(40, 700), np.arange(700, q.shape[0])]   # 40 points at rest
+    q, eye = q[rest], eye[rest]
+    w = time_metric(q, m.limits("max_speed"))
+    assert (np.diff(w) == 0).sum() >= 40
+    for tol in (0.05, 0.01):
+        got = blocks_mod._douglas_peucker(m, q, eye, w, tol, None)
+        monkeypatch.setattr(blocks_mod, "_split_level", lambda *args: _split_level_pointwise(*args[:-1]))
+        ref = blocks_mod._douglas_peucker(m, q, eye, w, tol, None)
+        monkeypatch.undo()
+        assert np.array_equal(got[0], ref[0]) and np.array_equal(got[1], ref[1])
+        assert got[0].sum() > 2
+    # a level whose first segment lies inside the rest (zero span of the time metric)
+    n = q.shape[0]
+    P = np.arange(n)
+    out = []
+    for level in (blocks_mod._split_level, None):
+        breaks = np.zeros(n, dtype=bool)
+        breaks[[0, 701, 739, n - 1]] = True
+        seg_err = np.zeros(n)
+        if level is None:
+            _split_level_pointwise(m, q, eye, w, P, breaks, seg_err, 0.05)
+        else:
+            level(m, q, eye, w, P, breaks, seg_err, 0.05, None)
+        out.append((breaks, seg_err))
+    assert w[739] == w[701]
+    assert np.array_equal(out[0][0], out[1][0]) and np.array_equal(out[0][1], out[1][1])
