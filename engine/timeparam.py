@@ -684,8 +684,9 @@ def _drop_parallel(allr: np.ndarray, order: np.ndarray, m: np.ndarray) -> tuple[
 
 
 def _box_rows(rows: np.ndarray, h: np.ndarray, xn_prev: np.ndarray, xn_cur: np.ndarray, ipos: np.ndarray,
-              ineg: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``rows`` with the box rows ``|x_k| <= xn_prev``, ``|x_j| <= xn_cur`` appended, and the ± pairs."""
+              ineg: np.ndarray, out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``rows`` with the box rows ``|x_k| <= xn_prev``, ``|x_j| <= xn_cur`` appended, and the ± pairs
+    (written into ``out`` of shape (B, R + 4, 2) when given)."""
     B = rows.shape[0]
     box = np.zeros((B, 4, 2))
     box[:, 0, 0] = 1.0 / xn_prev
@@ -694,16 +695,18 @@ def _box_rows(rows: np.ndarray, h: np.ndarray, xn_prev: np.ndarray, xn_cur: np.n
     box[:, 2, 1] = 2.0 * h / xn_cur
     box[:, 3] = -box[:, 2]
     R = rows.shape[1]
-    return np.concatenate([rows, box], axis=1), np.r_[ipos, R, R + 2], np.r_[ineg, R + 1, R + 3]
+    return np.concatenate([rows, box], axis=1, out=out), np.r_[ipos, R, R + 2], np.r_[ineg, R + 1, R + 3]
 
 
-def _hulls(allr: np.ndarray, ipos: np.ndarray, ineg: np.ndarray, compiled: bool) -> tuple[np.ndarray, np.ndarray]:
+def _hulls(allr: np.ndarray, ipos: np.ndarray, ineg: np.ndarray, compiled: bool, scratch: bool = False
+           ) -> tuple[np.ndarray, np.ndarray]:
     """Hull vertex rows of every row set: the compiled monotone chain when asked for and available
-    (node groups, many rows), else :func:`_hull_sym` (the reference, used on the given nodes)."""
+    (node groups, many rows), else :func:`_hull_sym` (the reference, used on the given nodes).
+    ``scratch``: the compiled hull's ``order`` may be the thread's work array (used at once)."""
     if compiled and _NUMBA:
         from engine import timeparam_jit
 
-        out = timeparam_jit.hulls(allr, (ipos, ineg))
+        out = timeparam_jit.hulls(allr, (ipos, ineg), scratch_out=scratch)
         if out is not None:
             return out
     return _hull_sym(allr, ipos, ineg)
@@ -721,8 +724,14 @@ def _chains(rows: np.ndarray, h: np.ndarray, xn_prev: np.ndarray, xn_cur: np.nda
     ``x_j / xn_cur + 3·i``), and the x_j range of each polygon.
     """
     B = rows.shape[0]
-    allr, ip2, in2 = _box_rows(rows, h, xn_prev, xn_cur, ipos, ineg)
-    order, m = _hulls(allr, ip2, in2, compiled)
+    work = None
+    if compiled and _NUMBA:                 # the rows and the hull in the thread's work arrays (used here only)
+        from engine import timeparam_jit
+
+        if timeparam_jit.kernel(0) is not None:
+            work = timeparam_jit.scratch("box_rows", (B, rows.shape[1] + 4, 2))
+    allr, ip2, in2 = _box_rows(rows, h, xn_prev, xn_cur, ipos, ineg, out=work)
+    order, m = _hulls(allr, ip2, in2, compiled, scratch=work is not None)
     if compiled and _NUMBA:
         from engine import timeparam_jit
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import os
 import sys
+import threading
 from typing import Any
 
 import numpy as np
@@ -29,6 +30,36 @@ import numpy as np
 # (M = 100) costs ~50 ms, a compiled one ~10 ms, and a program's laws run 10-20 passes.  Smaller
 # problems (every shipped example: 332..1750 nodes) use numba only when it is loaded already.
 IMPORT_THRESHOLD = 3000
+
+SCRATCH_MAX_ELEMENTS = 1 << 21
+"""Work arrays up to this many elements (16 MB of float64) are kept per thread between calls."""
+
+_SCRATCH = threading.local()
+
+
+def scratch(name: str, shape: tuple[int, ...], dtype: Any = np.float64, zero: bool = False) -> np.ndarray:
+    """A work array of ``shape`` kept per thread under ``name`` and handed out again by the next call
+    (its contents are the caller's until then; ``zero`` clears it).  A fresh array from numpy costs its
+    first touch page by page (~1.5 ms for the ~3 MB of work arrays of one solve at N = 893, M = 100,
+    every solve: allocations above glibc's mmap threshold go back to the system when freed).  Above
+    :data:`SCRATCH_MAX_ELEMENTS` elements an array of its own is made."""
+    n = 1
+    for d in shape:
+        n *= int(d)
+    dt = np.dtype(dtype)
+    if n > SCRATCH_MAX_ELEMENTS:
+        return np.zeros(shape, dt) if zero else np.empty(shape, dt)
+    bufs = getattr(_SCRATCH, "bufs", None)
+    if bufs is None:
+        bufs = _SCRATCH.bufs = {}
+    buf = bufs.get((name, dt))
+    if buf is None or buf.size < n:
+        buf = bufs[(name, dt)] = np.empty(max(n, 1), dt)
+    out = buf[:n].reshape(shape)
+    if zero:
+        out.fill(0)
+    return out
+
 
 _KERNEL: list[Any] = []      # [kernel] once compiled, [None] when numba is unusable here
 
@@ -466,9 +497,9 @@ def dp_pass(levels: tuple[np.ndarray, ...], xn: np.ndarray, ch: tuple[np.ndarray
     ``(rq, rk, lq, lk, rs, ls)``: the chains and their segment slopes ``diff(rk)/diff(rq)``,
     ``diff(lk)/diff(lq)`` (numpy's ``interp`` computes the same quotients).
 
-    ``work``: a list that keeps the pass's (N, M) work arrays (levels, J) for the next pass of the same
-    problem (every element is written before it is read); fresh arrays cost their first touch (page
-    faults: ~0.7 ms a pass at N = 893, M = 100, a fifth of the pass).
+    The pass's (N, M) work arrays (levels, J; every element is written before it is read) are the
+    thread's :func:`scratch` arrays, or, for bigger problems, kept in ``work`` (a list) for the next
+    pass of the same problem.
 
     Returns ``(candidates, unreachable node or -1, final speed reached, jidx, sdot)`` (``jidx``, ``sdot``
     valid only when the pass succeeded: node -1 and final reached), or ``None`` without numba."""
@@ -483,7 +514,10 @@ def dp_pass(levels: tuple[np.ndarray, ...], xn: np.ndarray, ch: tuple[np.ndarray
         return None
     plo_, span, phi, frac = levels
     n, M = plo_.size, frac.size
-    if work and work[0].shape == (n, M):
+    if n * M <= SCRATCH_MAX_ELEMENTS:                  # kept per thread (written before read)
+        lev = scratch("dp_lev", (n, M))
+        Jraw = scratch("dp_J", (n * M,), np.int64)
+    elif work and work[0].shape == (n, M):
         lev, Jraw = work
     else:
         lev = np.empty((n, M))
@@ -805,7 +839,7 @@ def _build_hull() -> Any:
     return _hulls
 
 
-def hulls(pts: np.ndarray, pairs: tuple[np.ndarray, np.ndarray] | None = None
+def hulls(pts: np.ndarray, pairs: tuple[np.ndarray, np.ndarray] | None = None, scratch_out: bool = False
           ) -> tuple[np.ndarray, np.ndarray] | None:
     """Convex hull (counter-clockwise vertex rows, strictly convex) of each row of ``pts`` (B, R, 2),
     zero points ignored; ``(order, m)`` as :func:`engine.timeparam._hull_sym` returns them, or ``None``
@@ -813,7 +847,8 @@ def hulls(pts: np.ndarray, pairs: tuple[np.ndarray, np.ndarray] | None = None
 
     ``pairs = (ipos, ineg)``: the rows are centrally symmetric, ``pts[:, ineg] == -pts[:, ipos]``
     (checked exactly, per row): the chain then runs on the ``ipos`` half and mirrors its result, the
-    same vertices in the same order as on every point."""
+    same vertices in the same order as on every point.  ``scratch_out``: ``order`` is the thread's
+    :func:`scratch` array (valid until the next such call)."""
     if not _HULL:
         if kernel(0) is None:
             _HULL.append(None)
@@ -825,7 +860,10 @@ def hulls(pts: np.ndarray, pairs: tuple[np.ndarray, np.ndarray] | None = None
     if _HULL[0] is None or kernel(0) is None:
         return None
     B, R = pts.shape[0], pts.shape[1]
-    order = np.zeros((B, max(R, 1)), np.int64)
+    if scratch_out:
+        order = scratch("hull_order", (B, max(R, 1)), np.int64, zero=True)
+    else:
+        order = np.zeros((B, max(R, 1)), np.int64)
     m = np.zeros(B, np.int64)
     partner = np.full(R, -1, np.int64)
     posr = np.zeros(0, np.int64)
@@ -894,4 +932,5 @@ def warm() -> bool:
     return True
 
 
-__all__ = ["IMPORT_THRESHOLD", "chains", "dp_pass", "forward_pass", "hulls", "kernel", "warm", "windows"]
+__all__ = ["IMPORT_THRESHOLD", "SCRATCH_MAX_ELEMENTS", "chains", "dp_pass", "forward_pass", "hulls", "kernel",
+           "scratch", "warm", "windows"]

@@ -213,3 +213,17 @@ def test_compiled_chains_bit_identical(n: int, monkeypatch: pytest.MonkeyPatch) 
     ref = tp._with_chains(prob) if ell is None else tp._coarse_problem(prob, ell)[0]
     for k in ("rq", "rk", "lq", "lk", "xjb", "xjt", "cap_dp", "xn"):
         assert np.array_equal(getattr(ref, k), getattr(new, k)), k
+
+
+def test_work_arrays_per_thread_give_the_same_laws_concurrently() -> None:
+    """The compiled pass and hull keep their work arrays per thread (engine.timeparam_jit.scratch):
+    laws solved in two threads at once, on problems of different sizes, are those solved alone."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    cases = [(example_path(300), 60), (example_path(), 80), (example_path(500), 100)]
+    alone = [tp.parametrize(*p, replace(example_limits(), levels=M)) for p, M in cases]
+    with ThreadPoolExecutor(max_workers=2) as ex:
+        futs = [ex.submit(tp.parametrize, *p, replace(example_limits(), levels=M)) for p, M in cases * 2]
+        together = [f.result() for f in futs]
+    for a, b in zip(alone * 2, together):
+        assert np.array_equal(a.sdot, b.sdot) and a.total_time_s == b.total_time_s
