@@ -31,8 +31,8 @@ import numpy as np
 # problems (every shipped example: 332..1750 nodes) use numba only when it is loaded already.
 IMPORT_THRESHOLD = 3000
 
-SCRATCH_MAX_ELEMENTS = 1 << 21
-"""Work arrays up to this many elements (16 MB of float64) are kept per thread between calls."""
+SCRATCH_MAX_ELEMENTS = 1 << 20
+"""Work arrays up to this many elements (8 MB of float64) are kept per thread between calls."""
 
 _SCRATCH = threading.local()
 
