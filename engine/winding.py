@@ -995,8 +995,11 @@ def _close_by_angle(
     q, m, target = choose_pattern(raw, p, spec.lead, spec.pattern_q, ctx, allow_below=True)
     c0 = float(pl.C[len(pl.C) // 2])
 
+    passes: dict[float, PassLine] = {}  # the root is one of the evaluated constants: its pass is kept
+
     def f(c: float) -> float:
-        return 2.0 * solve_pass(mandrel, b, spec, ctx, None, c_override=c).v[-1] + dwell[0] + dwell[1] - target
+        passes[c] = solve_pass(mandrel, b, spec, ctx, None, c_override=c)
+        return 2.0 * passes[c].v[-1] + dwell[0] + dwell[1] - target
 
     lo_c, hi_c = 0.8 * c0, c0
     r_top = float(np.min(pl.r[1:-1])) if pl.left == wc.OPEN and pl.right == wc.OPEN else float(mandrel.r_max)
@@ -1009,7 +1012,7 @@ def _close_by_angle(
     except (ValueError, InputError):
         raise _err(f"the pattern (p = {p}, q = {q}) cannot be closed by a small change of the winding angle; "
                    "use close_by = 'dwell'", "winding.close_by", ctx, InfeasibleError) from None
-    new = solve_pass(mandrel, b, spec, ctx, None, c_override=c_new)
+    new = passes[c_new] if c_new in passes else solve_pass(mandrel, b, spec, ctx, None, c_override=c_new)
     i = len(new.z) // 2
     notes.append(f"pattern closed by the winding angle: C {c0:.6g} -> {c_new:.6g} mm "
                  f"(β at z = {new.z[i]:.6g} mm: {math.degrees(new.beta[i]):.4f}°)")
