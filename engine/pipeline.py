@@ -1162,10 +1162,15 @@ def _block_errors_of(machine: Any, axes: Any, idx: np.ndarray, chosen: np.ndarra
         w = time_metric(q, fmax)
         span = w[b] - w[a]
         u = np.where(span > 0, (w[pts] - w[a]) / np.where(span > 0, span, 1.0), (pts - a) / (b - a))
-    qi = q[a] + u[:, None] * (q[b] - q[a])
+    # q[a] + u·(q[b] − q[a]) with the block ends gathered once per block (the same operands, bit for bit)
+    qa_s = q[idx[chosen]]
+    qi = np.repeat(q[idx[chosen + 1]] - qa_s, lengths, axis=0)
+    qi *= u[:, None]
+    qi += np.repeat(qa_s, lengths, axis=0)
     e_fk, _ = forward_kinematics(machine, qi, fibre=False)
     e_fk -= field_take(axes, "eye_xyz", pts)                 # (a deferred eye path: only these rows are made)
-    err = np.linalg.norm(e_fk, axis=1)
+    e_fk *= e_fk
+    err = np.sqrt(np.add.reduce(e_fk, axis=1))               # numpy.linalg.norm(·, axis=1), bit for bit
     out[chosen] = np.maximum.reduceat(err, first)            # blk is sorted: one reduceat per block
     return out
 

@@ -428,3 +428,34 @@ def test_linear_approximation_per_segment_equals_point_by_point(name, monkeypatc
         out.append((breaks, seg_err))
     assert w[739] == w[701]
     assert np.array_equal(out[0][0], out[1][0]) and np.array_equal(out[0][1], out[1][1])
+
+
+@pytest.mark.parametrize("local_metric", [False, True])
+def test_block_errors_per_block_gather_bit_for_bit(local_metric):
+    """The time law's block errors (``_block_errors_of``) with the block ends gathered once per block
+    equal the point-by-point formula q[a] + u·(q[b] − q[a]), ‖FK − eye‖ bit for bit."""
+    from engine.pipeline import _block_errors_of
+
+    m, p, ap = _setup("lathe4", n=3000)
+    b = make_blocks(m, ap, 0.05)
+    idx = np.asarray(b.index)
+    chosen = np.arange(idx.size - 1)
+    got = _block_errors_of(m, ap, idx, chosen, local_metric)
+    if not local_metric:   # the reference: every block point by point
+        from engine.blocks import time_metric
+
+        q = np.asarray(ap.q, dtype=float)
+        w = time_metric(q, m.limits("max_speed"))
+        ref = np.zeros(idx.size - 1)
+        for k in range(idx.size - 1):
+            a, c = idx[k], idx[k + 1]
+            pts = np.arange(a + 1, c + (k == idx.size - 2))
+            if pts.size == 0:
+                continue
+            span = w[c] - w[a]
+            u = (w[pts] - w[a]) / span if span > 0 else (pts - a) / (c - a)
+            qi = q[a] + u[:, None] * (q[c] - q[a])
+            e, _ = forward_kinematics(m, qi, fibre=False)
+            ref[k] = np.linalg.norm(e - ap.eye_xyz[pts], axis=1).max()
+        assert np.array_equal(got, ref)
+    assert np.abs(got - b.max_error).max() <= 1e-8
