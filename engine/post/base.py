@@ -254,22 +254,12 @@ class PostProcessor:
 
 def fmt(x: float, decimals: int, force_point: bool = False) -> str:
     """Fixed-point number without trailing zeros and without ``-0``; ``force_point`` keeps a '.'."""
-    s = f"{x:.{decimals}f}"
-    if "." in s:
-        s = s.rstrip("0")
-        if s.endswith(".") and not force_point:
-            s = s[:-1]
-    elif force_point:
-        s += "."
-    if s in ("-0", "-0.", "-"):
-        s = "0." if force_point else "0"
-    if s == "":
-        s = "0"
-    return s
+    return fmt_many((x,), decimals, force_point)[0]
 
 
 def fmt_many(values: Any, decimals: int, force_point: bool = False) -> list[str]:
-    """:func:`fmt` of every value (the same strings, one format spec for the whole list)."""
+    """Every value as :func:`fmt` writes it: fixed point with ``decimals`` decimals (Python's correct
+    rounding), trailing zeros dropped, never ``-0``; ``force_point`` keeps a '.' (Fanuc)."""
     spec = f"{{:.{decimals}f}}".format
     out: list[str] = []
     append = out.append

@@ -8,7 +8,7 @@ import numpy as np
 
 from engine.blocks import Blocks
 from engine.kinematics import MachineTemplate
-from engine.post.base import ControllerProfile, Option, PostProcessor, fmt, format_columns
+from engine.post.base import ControllerProfile, Option, PostProcessor, fmt_many, format_columns
 
 
 class CsvPost(PostProcessor):
@@ -33,9 +33,10 @@ class CsvPost(PostProcessor):
         if opts["comments"]:
             out += [f"# {s}" for s in self._comments(blocks, machine, profile, opts)]
         out.append(d.join(head))
-        for i in range(blocks.n + 1):
-            out.append(d.join([str(i), str(int(blocks.index[i])), fmt(t[i], nd), fmt(t17[i], nd),
-                               fmt(start[i], nd)] + pos[i]))
+        cols = (fmt_many(t, nd), fmt_many(t17, nd), fmt_many(start, nd))
+        index = np.asarray(blocks.index[:blocks.n + 1], dtype=np.int64).tolist()
+        for i, (k, a, b, c, p) in enumerate(zip(index, *cols, pos)):
+            out.append(d.join([str(i), str(k), a, b, c, *p]))
         return out
 
     def _comments(self, blocks, machine, profile, opts):
