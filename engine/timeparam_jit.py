@@ -851,12 +851,11 @@ def hulls(pts: np.ndarray, pairs: tuple[np.ndarray, np.ndarray] | None = None, s
     :func:`scratch` array (valid until the next such call)."""
     if not _HULL:
         if kernel(0) is None:
+            return None           # not loaded (yet): asked again once numba is (no None kept for good)
+        try:
+            _HULL.append(_build_hull())
+        except Exception:  # noqa: BLE001 - see kernel()
             _HULL.append(None)
-        else:
-            try:
-                _HULL.append(_build_hull())
-            except Exception:  # noqa: BLE001 - see kernel()
-                _HULL.append(None)
     if _HULL[0] is None or kernel(0) is None:
         return None
     B, R = pts.shape[0], pts.shape[1]

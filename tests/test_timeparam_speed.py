@@ -227,3 +227,22 @@ def test_work_arrays_per_thread_give_the_same_laws_concurrently() -> None:
         together = [f.result() for f in futs]
     for a, b in zip(alone * 2, together):
         assert np.array_equal(a.sdot, b.sdot) and a.total_time_s == b.total_time_s
+
+
+def test_compiled_hull_used_once_numba_is_loaded_after_a_numpy_solve() -> None:
+    """A solve before numba is loaded runs the numpy code; once numba is loaded the compiled hull
+    must be used (it used to remember 'not available' for good: later solves took the slower numpy
+    hull, whose answers may differ at round-off)."""
+    code = (
+        "import sys\n"
+        "from engine.timeparam import parametrize\n"
+        "from engine.timeparam_example import example_limits, example_path\n"
+        "from engine import timeparam_jit\n"
+        "parametrize(*example_path(200), example_limits())\n"
+        "assert 'numba' not in sys.modules\n"
+        "import numba\n"
+        "import numpy as np\n"
+        "assert timeparam_jit.hulls(np.array([[[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]]])) is not None\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
