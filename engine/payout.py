@@ -1669,7 +1669,9 @@ def _bisect(feasible: Callable[[float], FloatArray | None], good: float, bad: fl
     infeasible are not solved: the secant root ``e`` of the margin through the last two feasible points
     estimates the flip, one peek at ``e + 2·guard`` (guard = 1e-9·scale, ~100× the flip's dependence on
     the warm start) that fails marks every later midpoint at least ``guard`` beyond it infeasible at
-    once.  The probes that are solved, their order and their warm starts are those of plain bisection,
+    once.  Before there are two feasible points with different margins the peeks step from ``good``,
+    growing 16-fold, until one finds the margin unchanged (it is bound elsewhere there); at most 6
+    peeks per bisection.  The probes that are solved, their order and their warm starts are those of plain bisection,
     so the answer is bit for bit the same; only the certainly-infeasible solves are saved.
     """
     mu = feasible(good)
@@ -1682,6 +1684,7 @@ def _bisect(feasible: Callable[[float], FloatArray | None], good: float, bad: fl
     certain: float | None = None  # a parameter known infeasible (from a peek)
     peeks = 0
     step = 1e-6 * scale
+    flat = False  # a step peek found the margin unchanged: no more step peeks
     while abs(bad - good) > tol:
         mid = 0.5 * (good + bad)
         d = 1.0 if bad > good else -1.0
@@ -1693,7 +1696,7 @@ def _bisect(feasible: Callable[[float], FloatArray | None], good: float, bad: fl
             (t1, m1), (t2, m2) = pts[-2] if len(pts) > 1 else (math.nan, math.nan), pts[-1]
             if len(pts) > 1 and m1 != m2 and math.isfinite(m1) and math.isfinite(m2):
                 p = t2 + m2 * (t2 - t1) / (m1 - m2) + 2.0 * guard * d
-            elif certain is None:  # no estimate yet: steps from good growing 16-fold
+            elif certain is None and not flat:  # no estimate yet: steps from good growing 16-fold
                 p = good + step * d
                 step *= 16.0
             if (p is not None and d * (p - good) > 0.0 and d * (mid - p) >= guard
@@ -1705,7 +1708,9 @@ def _bisect(feasible: Callable[[float], FloatArray | None], good: float, bad: fl
                     bad = mid
                     continue
                 if ok:
-                    pts.append((p, margin()))  # type: ignore[misc]
+                    mp = margin()  # type: ignore[misc]
+                    flat = flat or mp == pts[-1][1]  # the margin is bound elsewhere here: steps tell nothing
+                    pts.append((p, mp))
         m = feasible(mid)
         if m is None:
             bad = mid
