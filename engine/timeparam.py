@@ -698,6 +698,22 @@ def _box_rows(rows: np.ndarray, h: np.ndarray, xn_prev: np.ndarray, xn_cur: np.n
     return np.concatenate([rows, box], axis=1, out=out), np.r_[ipos, R, R + 2], np.r_[ineg, R + 1, R + 3]
 
 
+def _compiled_hull_for(nodes: int) -> bool:
+    """Whether a problem of ``nodes`` nodes takes the compiled monotone-chain hull.
+
+    The compiled hull and :func:`_hull_sym` give the same polygons up to round-off but may keep a
+    different one of two nearly coincident vertices, which can move a law's last bits (the pipe
+    example's NC differed in one F word).  So the choice depends on the problem alone, never on
+    whether numba happens to be loaded in this process: problems from
+    :data:`engine.timeparam_jit.IMPORT_THRESHOLD` nodes on (which import numba anyway) take the
+    compiled hull, smaller ones :func:`_hull_sym` - a one-shot ``winder run`` and a GUI with numba
+    warmed write the same program.  (Without numba at all, e.g. the frozen build, big problems take
+    :func:`_hull_sym` too.)  The DP passes and the chains are bit for bit the same either way."""
+    from engine.timeparam_jit import IMPORT_THRESHOLD
+
+    return nodes >= IMPORT_THRESHOLD
+
+
 def _hulls(allr: np.ndarray, ipos: np.ndarray, ineg: np.ndarray, compiled: bool, scratch: bool = False
            ) -> tuple[np.ndarray, np.ndarray]:
     """Hull vertex rows of every row set: the compiled monotone chain when asked for and available
@@ -713,7 +729,8 @@ def _hulls(allr: np.ndarray, ipos: np.ndarray, ineg: np.ndarray, compiled: bool,
 
 
 def _chains(rows: np.ndarray, h: np.ndarray, xn_prev: np.ndarray, xn_cur: np.ndarray,
-            ipos: np.ndarray, ineg: np.ndarray, compiled: bool = False) -> dict[str, np.ndarray]:
+            ipos: np.ndarray, ineg: np.ndarray, compiled: bool = False, hull_compiled: bool | None = None
+            ) -> dict[str, np.ndarray]:
     """The feasible polygon of every interval in the ``(x_k, x_j) = (ṡ²_{i-1}, ṡ²_i)`` plane.
 
     ``rows`` (B, R, 2) are normalised constraints ``n·(x_k, u) <= 1`` with ``u = (x_j - x_k)/(2h)``,
@@ -731,7 +748,8 @@ def _chains(rows: np.ndarray, h: np.ndarray, xn_prev: np.ndarray, xn_cur: np.nda
         if timeparam_jit.kernel(0) is not None:
             work = timeparam_jit.scratch("box_rows", (B, rows.shape[1] + 4, 2))
     allr, ip2, in2 = _box_rows(rows, h, xn_prev, xn_cur, ipos, ineg, out=work)
-    order, m = _hulls(allr, ip2, in2, compiled, scratch=work is not None)
+    hc = compiled if hull_compiled is None else (compiled and hull_compiled)
+    order, m = _hulls(allr, ip2, in2, hc, scratch=work is not None and hc)
     if compiled and _NUMBA:
         from engine import timeparam_jit
 
@@ -893,13 +911,14 @@ def _prepare(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, chains:
 
 
 def _polygons(cap: np.ndarray, h: np.ndarray, hull_rows: np.ndarray, ipos: np.ndarray, ineg: np.ndarray,
-              limits: TimeLimits, chains: bool, compiled: bool = False
+              limits: TimeLimits, chains: bool, compiled: bool = False, hull_compiled: bool | None = None
               ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
-    """Box sizes ``xn``, the reachable caps ``cap_dp`` and the polygon chains of every interval."""
+    """Box sizes ``xn``, the reachable caps ``cap_dp`` and the polygon chains of every interval
+    (``hull_compiled``: see :func:`_compiled_hull_for`)."""
     cap_box = np.minimum(cap, 1e9)
     xn = (1.5 * cap_box) ** 2 + 1.0
     if chains:
-        ch = _chains(hull_rows, h, xn[:-1], xn[1:], ipos, ineg, compiled)
+        ch = _chains(hull_rows, h, xn[:-1], xn[1:], ipos, ineg, compiled, hull_compiled)
         cap_dp = _reachable(cap_box, h, ch, limits)
         # The box is a relaxation of the node caps.  Where no axis limits the speed (axes at rest or
         # moving linearly, large V, no sdot_max) it is orders of magnitude larger than the speeds any
@@ -909,7 +928,7 @@ def _polygons(cap: np.ndarray, h: np.ndarray, hull_rows: np.ndarray, ipos: np.nd
         loose = (xn > 1e12) & (xn > 1e6 * xn_r)                 # ṡ > 670 m/s: no physical limit
         if loose.any():
             xn = np.where(loose, xn_r, xn)
-            ch = _chains(hull_rows, h, xn[:-1], xn[1:], ipos, ineg, compiled)
+            ch = _chains(hull_rows, h, xn[:-1], xn[1:], ipos, ineg, compiled, hull_compiled)
             cap_dp = np.minimum(cap_dp, _reachable(cap_box, h, ch, limits))
     else:
         e = np.zeros(0)
@@ -996,7 +1015,7 @@ def _coarse_problem(prob: _Problem, ell: np.ndarray) -> tuple[_Problem, np.ndarr
     hr = prob.hull_rows if prob.hull_rows is not None else prob.rows
     xn_f = (1.5 * np.minimum(prob.cap, 1e9)) ** 2 + 1.0
     allr, ip_f, in_f = _box_rows(hr, prob.h, xn_f[:-1], xn_f[1:], prob.ipos, prob.ineg)
-    order, mv = _hulls(allr, ip_f, in_f, True)
+    order, mv = _hulls(allr, ip_f, in_f, _compiled_hull_for(n))
     R = max(int(mv.max()), 1)
     order = order[:, :R]
     keep = np.arange(R)[None, :] < mv[:, None]
@@ -1039,7 +1058,8 @@ def _coarse_problem(prob: _Problem, ell: np.ndarray) -> tuple[_Problem, np.ndarr
     s = prob.s[idx]
     h = np.diff(s)
     cap = prob.cap[idx]
-    xn, cap_dp, ch = _polygons(cap, h, rows, ipos, ineg, prob.limits, True, compiled=True)
+    xn, cap_dp, ch = _polygons(cap, h, rows, ipos, ineg, prob.limits, True, compiled=True,
+                               hull_compiled=_compiled_hull_for(n))
     pos = {int(v): k for k, v in enumerate(idx)}
     pnodes = []
     for pt, nodes in prob.point_nodes:
@@ -1057,7 +1077,7 @@ def _with_chains(prob: _Problem) -> _Problem:
     from dataclasses import replace as dc_replace
 
     xn, cap_dp, ch = _polygons(prob.cap, prob.h, prob.hull_rows, prob.ipos, prob.ineg, prob.limits, True,
-                               compiled=True)
+                               compiled=True, hull_compiled=_compiled_hull_for(prob.s.size))
     return dc_replace(prob, xn=xn[1:], cap_dp=cap_dp, slopes=None, work=[], **ch)
 
 
