@@ -516,7 +516,8 @@ def _rows(B: int, R: int) -> np.ndarray:
     return np.arange(0, B * R, R, dtype=np.intp)[:, None]
 
 
-def _hull_sym(pts: np.ndarray, ipos: np.ndarray, ineg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _hull_sym(pts: np.ndarray, ipos: np.ndarray, ineg: np.ndarray, compiled: bool = False
+              ) -> tuple[np.ndarray, np.ndarray]:
     """Convex hull vertices of every row of ``pts`` (B, R0, 2), counter-clockwise.
 
     Every row is centrally symmetric -- ``pts[:, ineg] == -pts[:, ipos]`` (each constraint
@@ -535,7 +536,9 @@ def _hull_sym(pts: np.ndarray, ipos: np.ndarray, ineg: np.ndarray) -> tuple[np.n
        collinear only within round-off waits a round if its predecessor goes too).
 
     Returns ``(order, m)``: ``order[b, :m[b]]`` are the row indices (into R0) of the hull vertices
-    of row b in CCW order; entries past ``m[b]`` are 0.
+    of row b in CCW order; entries past ``m[b]`` are 0.  ``compiled``: steps 1-3 by
+    :func:`engine.timeparam_jit.hull_sym_rows` where numba is loaded (the same arithmetic, the same
+    vertices bit for bit; the angles stay numpy's).
     """
     B = pts.shape[0]
     ipos = np.asarray(ipos, np.intp)
@@ -554,6 +557,16 @@ def _hull_sym(pts: np.ndarray, ipos: np.ndarray, ineg: np.ndarray) -> tuple[np.n
     ang = np.arctan2(py, px)
     r2 = px * px + py * py
     ang[r2 == 0] = 10.0                                     # zero rows: sorted last, dropped
+    D = 4
+    if compiled and _NUMBA and R > 0 and np.isfinite(ang).all():
+        from engine import timeparam_jit
+
+        th = [np.pi * d / D for d in range(D)]
+        res = timeparam_jit.hull_sym_rows(px, py, ang, r2, idx, np.array([math.cos(t) for t in th]),
+                                          np.array([math.sin(t) for t in th]))
+        if res is not None:
+            up, k = res
+            return _hull_sym_assemble(pts, ipos, ineg, up, k)
     order = np.lexsort((-r2, ang), axis=-1)
     order += _rows(B, R)
     X = px.ravel()[order]
@@ -563,7 +576,6 @@ def _hull_sym(pts: np.ndarray, ipos: np.ndarray, ineg: np.ndarray) -> tuple[np.n
     alive = A < 5.0
     alive[:, 1:] &= A[:, 1:] != A[:, :-1]                  # one point per ray: the farthest
     # 2. pre-filter with the extreme points in D directions of [0, π) and their mirror images
-    D = 4
     bi = np.arange(B)
     vx = np.empty((B, 2 * D))
     vy = np.empty((B, 2 * D))
@@ -633,6 +645,14 @@ def _hull_sym(pts: np.ndarray, ipos: np.ndarray, ineg: np.ndarray) -> tuple[np.n
     k = alive.sum(axis=1)
     K = max(int(k.max()), 1)
     up = np.take_along_axis(idx, np.argsort(~alive, axis=1, kind="stable")[:, :K], 1)
+    return _hull_sym_assemble(pts, ipos, ineg, up, k)
+
+
+def _hull_sym_assemble(pts: np.ndarray, ipos: np.ndarray, ineg: np.ndarray, up: np.ndarray, k: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """The half chain's row ids ``up[b, :k[b]]`` followed by their mirror partners: ``(order, m)``."""
+    K = max(int(k.max()), 1) if k.size else 1
+    up = up[:, :K]
     partner = np.zeros(pts.shape[1], np.intp)
     partner[ipos] = ineg
     partner[ineg] = ipos
@@ -701,31 +721,33 @@ def _box_rows(rows: np.ndarray, h: np.ndarray, xn_prev: np.ndarray, xn_cur: np.n
 def _compiled_hull_for(nodes: int) -> bool:
     """Whether a problem of ``nodes`` nodes takes the compiled monotone-chain hull.
 
-    The compiled hull and :func:`_hull_sym` give the same polygons up to round-off but may keep a
+    The monotone chain and :func:`_hull_sym` give the same polygons up to round-off but may keep a
     different one of two nearly coincident vertices, which can move a law's last bits (the pipe
     example's NC differed in one F word).  So the choice depends on the problem alone, never on
     whether numba happens to be loaded in this process: problems from
     :data:`engine.timeparam_jit.IMPORT_THRESHOLD` nodes on (which import numba anyway) take the
-    compiled hull, smaller ones :func:`_hull_sym` - a one-shot ``winder run`` and a GUI with numba
-    warmed write the same program.  (Without numba at all, e.g. the frozen build, big problems take
-    :func:`_hull_sym` too.)  The DP passes and the chains are bit for bit the same either way."""
+    monotone chain, smaller ones :func:`_hull_sym` (compiled too where numba is loaded, bit for bit
+    its numpy code): a one-shot ``winder run`` and a GUI with numba warmed write the same program.
+    Without numba at all (e.g. the frozen build) big problems take :func:`_hull_sym` too.  The DP
+    passes and the chains are bit for bit the same either way."""
     from engine.timeparam_jit import IMPORT_THRESHOLD
 
     return nodes >= IMPORT_THRESHOLD
 
 
-def _hulls(allr: np.ndarray, ipos: np.ndarray, ineg: np.ndarray, compiled: bool, scratch: bool = False
-           ) -> tuple[np.ndarray, np.ndarray]:
-    """Hull vertex rows of every row set: the compiled monotone chain when asked for and available
-    (node groups, many rows), else :func:`_hull_sym` (the reference, used on the given nodes).
-    ``scratch``: the compiled hull's ``order`` may be the thread's work array (used at once)."""
-    if compiled and _NUMBA:
+def _hulls(allr: np.ndarray, ipos: np.ndarray, ineg: np.ndarray, compiled: bool, scratch: bool = False,
+           chain: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Hull vertex rows of every row set: with ``compiled`` and ``chain`` the compiled monotone chain
+    where available, else :func:`_hull_sym` (compiled where numba is loaded: the same bits).
+    ``chain``: see :func:`_compiled_hull_for`.  ``scratch``: the compiled chain's ``order`` may be
+    the thread's work array (used at once)."""
+    if compiled and chain and _NUMBA:
         from engine import timeparam_jit
 
         out = timeparam_jit.hulls(allr, (ipos, ineg), scratch_out=scratch)
         if out is not None:
             return out
-    return _hull_sym(allr, ipos, ineg)
+    return _hull_sym(allr, ipos, ineg, compiled=compiled)
 
 
 def _chains(rows: np.ndarray, h: np.ndarray, xn_prev: np.ndarray, xn_cur: np.ndarray,
@@ -748,8 +770,8 @@ def _chains(rows: np.ndarray, h: np.ndarray, xn_prev: np.ndarray, xn_cur: np.nda
         if timeparam_jit.kernel(0) is not None:
             work = timeparam_jit.scratch("box_rows", (B, rows.shape[1] + 4, 2))
     allr, ip2, in2 = _box_rows(rows, h, xn_prev, xn_cur, ipos, ineg, out=work)
-    hc = compiled if hull_compiled is None else (compiled and hull_compiled)
-    order, m = _hulls(allr, ip2, in2, hc, scratch=work is not None and hc)
+    chain = True if hull_compiled is None else hull_compiled
+    order, m = _hulls(allr, ip2, in2, compiled, scratch=work is not None and chain, chain=chain)
     if compiled and _NUMBA:
         from engine import timeparam_jit
 
@@ -1015,7 +1037,7 @@ def _coarse_problem(prob: _Problem, ell: np.ndarray) -> tuple[_Problem, np.ndarr
     hr = prob.hull_rows if prob.hull_rows is not None else prob.rows
     xn_f = (1.5 * np.minimum(prob.cap, 1e9)) ** 2 + 1.0
     allr, ip_f, in_f = _box_rows(hr, prob.h, xn_f[:-1], xn_f[1:], prob.ipos, prob.ineg)
-    order, mv = _hulls(allr, ip_f, in_f, _compiled_hull_for(n))
+    order, mv = _hulls(allr, ip_f, in_f, True, chain=_compiled_hull_for(n))
     R = max(int(mv.max()), 1)
     order = order[:, :R]
     keep = np.arange(R)[None, :] < mv[:, None]

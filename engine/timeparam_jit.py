@@ -631,6 +631,166 @@ def chains(allr: np.ndarray, order: np.ndarray, m: np.ndarray, h: np.ndarray, xn
     return out if ok else None
 
 
+_HULL_SYM: list[Any] = []
+
+
+def _build_hull_sym() -> Any:
+    import numba
+
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
+    def _graham(px, py, ang, r2, idx, cd, sd, up, kk):  # pragma: no cover - compiled
+        B, R = px.shape[0], px.shape[1]
+        o = np.empty(R, np.int64)
+        X = np.empty(R)
+        Y = np.empty(R)
+        A = np.empty(R)
+        I = np.empty(R, np.int64)
+        alive = np.empty(R, np.bool_)
+        bad = np.empty(R, np.bool_)
+        mark = np.empty(R, np.bool_)
+        nr = np.empty(R, np.bool_)
+        prv = np.empty(R, np.int64)
+        nxt = np.empty(R, np.int64)
+        D = cd.shape[0]
+        vx = np.empty(2 * D)
+        vy = np.empty(2 * D)
+        for b in range(B):
+            # 1. np.lexsort((-r2, ang)): by angle, then the farther first, then the row number (stable)
+            for j in range(R):
+                v = j
+                t = j - 1
+                while t >= 0:
+                    u = o[t]
+                    if ang[b, u] > ang[b, v] or (ang[b, u] == ang[b, v] and -r2[b, u] > -r2[b, v]):
+                        o[t + 1] = u
+                        t -= 1
+                    else:
+                        break
+                o[t + 1] = v
+            for j in range(R):
+                X[j] = px[b, o[j]]
+                Y[j] = py[b, o[j]]
+                A[j] = ang[b, o[j]]
+                I[j] = idx[b, o[j]]
+            for j in range(R):
+                alive[j] = A[j] < 5.0 and (j == 0 or A[j] != A[j - 1])
+            # 2. the extreme points in D directions and their mirror images
+            for d in range(D):
+                best = -1.0
+                r = 0
+                for j in range(R):
+                    pr = abs(X[j] * cd[d] + Y[j] * sd[d])
+                    if pr > best:
+                        best = pr
+                        r = j
+                p = X[r] * cd[d] + Y[r] * sd[d]
+                sg = 1.0 if p > 0 else (-1.0 if p < 0 else 0.0)
+                vx[d] = sg * X[r]
+                vy[d] = sg * Y[r]
+                vx[D + d] = -vx[d]
+                vy[D + d] = -vy[d]
+            for j in range(R):
+                if not alive[j]:
+                    continue
+                inside = True
+                for d in range(2 * D):
+                    ax_ = vx[d]
+                    ay_ = vy[d]
+                    ex = vx[(d + 1) % (2 * D)] - ax_
+                    ey = vy[(d + 1) % (2 * D)] - ay_
+                    crs = ex * (Y[j] - ay_) - ey * (X[j] - ax_)
+                    if not ((crs > 1e-12 * (abs(ex) + abs(ey))) or (ex == 0 and ey == 0)):
+                        inside = False
+                        break
+                if inside:
+                    alive[j] = False
+            # 3. rounds of simultaneous removal
+            while True:
+                last = -1
+                first = R
+                for j in range(R):
+                    prv[j] = last
+                    if alive[j]:
+                        last = j
+                for j in range(R - 1, -1, -1):
+                    nxt[j] = first
+                    if alive[j]:
+                        first = j
+                if last < 0:
+                    break
+                for j in range(R):
+                    bad[j] = False
+                    mark[j] = False
+                    nr[j] = False
+                    if not alive[j]:
+                        continue
+                    sp = 1.0
+                    pp = prv[j]
+                    if pp < 0:
+                        pp = last
+                        sp = -1.0
+                    sn = 1.0
+                    pn = nxt[j]
+                    if pn >= R:
+                        pn = first
+                        sn = -1.0
+                    e1x = X[j] - sp * X[pp]
+                    e1y = Y[j] - sp * Y[pp]
+                    e2x = sn * X[pn] - X[j]
+                    e2y = sn * Y[pn] - Y[j]
+                    cr = e1x * e2y - e1y * e2x
+                    near = cr * cr <= 1e-24 * (e1x * e1x + e1y * e1y) * (e2x * e2x + e2y * e2y)
+                    strict = cr < 0 and not near
+                    mark[j] = strict or near
+                    bad[j] = strict
+                    nr[j] = near
+                    prv[j] = pp
+                any_bad = False
+                for j in range(R):        # collinear within round-off: removed unless its predecessor is marked
+                    if alive[j] and nr[j] and not mark[prv[j]]:
+                        bad[j] = True
+                for j in range(R):
+                    if alive[j] and bad[j]:
+                        any_bad = True
+                if not any_bad:
+                    break
+                for j in range(R):
+                    if bad[j]:
+                        alive[j] = False
+            c = 0
+            for j in range(R):
+                if alive[j]:
+                    up[b, c] = I[j]
+                    c += 1
+            kk[b] = c
+        return 0
+
+    return _graham
+
+
+def hull_sym_rows(px: np.ndarray, py: np.ndarray, ang: np.ndarray, r2: np.ndarray, idx: np.ndarray,
+                  cd: np.ndarray, sd: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Steps 1-3 of :func:`engine.timeparam._hull_sym` (sort, extreme-point pre-filter, rounds of the
+    parallel Graham scan) compiled, row by row, with its arithmetic operation for operation: the
+    half chain's row ids ``up`` (B, R) and their counts ``k``, bit for bit the numpy code's.  The
+    angles come from numpy (``ang``: its ``arctan2``, whose bits a compiled ``atan2`` need not
+    match).  ``None`` when numba is not loaded."""
+    if not _HULL_SYM:
+        if kernel(0) is None:
+            return None
+        try:
+            _HULL_SYM.append(_build_hull_sym())
+        except Exception:  # noqa: BLE001 - see kernel()
+            _HULL_SYM.append(None)
+    if _HULL_SYM[0] is None or kernel(0) is None:
+        return None
+    B, R = px.shape
+    up = np.zeros((B, max(R, 1)), np.int64)
+    k = np.zeros(B, np.int64)
+    _HULL_SYM[0](px, py, ang, r2, np.ascontiguousarray(idx, np.int64), cd, sd, up, k)
+    return up, k
+
+
 _HULL: list[Any] = []
 
 
@@ -932,4 +1092,4 @@ def warm() -> bool:
 
 
 __all__ = ["IMPORT_THRESHOLD", "SCRATCH_MAX_ELEMENTS", "chains", "dp_pass", "forward_pass", "hulls", "kernel",
-           "scratch", "warm", "windows"]
+           "hull_sym_rows", "scratch", "warm", "windows"]
