@@ -543,6 +543,21 @@ def _hull_sym(pts: np.ndarray, ipos: np.ndarray, ineg: np.ndarray, compiled: boo
     B = pts.shape[0]
     ipos = np.asarray(ipos, np.intp)
     ineg = np.asarray(ineg, np.intp)
+    D = 4
+    prep = None
+    if compiled and _NUMBA and ipos.size and np.isfinite(pts).all():
+        from engine import timeparam_jit
+
+        prep = timeparam_jit.hull_sym_prep(pts, ipos, ineg)
+    if prep is not None:                    # the lines below, compiled; then the angles by numpy
+        px, py, idx, r2 = prep
+        ang = np.arctan2(py, px)
+        ang[r2 == 0] = 10.0
+        th = [np.pi * d / D for d in range(D)]
+        res = timeparam_jit.hull_sym_rows(px, py, ang, r2, idx, np.array([math.cos(t) for t in th]),
+                                          np.array([math.sin(t) for t in th]))
+        if res is not None:
+            return _hull_sym_assemble(pts, ipos, ineg, *res)
     H = pts[:, ipos]
     R = H.shape[1]
     px, py = np.ascontiguousarray(H[..., 0]), np.ascontiguousarray(H[..., 1])
@@ -557,16 +572,6 @@ def _hull_sym(pts: np.ndarray, ipos: np.ndarray, ineg: np.ndarray, compiled: boo
     ang = np.arctan2(py, px)
     r2 = px * px + py * py
     ang[r2 == 0] = 10.0                                     # zero rows: sorted last, dropped
-    D = 4
-    if compiled and _NUMBA and R > 0 and np.isfinite(ang).all():
-        from engine import timeparam_jit
-
-        th = [np.pi * d / D for d in range(D)]
-        res = timeparam_jit.hull_sym_rows(px, py, ang, r2, idx, np.array([math.cos(t) for t in th]),
-                                          np.array([math.sin(t) for t in th]))
-        if res is not None:
-            up, k = res
-            return _hull_sym_assemble(pts, ipos, ineg, up, k)
     order = np.lexsort((-r2, ang), axis=-1)
     order += _rows(B, R)
     X = px.ravel()[order]

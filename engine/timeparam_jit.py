@@ -641,6 +641,8 @@ def _build_hull_sym() -> Any:
     def _graham(px, py, ang, r2, idx, cd, sd, up, kk):  # pragma: no cover - compiled
         B, R = px.shape[0], px.shape[1]
         o = np.empty(R, np.int64)
+        ka = np.empty(R)
+        kq = np.empty(R)
         X = np.empty(R)
         Y = np.empty(R)
         A = np.empty(R)
@@ -649,24 +651,27 @@ def _build_hull_sym() -> Any:
         bad = np.empty(R, np.bool_)
         mark = np.empty(R, np.bool_)
         nr = np.empty(R, np.bool_)
-        prv = np.empty(R, np.int64)
-        nxt = np.empty(R, np.int64)
+        L = np.empty(R, np.int64)
         D = cd.shape[0]
         vx = np.empty(2 * D)
         vy = np.empty(2 * D)
         for b in range(B):
             # 1. np.lexsort((-r2, ang)): by angle, then the farther first, then the row number (stable)
             for j in range(R):
-                v = j
+                ka[j] = ang[b, j]
+                kq[j] = -r2[b, j]
+            for j in range(R):
+                va = ka[j]
+                vq = kq[j]
                 t = j - 1
                 while t >= 0:
                     u = o[t]
-                    if ang[b, u] > ang[b, v] or (ang[b, u] == ang[b, v] and -r2[b, u] > -r2[b, v]):
+                    if ka[u] > va or (ka[u] == va and kq[u] > vq):
                         o[t + 1] = u
                         t -= 1
                     else:
                         break
-                o[t + 1] = v
+                o[t + 1] = j
             for j in range(R):
                 X[j] = px[b, o[j]]
                 Y[j] = py[b, o[j]]
@@ -704,35 +709,28 @@ def _build_hull_sym() -> Any:
                         break
                 if inside:
                     alive[j] = False
-            # 3. rounds of simultaneous removal
-            while True:
-                last = -1
-                first = R
-                for j in range(R):
-                    prv[j] = last
-                    if alive[j]:
-                        last = j
-                for j in range(R - 1, -1, -1):
-                    nxt[j] = first
-                    if alive[j]:
-                        first = j
-                if last < 0:
-                    break
-                for j in range(R):
-                    bad[j] = False
-                    mark[j] = False
-                    nr[j] = False
-                    if not alive[j]:
-                        continue
-                    sp = 1.0
-                    pp = prv[j]
-                    if pp < 0:
-                        pp = last
+            # 3. rounds of simultaneous removal, on the alive points in order (their neighbours are the
+            # alive ones before and after, across an end the mirror image of the other end's)
+            n = 0
+            for j in range(R):
+                if alive[j]:
+                    L[n] = j
+                    n += 1
+            while n > 0:
+                any_bad = False
+                for i in range(n):
+                    j = L[i]
+                    if i > 0:
+                        pp = L[i - 1]
+                        sp = 1.0
+                    else:
+                        pp = L[n - 1]
                         sp = -1.0
-                    sn = 1.0
-                    pn = nxt[j]
-                    if pn >= R:
-                        pn = first
+                    if i < n - 1:
+                        pn = L[i + 1]
+                        sn = 1.0
+                    else:
+                        pn = L[0]
                         sn = -1.0
                     e1x = X[j] - sp * X[pp]
                     e1y = Y[j] - sp * Y[pp]
@@ -741,22 +739,25 @@ def _build_hull_sym() -> Any:
                     cr = e1x * e2y - e1y * e2x
                     near = cr * cr <= 1e-24 * (e1x * e1x + e1y * e1y) * (e2x * e2x + e2y * e2y)
                     strict = cr < 0 and not near
-                    mark[j] = strict or near
-                    bad[j] = strict
-                    nr[j] = near
-                    prv[j] = pp
-                any_bad = False
-                for j in range(R):        # collinear within round-off: removed unless its predecessor is marked
-                    if alive[j] and nr[j] and not mark[prv[j]]:
-                        bad[j] = True
-                for j in range(R):
-                    if alive[j] and bad[j]:
+                    mark[i] = strict or near
+                    nr[i] = near
+                    bad[i] = strict
+                # collinear within round-off: removed unless its predecessor is marked too
+                for i in range(n):
+                    if nr[i] and not mark[i - 1 if i > 0 else n - 1]:
+                        bad[i] = True
+                    if bad[i]:
                         any_bad = True
                 if not any_bad:
                     break
-                for j in range(R):
-                    if bad[j]:
-                        alive[j] = False
+                c = 0
+                for i in range(n):
+                    if bad[i]:
+                        alive[L[i]] = False
+                    else:
+                        L[c] = L[i]
+                        c += 1
+                n = c
             c = 0
             for j in range(R):
                 if alive[j]:
@@ -765,16 +766,53 @@ def _build_hull_sym() -> Any:
             kk[b] = c
         return 0
 
-    return _graham
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
+    def _prep(pts, ipos, ineg, px, py, idx, r2):  # pragma: no cover - compiled
+        B, R = px.shape[0], px.shape[1]
+        for b in range(B):
+            sx = 0.0
+            sy = 0.0
+            for j in range(R):
+                px[b, j] = pts[b, ipos[j], 0]
+                py[b, j] = pts[b, ipos[j], 1]
+                sx = max(sx, abs(px[b, j]))
+                sy = max(sy, abs(py[b, j]))
+            sx = sx if sx > 0 else 1.0
+            sy = sy if sy > 0 else 1.0
+            for j in range(R):
+                x = px[b, j] / sx
+                y = py[b, j] / sy
+                if y < 0 or (y == 0 and x < 0):
+                    x = -x
+                    y = -y
+                    idx[b, j] = ineg[j]
+                else:
+                    idx[b, j] = ipos[j]
+                px[b, j] = x
+                py[b, j] = y
+                r2[b, j] = x * x + y * y
+        return 0
+
+    return _graham, _prep
 
 
-def hull_sym_rows(px: np.ndarray, py: np.ndarray, ang: np.ndarray, r2: np.ndarray, idx: np.ndarray,
-                  cd: np.ndarray, sd: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """Steps 1-3 of :func:`engine.timeparam._hull_sym` (sort, extreme-point pre-filter, rounds of the
-    parallel Graham scan) compiled, row by row, with its arithmetic operation for operation: the
-    half chain's row ids ``up`` (B, R) and their counts ``k``, bit for bit the numpy code's.  The
-    angles come from numpy (``ang``: its ``arctan2``, whose bits a compiled ``atan2`` need not
-    match).  ``None`` when numba is not loaded."""
+def hull_sym_prep(pts: np.ndarray, ipos: np.ndarray, ineg: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """The first lines of :func:`engine.timeparam._hull_sym` compiled: the half points of every row scaled
+    by the row's largest |x| and |y|, turned into the upper half-plane, their row ids and squared radii
+    ``(px, py, idx, r2)``, bit for bit; ``None`` when numba is not loaded."""
+    k = _hull_sym_kernels()
+    if k is None:
+        return None
+    B, R = pts.shape[0], ipos.shape[0]
+    px, py, r2 = np.empty((B, R)), np.empty((B, R)), np.empty((B, R))
+    idx = np.empty((B, R), np.int64)
+    k[1](np.ascontiguousarray(pts, float), np.ascontiguousarray(ipos, np.int64),
+         np.ascontiguousarray(ineg, np.int64), px, py, idx, r2)
+    return px, py, idx, r2
+
+
+def _hull_sym_kernels() -> Any:
     if not _HULL_SYM:
         if kernel(0) is None:
             return None
@@ -784,10 +822,23 @@ def hull_sym_rows(px: np.ndarray, py: np.ndarray, ang: np.ndarray, r2: np.ndarra
             _HULL_SYM.append(None)
     if _HULL_SYM[0] is None or kernel(0) is None:
         return None
+    return _HULL_SYM[0]
+
+
+def hull_sym_rows(px: np.ndarray, py: np.ndarray, ang: np.ndarray, r2: np.ndarray, idx: np.ndarray,
+                  cd: np.ndarray, sd: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Steps 1-3 of :func:`engine.timeparam._hull_sym` (sort, extreme-point pre-filter, rounds of the
+    parallel Graham scan) compiled, row by row, with its arithmetic operation for operation: the
+    half chain's row ids ``up`` (B, R) and their counts ``k``, bit for bit the numpy code's.  The
+    angles come from numpy (``ang``: its ``arctan2``, whose bits a compiled ``atan2`` need not
+    match).  ``None`` when numba is not loaded."""
+    kern = _hull_sym_kernels()
+    if kern is None:
+        return None
     B, R = px.shape
     up = np.zeros((B, max(R, 1)), np.int64)
     k = np.zeros(B, np.int64)
-    _HULL_SYM[0](px, py, ang, r2, np.ascontiguousarray(idx, np.int64), cd, sd, up, k)
+    kern[0](px, py, ang, r2, np.ascontiguousarray(idx, np.int64), cd, sd, up, k)
     return up, k
 
 
@@ -1092,4 +1143,4 @@ def warm() -> bool:
 
 
 __all__ = ["IMPORT_THRESHOLD", "SCRATCH_MAX_ELEMENTS", "chains", "dp_pass", "forward_pass", "hulls", "kernel",
-           "hull_sym_rows", "scratch", "warm", "windows"]
+           "hull_sym_prep", "hull_sym_rows", "scratch", "warm", "windows"]
