@@ -848,33 +848,6 @@ _HULL: list[Any] = []
 def _build_hull() -> Any:
     import numba
 
-    @numba.njit(cache=True, nogil=True)
-    def _sort_xy(xs, ys, c, srt, bcnt, bid, nbk):  # pragma: no cover - compiled
-        """``srt[:c]``: the points' order by x, then y, equal points in input order (a stable counting
-        pass into ``nbk`` buckets of x in [-1, 1], then a stable insertion sort inside the buckets)."""
-        for q in range(nbk + 1):
-            bcnt[q] = 0
-        for q in range(c):
-            v = (xs[q] + 1.0) * (0.4999 * nbk)
-            bk = 0 if not v > 0.0 else (nbk - 1 if v >= nbk - 1 else int(v))
-            bid[q] = bk
-            bcnt[bk + 1] += 1
-        for q in range(nbk):
-            bcnt[q + 1] += bcnt[q]
-        for q in range(c):
-            bk = bid[q]
-            srt[bcnt[bk]] = q
-            bcnt[bk] += 1
-        for q in range(1, c):
-            v = srt[q]
-            vx = xs[v]
-            vy = ys[v]
-            r = q - 1
-            while r >= 0 and (xs[srt[r]] > vx or (xs[srt[r]] == vx and ys[srt[r]] > vy)):
-                srt[r + 1] = srt[r]
-                r -= 1
-            srt[r + 1] = v
-
     @numba.njit(cache=True, nogil=True, error_model="numpy")
     def _hulls(pts, order, m, posr, partner):  # pragma: no cover - compiled
         B, R = pts.shape[0], pts.shape[1]
@@ -927,7 +900,28 @@ def _build_hull() -> Any:
                 if 2 * c < 3:
                     sym = False
             if sym:
-                _sort_xy(xs, ys, c, srt, bcnt, bid, nbk)
+                for q in range(nbk + 1):
+                    bcnt[q] = 0
+                for q in range(c):
+                    v = (xs[q] + 1.0) * (0.4999 * nbk)
+                    bk = 0 if not v > 0.0 else (nbk - 1 if v >= nbk - 1 else int(v))
+                    bid[q] = bk
+                    bcnt[bk + 1] += 1
+                for q in range(nbk):
+                    bcnt[q + 1] += bcnt[q]
+                for q in range(c):
+                    bk = bid[q]
+                    srt[bcnt[bk]] = q
+                    bcnt[bk] += 1
+                for q in range(1, c):
+                    v = srt[q]
+                    vx = xs[v]
+                    vy = ys[v]
+                    r = q - 1
+                    while r >= 0 and (xs[srt[r]] > vx or (xs[srt[r]] == vx and ys[srt[r]] > vy)):
+                        srt[r + 1] = srt[r]
+                        r -= 1
+                    srt[r + 1] = v
                 # merge the half (ascending) with its mirror image (the half descending, negated)
                 a = 0
                 d = c - 1
@@ -1004,7 +998,28 @@ def _build_hull() -> Any:
             # sort by x, then y, equal points in input order (a stable insertion sort: few points)
             # (a stable counting pass into buckets of x first: the insertion sort then only fixes
             # the order inside a bucket; the order is the same)
-            _sort_xy(xs, ys, c, srt, bcnt, bid, nbk)
+            for q in range(nbk + 1):
+                bcnt[q] = 0
+            for q in range(c):
+                v = (xs[q] + 1.0) * (0.4999 * nbk)
+                bk = 0 if not v > 0.0 else (nbk - 1 if v >= nbk - 1 else int(v))
+                bid[q] = bk
+                bcnt[bk + 1] += 1
+            for q in range(nbk):
+                bcnt[q + 1] += bcnt[q]
+            for q in range(c):
+                bk = bid[q]
+                srt[bcnt[bk]] = q
+                bcnt[bk] += 1
+            for q in range(1, c):
+                v = srt[q]
+                vx = xs[v]
+                vy = ys[v]
+                r = q - 1
+                while r >= 0 and (xs[srt[r]] > vx or (xs[srt[r]] == vx and ys[srt[r]] > vy)):
+                    srt[r + 1] = srt[r]
+                    r -= 1
+                srt[r + 1] = v
             # Andrew's monotone chain, counter-clockwise; a point that does not turn strictly left
             # (within round-off of the two edges' lengths, and by more than 1e-15 of the unit box) is
             # dropped: collinear, duplicate and near-duplicate points
