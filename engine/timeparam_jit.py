@@ -995,7 +995,10 @@ def _build_hull() -> Any:
                     order[b, q] = ids[q]
                 m[b] = c
                 continue
-            # sort by x, then y, equal points in input order (a stable insertion sort: few points)
+            # sort by x, then y, equal points in input order (a stable insertion sort: few points).
+            # The symmetric path above sorts the same way; the two stay written out because a compiled
+            # function calling another one built in this closure misses numba's on-disk cache (every
+            # process would compile the hull again; tests/test_timeparam_numba_cache.py)
             # (a stable counting pass into buckets of x first: the insertion sort then only fixes
             # the order inside a bucket; the order is the same)
             for q in range(nbk + 1):
