@@ -42,6 +42,18 @@ def gl_window(qtbot):
     w.close()
 
 
+def test_mandrel_in_view_when_a_job_opens(gl_window, qtbot) -> None:
+    """The first framing comes before the GL widget is laid out (0 x 0): it waits for the widget's size,
+    so the whole mandrel is in view on opening, not only after a run."""
+    v = gl_window.view3d
+    pts = v.scene_points()
+    assert pts.shape[0] > 0
+    qtbot.waitUntil(lambda: not getattr(v, "_frame_pending", False), timeout=10000)
+    qtbot.wait(100)
+    assert min(v.plotter.render_window.GetSize()) >= 100
+    assert v.points_in_view(pts[:: max(1, pts.shape[0] // 500)]).all()
+
+
 def _radius_and_axis(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return points[:, 0], np.hypot(points[:, 1], points[:, 2])
 

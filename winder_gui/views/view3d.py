@@ -39,7 +39,14 @@ from winder_gui.i18n import tr
 from winder_gui.views.geometry import MandrelViewData, PathsViewData
 from winder_gui.views.playback import Timeline
 from winder_gui.views.view3d_machine import MachineMixin
-from winder_gui.views.view3d_playback import COLOUR_KEYS, FRAME_MS, SLIDER_STEPS_PER_S, PlaybackMixin, SceneMixin
+from winder_gui.views.view3d_playback import (
+    COLOUR_KEYS,
+    FRAME_MS,
+    MIN_FRAME_PX,
+    SLIDER_STEPS_PER_S,
+    PlaybackMixin,
+    SceneMixin,
+)
 from winder_gui.views.view3d_scenes import PATH_ACTORS, SURFACE_ACTORS, SceneCacheMixin
 from winder_gui.views.vtk_widget import _preload_vtk, interactor_class
 from winder_gui.workers import JobRunner
@@ -101,6 +108,8 @@ class MandrelView3D(PlaybackMixin, SceneMixin, SceneCacheMixin, MachineMixin, QW
         self._scheduled = False
         self._loader: JobRunner | None = None
         self._reset_camera = True
+        self._frame_pending = False
+        """A framing asked for before the GL widget had its size (done at its first real size)."""
         self.paths: PathsViewData | None = None
         self.supports: list[tuple[str, float, float, float]] = []
         """The job's shafts, chuck and tailstock as drawn (:meth:`set_supports`)."""
@@ -168,6 +177,7 @@ class MandrelView3D(PlaybackMixin, SceneMixin, SceneCacheMixin, MachineMixin, QW
             self._use_placeholder(f"3D view unavailable: {exc}")
             return self.backend
         self.plotter = plotter
+        plotter.resized_callback = self._gl_resized
         self._layout.removeWidget(self._label)
         self._label.hide()
         self.gl_widget = plotter.interactor if hasattr(plotter, "interactor") else plotter
@@ -179,6 +189,12 @@ class MandrelView3D(PlaybackMixin, SceneMixin, SceneCacheMixin, MachineMixin, QW
             self._render_paths()
             self.frame_all()
         return self.backend
+
+    def _gl_resized(self, w: int, h: int) -> None:
+        """The GL widget got a size: a framing that had to wait for one is done now (after the resize)."""
+        if self._frame_pending and min(w, h) >= MIN_FRAME_PX:
+            self._frame_pending = False
+            QTimer.singleShot(0, self.frame_all)
 
     def _use_placeholder(self, why: str) -> None:
         self.backend = "placeholder"

@@ -36,6 +36,8 @@ SLIDER_STEPS_PER_S = 10
 """The time slider moves in tenths of a machine second."""
 CAMERA_PRESETS = ("iso", "side", "axis")
 EYE_PATH_LOD_POINTS = 3000
+MIN_FRAME_PX = 16
+"""A viewport smaller than this (px, either side) is not laid out yet: framing waits for its real size."""
 """Points of the thinned eye path drawn while playing or moving (the whole path: up to 20 000 frames)."""
 COLOUR_KEYS = {"circuit": "circuit", "winding angle β [deg]": "beta_deg", "λ [–]": "lam", "pull speed u": "u"}
 
@@ -412,6 +414,11 @@ class SceneMixin:
         Frame all)."""
         pts = self.scene_points()
         if self.plotter is None or pts.shape[0] == 0:
+            return
+        if min(self.plotter.render_window.GetSize()) < MIN_FRAME_PX:
+            # not laid out yet (0 x 0 at the first render): the zoom below would fit a viewport that is
+            # not the one shown; frame once the widget has its size (View3D._gl_resized)
+            self._frame_pending = True
             return
         lo, hi = pts.min(axis=0), pts.max(axis=0)
         pad = 0.04 * float(np.max(hi - lo))

@@ -69,6 +69,9 @@ def interactor_class() -> Any:
         def resizeGL(self, w: int, h: int) -> None:  # noqa: N802 - Qt override
             self._fresh_stamp = None
             super().resizeGL(w, h)
+            callback = getattr(self, "resized_callback", None)
+            if callback is not None:
+                callback(w, h)
 
         def paintGL(self) -> None:  # noqa: N802 - Qt override
             rw = self.GetRenderWindow()
