@@ -43,14 +43,18 @@ def test_envelope_cache_equals_the_whole_envelope(name: str) -> None:
         assert env.workspace == full.workspace
 
 
-def test_refined_min_range_law_unchanged_by_the_cache(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The whole refined min-range law with and without the envelope cache: the same law bit for bit."""
-    path = ROOT / "resources" / "examples" / "pipe.toml"
+def _coarse_example(name: str) -> tuple:
+    """An example at 600 points per pass and a 300-point payout grid: (job, mandrel, one circuit's line)."""
+    path = ROOT / "resources" / "examples" / f"{name}.toml"
     job = load_job(path)
     job = job.replace(winding=job.winding.model_copy(update={"points_per_pass": 600}),
                       payout=job.payout.model_copy(update={"grid_points": 300}))
-    mandrel = build_mandrel(job, path)
-    line = ContactLine.from_line(winding_line_for_job(job, path).one_circuit)
+    return job, build_mandrel(job, path), ContactLine.from_line(winding_line_for_job(job, path).one_circuit)
+
+
+def test_refined_min_range_law_unchanged_by_the_cache(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The whole refined min-range law with and without the envelope cache: the same law bit for bit."""
+    job, mandrel, line = _coarse_example("pipe")
     a = payout.min_range_law(line, mandrel, job.payout)
     assert a.report["line"]["refinements"] >= 1  # the cache was used
 
@@ -68,12 +72,7 @@ def test_bisection_skipping_certain_failures_is_bit_for_bit_bisection(name: str,
                                                                        ) -> None:
     """(13) and (14) with the peeks (midpoints certainly infeasible are not solved) against plain bisection
     (every midpoint solved): the same bounds and the same law bit for bit, with fewer solves."""
-    path = ROOT / "resources" / "examples" / f"{name}.toml"
-    job = load_job(path)
-    job = job.replace(winding=job.winding.model_copy(update={"points_per_pass": 600}),
-                      payout=job.payout.model_copy(update={"grid_points": 300}))
-    mandrel = build_mandrel(job, path)
-    line = ContactLine.from_line(winding_line_for_job(job, path).one_circuit)
+    job, mandrel, line = _coarse_example(name)
     a = payout.min_range_law(line, mandrel, job.payout, refine=False)
     monkeypatch.setattr(payout._WarmProbe, "peek", lambda self, x: None)  # nothing is ever certain
     b = payout.min_range_law(line, mandrel, job.payout, refine=False)
@@ -90,12 +89,7 @@ def test_bisection_skipping_certain_failures_is_bit_for_bit_bisection(name: str,
 
 def test_tube_margin_closes_at_the_optimum() -> None:
     """The margin the peeks extrapolate is positive on feasible bounds and about 0 at the (13) optimum."""
-    path = ROOT / "resources" / "examples" / "pipe.toml"
-    job = load_job(path)
-    job = job.replace(winding=job.winding.model_copy(update={"points_per_pass": 600}),
-                      payout=job.payout.model_copy(update={"grid_points": 300}))
-    mandrel = build_mandrel(job, path)
-    line = ContactLine.from_line(winding_line_for_job(job, path).one_circuit)
+    job, mandrel, line = _coarse_example("pipe")
     eye = payout.min_range_law(line, mandrel, job.payout, refine=False)
     t13 = eye.report["solver"]["u_min_13"]
     geo, env, _ = payout._prepare(line, mandrel, job.payout, job.payout.parameter, 300, None, None)
