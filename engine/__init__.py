@@ -7,3 +7,7 @@ Units inside the engine: lengths in mm, angles in rad, time in s.
 """
 
 __version__ = "0.1.0"
+
+from engine import _lightimport
+
+_lightimport.install()  # SciPy's array-API layer without NumPy's unused lazy submodules (issue 16)

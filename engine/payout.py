@@ -1084,19 +1084,15 @@ _highs_core_cache: list[Any] = []
 
 
 def _highs_core() -> Any | None:
-    """SciPy's build of HiGHS (``scipy.optimize._highspy._core``, SciPy >= 1.15), imported the ordinary
-    way, for :func:`_linprog_highs_direct`; None where that layout is absent (other SciPy versions):
-    :func:`_linprog` then calls ``linprog``.  (Loading the extension from its file to skip importing
-    ``scipy.optimize`` saved ~0.05 s but needed the interpreter's import lock, which could deadlock with
-    another thread importing scipy: not worth it.)"""
+    """SciPy's build of HiGHS (``scipy.optimize._highspy._core``, SciPy >= 1.15) for
+    :func:`_linprog_highs_direct`, loaded by :func:`engine._lightimport.extension_module` (without
+    importing all of ``scipy.optimize`` when nothing else has); None where that layout is absent (other
+    SciPy versions): :func:`_linprog` then calls ``linprog``."""
     if _highs_core_cache:
         return _highs_core_cache[0]
-    try:
-        import importlib
+    from engine._lightimport import extension_module
 
-        mod: Any = importlib.import_module(_HIGHS_CORE_NAME)
-    except ImportError:
-        mod = None
+    mod: Any = extension_module(_HIGHS_CORE_NAME)
     needed = ("HighsLp", "_Highs", "HighsOptions", "MatrixFormat", "HighsModelStatus", "HighsDebugLevel",
               "HighsStatus", "simplex_constants", "kHighsInf")
     if mod is not None and not all(hasattr(mod, a) for a in needed):

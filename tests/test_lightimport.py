@@ -1,0 +1,79 @@
+"""engine._lightimport: SciPy imported without NumPy's unused lazy submodules, and SciPy's HiGHS without all
+of scipy.optimize (issue 16, start-up) - the same modules, the same numbers, NumPy left as it was."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _run(code: str) -> dict:
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT,
+                         env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+_STATE = (
+    "import json, sys, numpy as np\n"
+    "names = sorted(np.__all__); d = sorted(dir(np))\n"
+)
+
+
+def test_scipy_without_numpy_lazy_submodules_and_numpy_unchanged() -> None:
+    plain = _run(_STATE + "print(json.dumps({'all': names, 'dir': d}))")
+    got = _run(
+        "import engine, sys\n"
+        "from engine import _lightimport\n"
+        "assert _lightimport._FINDER in sys.meta_path\n"
+        "import numpy as np\n"
+        "import scipy.sparse, scipy.linalg\n"
+        "from scipy._lib import array_api_compat\n"
+        "from scipy._lib._array_api import array_namespace\n"
+        "xp = array_namespace(np.ones(3))\n"
+        "a = xp.asarray([[2.0, 1.0], [1.0, 3.0]])\n"
+        "assert abs(float(xp.linalg.det(a)) - 5.0) < 1e-12 and float(xp.sum(xp.fft.fft(xp.ones(4))).real) == 4.0\n"
+        "loaded = [m for m in ('numpy.f2py', 'numpy.testing', 'unittest', 'charset_normalizer') if m in sys.modules]\n"
+        "finder_left = _lightimport._FINDER in sys.meta_path\n"
+        + _STATE +
+        "import numpy.testing\n"
+        "np.testing.assert_allclose(scipy.linalg.solve(a, [1.0, 2.0]), np.linalg.solve(a, [1.0, 2.0]))\n"
+        "print(json.dumps({'all': names, 'dir': d, 'loaded': loaded, 'finder_left': finder_left}))\n"
+    )
+    assert got["loaded"] == []            # the clone no longer imports them
+    assert got["finder_left"] is False     # the finder answered once and removed itself
+    assert got["all"] == plain["all"] and got["dir"] == plain["dir"]  # NumPy's namespace as it was
+
+
+def test_no_effect_once_scipy_base_is_imported() -> None:
+    got = _run(
+        "import sys, json\n"
+        "import scipy.sparse\n"
+        "from engine import _lightimport\n"
+        "print(json.dumps({'finder': _lightimport._FINDER in sys.meta_path, 'f2py': 'numpy.f2py' in sys.modules}))\n"
+    )
+    assert got == {"finder": False, "f2py": True}  # scipy came first: the ordinary (heavier) import, nothing hooked
+
+
+def test_highs_extension_without_scipy_optimize_then_scipy_optimize_uses_it() -> None:
+    got = _run(
+        "import sys, json\n"
+        "from engine import _lightimport, payout\n"
+        "core = payout._highs_core()\n"
+        "before = 'scipy.optimize' in sys.modules\n"
+        "import scipy.optimize\n"
+        "from scipy.optimize._highspy import _highs_wrapper\n"
+        "same = sys.modules['scipy.optimize._highspy._core'] is core and _highs_wrapper._h is core\n"
+        "r = scipy.optimize.linprog([-1.0, -2.0], A_ub=[[1.0, 1.0]], b_ub=[4.0], bounds=[(0, 3), (0, 3)])\n"
+        "missing = _lightimport.extension_module('scipy.optimize._no_such_ext')\n"
+        "print(json.dumps({'before': before, 'same': same, 'fun': r.fun, 'missing': missing}))\n"
+    )
+    assert got["before"] is False          # HiGHS came without the rest of scipy.optimize
+    assert got["same"] is True             # loaded once: scipy.optimize took this module
+    assert abs(got["fun"] + 7.0) < 1e-9    # x = (1, 3)
+    assert got["missing"] is None
