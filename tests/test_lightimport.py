@@ -77,3 +77,24 @@ def test_highs_extension_without_scipy_optimize_then_scipy_optimize_uses_it() ->
     assert got["same"] is True             # loaded once: scipy.optimize took this module
     assert abs(got["fun"] + 7.0) < 1e-9    # x = (1, 3)
     assert got["missing"] is None
+
+
+def test_winder_process_looks_for_no_pydantic_plugins_unless_the_user_says() -> None:
+    code = (
+        "import json, os, sys\n"
+        "from unittest import mock\n"
+        "import pydantic.plugin._loader as loader\n"
+        "from engine import cli\n"
+        "with mock.patch.object(loader, 'entry_points', return_value=[]) as ep:\n"
+        "    rc = cli.main(['mandrel', 'resources/examples/pipe.toml'])\n"
+        "print(json.dumps({'rc': rc, 'env': os.environ.get('PYDANTIC_DISABLE_PLUGINS'), 'scanned': ep.called}))\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "PYDANTIC_DISABLE_PLUGINS"}
+    for user, want in ((None, "__all__"), ("some_plugin", "some_plugin")):
+        e = {**env, "PYTHONPATH": str(ROOT), **({"PYDANTIC_DISABLE_PLUGINS": user} if user else {})}
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT, env=e)
+        assert out.returncode == 0, out.stderr
+        got = json.loads(out.stdout.strip().splitlines()[-1])
+        assert got["env"] == want
+        # the job schema built without the scan; the user's own setting is kept (and pydantic then looks)
+        assert got == {"rc": 0, "env": want, "scanned": user is not None}

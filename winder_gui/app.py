@@ -56,6 +56,9 @@ def _process_start() -> float:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Start the Qt application; ``argv`` may hold a job file and ``--selftest``."""
+    from engine.cli import _process_defaults
+
+    _process_defaults()  # before the job schema is built; also when started as python -m winder_gui.app
     from PySide6.QtCore import QTimer
     from PySide6.QtWidgets import QApplication
 
