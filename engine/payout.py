@@ -2022,7 +2022,6 @@ def _ipm_qp(Q: Any, c: FloatArray, A: Any, b: FloatArray, x0: FloatArray, max_it
     Returns None when it does not converge (the caller then uses HiGHS).
     """
     import scipy.sparse as sp
-    import scipy.sparse.linalg as spla
 
     m = A.shape[0]
     At = A.T.tocsr()
@@ -2048,6 +2047,8 @@ def _ipm_qp(Q: Any, c: FloatArray, A: Any, b: FloatArray, x0: FloatArray, max_it
             if kkt is not None:
                 solve = kkt.factor(d)
             else:
+                import scipy.sparse.linalg as spla  # here only: its import costs ~0.05 s, the cyclic path needs none
+
                 solve = spla.splu((Q + At @ sp.diags(d) @ A).tocsc()).solve
         except (RuntimeError, np.linalg.LinAlgError, ValueError):
             return None
