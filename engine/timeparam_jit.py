@@ -631,6 +631,97 @@ def chains(allr: np.ndarray, order: np.ndarray, m: np.ndarray, h: np.ndarray, xn
     return out if ok else None
 
 
+_LIMITS: list[Any] = []
+
+
+def _build_limits() -> Any:
+    import numba
+
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
+    def _limit_ratios_k(d1, d2, h, x0, u, tau, A, V):  # pragma: no cover - compiled
+        # engine.timeparam._limit_ratios' numpy code element by element: x = max(x0 + ((2u)·h)·τ, 0),
+        # X', X'' by Horner from 0 (out = out·τ + c_n), |X''·x + X'·u|/A and |X'|·√x/V; the maxima
+        # are exact in any order (a NaN wins, as in numpy's max).
+        n1, p, n_1 = d1.shape
+        n_2 = d2.shape[2]
+        # max_k fl(a_k/A) = fl(max_k a_k / A): a correctly rounded division by A > 0 is monotone, so
+        # each axis' maximum is divided once
+        am = np.full(p, -np.inf)
+        vm = np.full(p, -np.inf)
+        T = tau.size
+        xs = np.empty(T)
+        sx = np.empty(T)
+        q1 = np.empty(T)
+        q2 = np.empty(T)
+        nan_a = False
+        nan_v = False
+        for i in range(n1):
+            w = 2.0 * u[i] * h[i]
+            ui = u[i]
+            for t in range(T):
+                x = x0[i] + w * tau[t]
+                if x < 0.0:                      # np.maximum(x, 0.0): NaN stays, -0.0 stays
+                    x = 0.0
+                xs[t] = x
+                sx[t] = np.sqrt(x)
+            for c in range(p):
+                for t in range(T):
+                    q1[t] = 0.0
+                    q2[t] = 0.0
+                for k in range(n_1 - 1, -1, -1):
+                    ck = d1[i, c, k]
+                    for t in range(T):
+                        q1[t] = q1[t] * tau[t] + ck
+                for k in range(n_2 - 1, -1, -1):
+                    ck = d2[i, c, k]
+                    for t in range(T):
+                        q2[t] = q2[t] * tau[t] + ck
+                ma = am[c]
+                mv = vm[c]
+                for t in range(T):
+                    a = abs(q2[t] * xs[t] + q1[t] * ui)
+                    v = abs(q1[t]) * sx[t]
+                    if a > ma:
+                        ma = a
+                    if v > mv:
+                        mv = v
+                    nan_a |= a != a
+                    nan_v |= v != v
+                am[c] = ma
+                vm[c] = mv
+        acc = -np.inf
+        spd = -np.inf
+        for c in range(p):
+            acc = max(acc, am[c] / A[c])
+            spd = max(spd, vm[c] / V[c])
+        if nan_a:
+            acc = np.nan
+        if nan_v:
+            spd = np.nan
+        return acc, spd
+
+    return _limit_ratios_k
+
+
+def limit_ratios(d1: np.ndarray, d2: np.ndarray, h: np.ndarray, x0: np.ndarray, u: np.ndarray, tau: np.ndarray,
+                 A: np.ndarray, V: np.ndarray) -> tuple[float, float] | None:
+    """The worst acceleration and speed ratios of :func:`engine.timeparam._limit_ratios` (bit for bit its
+    numpy code's), or ``None`` without numba (loaded)."""
+    if not _LIMITS:
+        if kernel(0) is None:
+            return None
+        try:
+            _LIMITS.append(_build_limits())
+        except Exception:  # noqa: BLE001 - see kernel()
+            _LIMITS.append(None)
+    if _LIMITS[0] is None or d1.shape[0] == 0:
+        return None
+    c = np.ascontiguousarray
+    acc, spd = _LIMITS[0](c(d1, float), c(d2, float), c(h, float), c(x0, float), c(u, float), c(tau, float),
+                          c(A, float), c(V, float))
+    return float(acc), float(spd)
+
+
 _HULL_SYM: list[Any] = []
 
 
@@ -1146,4 +1237,4 @@ def warm() -> bool:
 
 
 __all__ = ["IMPORT_THRESHOLD", "SCRATCH_MAX_ELEMENTS", "chains", "dp_pass", "forward_pass", "hulls", "kernel",
-           "hull_sym_prep", "hull_sym_rows", "scratch", "warm", "windows"]
+           "hull_sym_prep", "hull_sym_rows", "limit_ratios", "scratch", "warm", "windows"]
