@@ -906,7 +906,9 @@ def run_laminate(
                     slots.append(p)
                     surface = p.grown
                     if isinstance(p, _Prepared):
-                        sched.add(p, more=j < n - 1)  # type: ignore[union-attr]
+                        sched.add(p, more=j < n - 1,  # type: ignore[union-attr]
+                                  heavier_later=any(isinstance(lay, (HelicalLayer, PolarLayer))
+                                                    for _k, lay in active[j + 1:]))
                     continue
                 lr = _wind_layer(job, jp, i, layer, name, key, surface, layer_upto, sub, run_pipeline, bare=bare)
             except InputError as exc:  # InfeasibleError included
@@ -999,7 +1001,7 @@ def _pipeline_cost(p: _Prepared) -> float:
 
 
 _PIPELINE_MODULES = ("engine.payout", "engine.kinematics", "engine.blocks", "engine.timeparam",
-                     "scipy.sparse", "scipy.sparse.linalg", "scipy.linalg", "scipy.spatial")
+                     "scipy.sparse", "scipy.linalg", "scipy.spatial")
 """What the layers' pipelines import: imported once here before the forks instead of once per child.
 (``scipy.optimize``'s HiGHS extension: :func:`_preload` takes it through ``engine.payout._highs_core``.)"""
 
@@ -1098,7 +1100,8 @@ class _Scheduler:
     """Runs the prepared layers' pipelines side by side in forked worker processes, one layer each.
 
     A layer goes to a child as soon as it is prepared if a later layer is still to be prepared and fewer
-    than ``workers - 1`` children run (this process prepares the next layers meanwhile).  Once every layer
+    than ``workers - 1`` children run (this process prepares the next layers meanwhile), except a hoop
+    layer with a helical or polar layer still to come (this process winds it later).  Once every layer
     is prepared, up to ``workers`` children run the rest, the longest first, each slot taking the next
     layer as it frees up; this process runs a layer itself only when it is far cheaper than those running
     (a hoop layer costs less than its fork) or when it is the last one and no child runs.  The answers are
@@ -1151,10 +1154,12 @@ class _Scheduler:
         for c in self.children.values():
             c.close()
 
-    def add(self, p: _Prepared, more: bool) -> None:
-        """A layer is prepared (``more``: others are still to be prepared): to a free child, else queued."""
+    def add(self, p: _Prepared, more: bool, heavier_later: bool = False) -> None:
+        """A layer is prepared (``more``: others are still to be prepared): to a free child, else queued.
+        A hoop layer with a helical or polar layer still to come is queued: it will be far cheaper than
+        that one, and this process winds it while that one runs (its fork would cost about as much)."""
         self._poll()
-        if more and self._running() < self.slots_free:
+        if more and self._running() < self.slots_free and not (isinstance(p.layer, HoopLayer) and heavier_later):
             self._spawn(p, None)
         else:
             self.queue.append(p)
@@ -1186,11 +1191,11 @@ class _Scheduler:
             self.queue.sort(key=_pipeline_cost, reverse=True)
             while self.queue or self._running():
                 self._poll()
-                while len(self.queue) > 1 and self._running() < self.workers:
+                while len(self.queue) > 1 and self._running() < self.workers and not self._small(self.queue[0]):
                     p = self.queue.pop(0)
                     self._spawn(p, sub(p))
-                if self.queue and (self._running() >= self.workers or len(self.queue) == 1 and
-                                   (not self._running() or self._small(self.queue[-1]))):
+                if self.queue and (self._running() >= self.workers or self._small(self.queue[-1]) or
+                                   len(self.queue) == 1 and not self._running()):
                     p = self.queue.pop()
                     self.out[p.i] = self._here(p, sub(p))
                     continue

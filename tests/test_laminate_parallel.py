@@ -373,16 +373,44 @@ def _events(job, one, workers: int, monkeypatch: pytest.MonkeyPatch) -> list[str
 
 
 def test_a_layer_pipeline_starts_while_the_next_layers_are_prepared(layup, monkeypatch: pytest.MonkeyPatch) -> None:
-    """With 2 workers: layer 1 goes to a child as soon as it is prepared, the helical layer to the second
-    slot once all are prepared, the hoops run here; with 3, layer 2 gets a slot at once.  The result is
-    unchanged."""
+    """With 2 workers: layer 0 (polar) goes to a child as soon as it is prepared, the helical layer to the
+    second slot once all are prepared, the hoops run here; with 3, the helical layer gets a slot as soon
+    as it is prepared, and the hoop before it is not forked for (a heavier layer is still to come: this
+    process winds it while the others run).  The result is unchanged."""
     job, one = layup
     log = _events(job, one, 2, monkeypatch)
     assert log[:2] == ["prep 0", "fork 0"], log
     # the polar and helical layers in children; the hoops, each far cheaper, here (no fork for them)
     assert sorted(e for e in log if e.startswith("fork")) == ["fork 0", "fork 3"], log
     log = _events(job, one, 3, monkeypatch)
-    assert log[:4] == ["prep 0", "fork 0", "prep 1", "fork 1"], log
+    assert log[:6] == ["prep 0", "fork 0", "prep 1", "prep 2", "prep 3", "fork 3"], log
+    assert sorted(e for e in log if e.startswith("fork")) == ["fork 0", "fork 3"], log
+
+
+def test_hoops_around_a_helical_layer_are_wound_here_while_it_runs(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The pipe example (hoop, helical, hoop) with 2 workers: only the helical layer is forked for, as soon
+    as it is prepared; both hoops are wound in this process meanwhile (forking for the first hoop would put
+    three processes on two cores while the helical layer runs).  The result is the one-process result."""
+    from engine.job import load_job
+
+    path = Path(__file__).resolve().parents[1] / "resources" / "examples" / "pipe.toml"
+    job = load_job(path)
+    one = lam.run_laminate(job, str(path), workers=1)
+    log: list[str] = []
+    fork, here = lam._fork_pipeline, lam._Scheduler._here
+
+    def logged_fork(jp, p, upto, register):  # noqa: ANN001, ANN202
+        log.append(f"fork {p.i}")
+        return fork(jp, p, upto, register)
+
+    def logged_here(self, p, state):  # noqa: ANN001, ANN202
+        log.append(f"here {p.i}")
+        return here(self, p, state)
+
+    monkeypatch.setattr(lam, "_fork_pipeline", logged_fork)
+    monkeypatch.setattr(lam._Scheduler, "_here", logged_here)
+    _same_result(one, lam.run_laminate(job, str(path), workers=2))
+    assert log[0] == "fork 1" and sorted(log[1:]) == ["here 0", "here 2"], log
 
 
 def _interrupted_run(tmp_path: Path, sig: int) -> tuple[int, str, int, Path]:
