@@ -430,6 +430,7 @@ class _Problem:
     ipos: np.ndarray | None = None        # the ± pairs of rows: rows[:, ineg] == -rows[:, ipos]
     ineg: np.ndarray | None = None
     slopes: tuple | None = None   # the compiled pass's constants: chain slopes, 2h, K/4h², uniform h
+    chain_slopes: tuple | None = None     # (rs, ls) from the compiled chains: np.diff(rk)/np.diff(rq), left alike
     work: list = field(default_factory=list, repr=False)   # the compiled pass's (N, M) arrays, kept between passes
 
 
@@ -518,7 +519,7 @@ def _rows(B: int, R: int) -> np.ndarray:
     return np.arange(0, B * R, R, dtype=np.intp)[:, None]
 
 
-def _hull_sym(pts: np.ndarray, ipos: np.ndarray, ineg: np.ndarray, compiled: bool = False
+def _hull_sym(pts: np.ndarray, ipos: np.ndarray, ineg: np.ndarray, compiled: bool = False, scratch: bool = False
               ) -> tuple[np.ndarray, np.ndarray]:
     """Convex hull vertices of every row of ``pts`` (B, R0, 2), counter-clockwise.
 
@@ -540,7 +541,8 @@ def _hull_sym(pts: np.ndarray, ipos: np.ndarray, ineg: np.ndarray, compiled: boo
     Returns ``(order, m)``: ``order[b, :m[b]]`` are the row indices (into R0) of the hull vertices
     of row b in CCW order; entries past ``m[b]`` are 0.  ``compiled``: steps 1-3 by
     :func:`engine.timeparam_jit.hull_sym_rows` where numba is loaded (the same arithmetic, the same
-    vertices bit for bit; the angles stay numpy's).
+    vertices bit for bit; the angles stay numpy's), and with ``scratch`` in the thread's work arrays (the
+    result is valid until the next such call).
     """
     B = pts.shape[0]
     ipos = np.asarray(ipos, np.intp)
@@ -550,14 +552,20 @@ def _hull_sym(pts: np.ndarray, ipos: np.ndarray, ineg: np.ndarray, compiled: boo
     if compiled and _NUMBA and ipos.size and np.isfinite(pts).all():
         from engine import timeparam_jit
 
-        prep = timeparam_jit.hull_sym_prep(pts, ipos, ineg)
+        prep = timeparam_jit.hull_sym_prep(pts, ipos, ineg, work=scratch)
     if prep is not None:                    # the lines below, compiled; then the angles by numpy
         px, py, idx, r2 = prep
-        ang = np.arctan2(py, px)
-        ang[r2 == 0] = 10.0
+        ang = np.arctan2(py, px, out=timeparam_jit.scratch("hs_ang", px.shape) if scratch else None)
+        np.copyto(ang, 10.0, where=r2 == 0)
         th = [np.pi * d / D for d in range(D)]
-        res = timeparam_jit.hull_sym_rows(px, py, ang, r2, idx, np.array([math.cos(t) for t in th]),
-                                          np.array([math.sin(t) for t in th]))
+        cd, sd = np.array([math.cos(t) for t in th]), np.array([math.sin(t) for t in th])
+        partner = np.zeros(pts.shape[1], np.intp)
+        partner[ipos] = ineg
+        partner[ineg] = ipos
+        out = timeparam_jit.hull_sym_order(px, py, ang, r2, idx, cd, sd, partner, work=scratch)
+        if out is not None:                 # with the assembly (_hull_sym_assemble) compiled too
+            return out
+        res = timeparam_jit.hull_sym_rows(px, py, ang, r2, idx, cd, sd)
         if res is not None:
             return _hull_sym_assemble(pts, ipos, ineg, *res)
     H = pts[:, ipos]
@@ -754,12 +762,12 @@ def _hulls(allr: np.ndarray, ipos: np.ndarray, ineg: np.ndarray, compiled: bool,
         out = timeparam_jit.hulls(allr, (ipos, ineg), scratch_out=scratch)
         if out is not None:
             return out
-    return _hull_sym(allr, ipos, ineg, compiled=compiled)
+    return _hull_sym(allr, ipos, ineg, compiled=compiled, scratch=scratch)
 
 
 def _chains(rows: np.ndarray, h: np.ndarray, xn_prev: np.ndarray, xn_cur: np.ndarray,
-            ipos: np.ndarray, ineg: np.ndarray, compiled: bool = False, hull_compiled: bool | None = None
-            ) -> dict[str, np.ndarray]:
+            ipos: np.ndarray, ineg: np.ndarray, compiled: bool = False, hull_compiled: bool | None = None,
+            work: bool = False) -> dict[str, np.ndarray]:
     """The feasible polygon of every interval in the ``(x_k, x_j) = (ṡ²_{i-1}, ṡ²_i)`` plane.
 
     ``rows`` (B, R, 2) are normalised constraints ``n·(x_k, u) <= 1`` with ``u = (x_j - x_k)/(2h)``,
@@ -767,22 +775,24 @@ def _chains(rows: np.ndarray, h: np.ndarray, xn_prev: np.ndarray, xn_cur: np.nda
     box rows ``|x_k| <= xn_prev``, ``|x_j| <= xn_cur`` are added (relaxations of the node caps) so
     that the polygon is bounded.  Returns the right chain ``x_k = R(x_j)`` and the left chain
     ``x_k = L(x_j)`` of each polygon, flattened for one global ``np.interp`` (abscissa
-    ``x_j / xn_cur + 3·i``), and the x_j range of each polygon.
+    ``x_j / xn_cur + 3·i``), and the x_j range of each polygon; from the compiled code also the chains'
+    segment slopes ``rs``, ``ls``.  ``work``: the chains may be the thread's work arrays (valid until
+    the next such call; for parametrize's problems, used within the call only).
     """
     B = rows.shape[0]
-    work = None
+    wrows = None
     if compiled and _NUMBA:                 # the rows and the hull in the thread's work arrays (used here only)
         from engine import timeparam_jit
 
         if timeparam_jit.kernel(0) is not None:
-            work = timeparam_jit.scratch("box_rows", (B, rows.shape[1] + 4, 2))
-    allr, ip2, in2 = _box_rows(rows, h, xn_prev, xn_cur, ipos, ineg, out=work)
+            wrows = timeparam_jit.scratch("box_rows", (B, rows.shape[1] + 4, 2))
+    allr, ip2, in2 = _box_rows(rows, h, xn_prev, xn_cur, ipos, ineg, out=wrows)
     chain = True if hull_compiled is None else hull_compiled
-    order, m = _hulls(allr, ip2, in2, compiled, scratch=work is not None and chain, chain=chain)
+    order, m = _hulls(allr, ip2, in2, compiled, scratch=wrows is not None, chain=chain)
     if compiled and _NUMBA:
         from engine import timeparam_jit
 
-        out = timeparam_jit.chains(allr, order, m, h, xn_cur)     # the same bits, one compiled loop
+        out = timeparam_jit.chains(allr, order, m, h, xn_cur, work)     # the same bits, one compiled loop
         if out is not None:
             return out
     V = int(m.max())
@@ -854,7 +864,8 @@ def _reachable(cap: np.ndarray, h: np.ndarray, ch: dict[str, np.ndarray], limits
     return np.minimum(out, cap)
 
 
-def _prepare(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, chains: bool = True) -> _Problem:
+def _prepare(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, chains: bool = True, work: bool = False
+             ) -> _Problem:
     s, X, dX, ddX = _validate(path_s, X, dX, ddX, limits)
     n, p = X.shape
     h = np.diff(s)
@@ -911,23 +922,54 @@ def _prepare(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, chains:
         Qp[..., 1:] += 2.0 * h[:, None, None] * d2
         P = Pp @ _P2B.T
         Q = Qp @ _P2B.T
-    g5, c5 = P / A[None, :, None], Q / A[None, :, None]
-    G = g5[0].size
+    G = P.shape[1] * P.shape[2]
     extra = math.isfinite(limits.sddot_max)
-    # rows (g, c), then (-g, -c), then the s̈_T pair: written in place (no stack/concatenate copies)
-    rows = np.empty((n - 1, 2 * G + 2 * extra, 2))
-    rows[:, :G, 0] = g5.reshape(n - 1, G)
-    rows[:, :G, 1] = c5.reshape(n - 1, G)
-    np.negative(rows[:, :G], out=rows[:, G:2 * G])
+    R = 2 * G + 2 * extra
     ipos, ineg = np.arange(G), np.arange(G, 2 * G)   # the ± pairs
     if extra:
+        ipos, ineg = np.r_[ipos, 2 * G], np.r_[ineg, 2 * G + 1]
+    # rows (g, c), then (-g, -c), then the s̈_T pair, and the pre-pruned hull rows (_rows_numpy).  ``work``: in
+    # the thread's work arrays (no fresh pages every solve; parametrize's problem is used only within the call)
+    prune = P.shape[-1] == 5
+    if work:
+        from engine.timeparam_jit import scratch
+
+        rows = scratch("prepare_rows", (n - 1, R, 2))
+        hull_rows = scratch("prepare_hull_rows", (n - 1, R, 2)) if prune else rows
+    else:
+        rows = np.empty((n - 1, R, 2))
+        hull_rows = np.empty((n - 1, R, 2)) if prune else rows
+    done = False
+    if _NUMBA:
+        from engine import timeparam_jit
+
+        done = timeparam_jit.constraint_rows(P, Q, A, 1.0 / limits.sddot_max if extra else None, rows, hull_rows)
+    if not done:
+        _rows_numpy(P, Q, A, limits, rows, hull_rows)
+    xn, cap_dp, ch = _polygons(cap, h, hull_rows, ipos, ineg, limits, chains)
+    return _Problem(s=s, h=h, p=p, d1=d1, d2=d2, cap_v=cap_v, cap_tech=cap_tech, cap=cap, cap_dp=cap_dp, xn=xn[1:],
+                    rows=rows, limits=limits, point_nodes=point_nodes, hull_rows=hull_rows, ipos=ipos, ineg=ineg,
+                    **ch)
+
+
+def _rows_numpy(P: np.ndarray, Q: np.ndarray, A: np.ndarray, limits: TimeLimits, rows: np.ndarray,
+                hull_rows: np.ndarray) -> None:
+    """The constraint rows ``n·(x_k, u) <= 1`` of every interval into ``rows`` (N-1, R, 2): ``(g, c) =
+    (P, Q)/A`` for every axis and Bernstein coefficient, then ``(-g, -c)``, then ``(0, ±1/s̈_T)``; and
+    ``hull_rows`` (the same array when there is nothing to prune): exact pre-pruning, an inner
+    Bernstein point inside the triangle (origin, first, last) of its own axis is implied by those two
+    (the origin lies inside the hull), so the hull skips it (its row times 0.0, the others times 1.0).
+    :func:`engine.timeparam_jit.constraint_rows` is this code compiled (the same bits)."""
+    n1, p = P.shape[:2]
+    g5, c5 = P / A[None, :, None], Q / A[None, :, None]
+    G = g5[0].size
+    rows[:, :G, 0] = g5.reshape(n1, G)
+    rows[:, :G, 1] = c5.reshape(n1, G)
+    np.negative(rows[:, :G], out=rows[:, G:2 * G])
+    if rows.shape[1] > 2 * G:
         rows[:, 2 * G:, 0] = 0.0
         rows[:, 2 * G, 1] = 1.0 / limits.sddot_max
         rows[:, 2 * G + 1, 1] = -1.0 / limits.sddot_max
-        ipos, ineg = np.r_[ipos, 2 * G], np.r_[ineg, 2 * G + 1]
-    # exact pre-pruning: an inner Bernstein point inside the triangle (origin, first, last) of its
-    # own axis is implied by those two (the origin lies inside the hull), so the hull skips it
-    hull_rows = rows
     if P.shape[-1] == 5:
         gt, ct = np.moveaxis(g5, -1, 0).copy(), np.moveaxis(c5, -1, 0).copy()    # (5, N-1, p), contiguous
         det = gt[0] * ct[4] - ct[0] * gt[4]
@@ -935,29 +977,25 @@ def _prepare(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, chains:
         al = (gt[1:4] * ct[4] - ct[1:4] * gt[4]) / sd
         be = (gt[0] * ct[1:4] - ct[0] * gt[1:4]) / sd
         inner = (np.abs(det) > 0) & (al >= 0) & (be >= 0) & (al + be <= 1.0 - 1e-12)    # (3, N-1, p)
-        keep = np.ones((n - 1, rows.shape[1]))
-        kp = np.ones((n - 1, p, 5))
+        keep = np.ones((n1, rows.shape[1]))
+        kp = np.ones((n1, p, 5))
         kp[..., 1:4] = np.moveaxis(~inner, 0, -1)
-        keep[:, :G] = kp.reshape(n - 1, G)
+        keep[:, :G] = kp.reshape(n1, G)
         keep[:, G:2 * G] = keep[:, :G]
-        hull_rows = np.empty_like(rows)                       # rows · keep: the dropped rows times 0.0
-        np.multiply(rows[..., 0], keep, out=hull_rows[..., 0])
+        np.multiply(rows[..., 0], keep, out=hull_rows[..., 0])   # rows · keep: the dropped rows times 0.0
         np.multiply(rows[..., 1], keep, out=hull_rows[..., 1])
-    xn, cap_dp, ch = _polygons(cap, h, hull_rows, ipos, ineg, limits, chains)
-    return _Problem(s=s, h=h, p=p, d1=d1, d2=d2, cap_v=cap_v, cap_tech=cap_tech, cap=cap, cap_dp=cap_dp, xn=xn[1:],
-                    rows=rows, limits=limits, point_nodes=point_nodes, hull_rows=hull_rows, ipos=ipos, ineg=ineg,
-                    **ch)
 
 
 def _polygons(cap: np.ndarray, h: np.ndarray, hull_rows: np.ndarray, ipos: np.ndarray, ineg: np.ndarray,
-              limits: TimeLimits, chains: bool, compiled: bool = False, hull_compiled: bool | None = None
-              ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+              limits: TimeLimits, chains: bool, compiled: bool = False, hull_compiled: bool | None = None,
+              work: bool = False) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
     """Box sizes ``xn``, the reachable caps ``cap_dp`` and the polygon chains of every interval
-    (``hull_compiled``: see :func:`_compiled_hull_for`)."""
+    (``hull_compiled``: see :func:`_compiled_hull_for`; ``work``: see :func:`_chains`), with the chains'
+    segment slopes as ``chain_slopes`` where the compiled code made them."""
     cap_box = np.minimum(cap, 1e9)
     xn = (1.5 * cap_box) ** 2 + 1.0
     if chains:
-        ch = _chains(hull_rows, h, xn[:-1], xn[1:], ipos, ineg, compiled, hull_compiled)
+        ch = _chains(hull_rows, h, xn[:-1], xn[1:], ipos, ineg, compiled, hull_compiled, work)
         cap_dp = _reachable(cap_box, h, ch, limits)
         # The box is a relaxation of the node caps.  Where no axis limits the speed (axes at rest or
         # moving linearly, large V, no sdot_max) it is orders of magnitude larger than the speeds any
@@ -967,13 +1005,15 @@ def _polygons(cap: np.ndarray, h: np.ndarray, hull_rows: np.ndarray, ipos: np.nd
         loose = (xn > 1e12) & (xn > 1e6 * xn_r)                 # ṡ > 670 m/s: no physical limit
         if loose.any():
             xn = np.where(loose, xn_r, xn)
-            ch = _chains(hull_rows, h, xn[:-1], xn[1:], ipos, ineg, compiled, hull_compiled)
+            ch = _chains(hull_rows, h, xn[:-1], xn[1:], ipos, ineg, compiled, hull_compiled, work)
             cap_dp = np.minimum(cap_dp, _reachable(cap_box, h, ch, limits))
     else:
         e = np.zeros(0)
         ch = {"rq": e, "rk": e, "lq": e, "lk": e, "xjb": e, "xjt": e}
         cap_dp = cap
-    ch = {k: v for k, v in ch.items() if k not in ("uhi", "ulo", "xkt")}
+    slopes = (ch["rs"], ch["ls"]) if "rs" in ch else None
+    ch = {k: v for k, v in ch.items() if k not in ("uhi", "ulo", "xkt", "rs", "ls")}
+    ch["chain_slopes"] = slopes
     return xn, cap_dp, ch
 
 
@@ -1018,7 +1058,7 @@ def _group_length(prob: _Problem) -> np.ndarray | None:
     return ell if float(np.median(ratio)) * _GROUP_WHEN < 1.0 else None
 
 
-def _coarse_problem(prob: _Problem, ell: np.ndarray) -> tuple[_Problem, np.ndarray]:
+def _coarse_problem(prob: _Problem, ell: np.ndarray, work: bool = False) -> tuple[_Problem, np.ndarray]:
     """The problem on groups of consecutive intervals about one level step ``ell`` long, constant s̈
     in each.
 
@@ -1030,6 +1070,7 @@ def _coarse_problem(prob: _Problem, ell: np.ndarray) -> tuple[_Problem, np.ndarr
     ``g·x_a + (c + 2g·(s_i - s_a))·u <= 1``, and each inner node's cap ``x_i <= cap_i²`` a row too.  The
     group's polygon is exactly the set of (x_a, x_b) whose linear ṡ² keeps every constraint of every
     interval in it.  Returns the coarse problem and the indices of its nodes among the given ones.
+    ``work``: work arrays of the thread for the hulls and the chains (see :func:`_chains`).
     """
     n = prob.s.size
     sigma = np.concatenate([[0.0], np.cumsum(np.minimum(prob.h / ell, 1e6))])
@@ -1054,7 +1095,7 @@ def _coarse_problem(prob: _Problem, ell: np.ndarray) -> tuple[_Problem, np.ndarr
     hr = prob.hull_rows if prob.hull_rows is not None else prob.rows
     xn_f = (1.5 * np.minimum(prob.cap, 1e9)) ** 2 + 1.0
     allr, ip_f, in_f = _box_rows(hr, prob.h, xn_f[:-1], xn_f[1:], prob.ipos, prob.ineg)
-    order, mv = _hulls(allr, ip_f, in_f, True, chain=_compiled_hull_for(n))
+    order, mv = _hulls(allr, ip_f, in_f, True, scratch=work, chain=_compiled_hull_for(n))   # (used here only)
     R = max(int(mv.max()), 1)
     order = order[:, :R]
     keep = np.arange(R)[None, :] < mv[:, None]
@@ -1098,7 +1139,7 @@ def _coarse_problem(prob: _Problem, ell: np.ndarray) -> tuple[_Problem, np.ndarr
     h = np.diff(s)
     cap = prob.cap[idx]
     xn, cap_dp, ch = _polygons(cap, h, rows, ipos, ineg, prob.limits, True, compiled=True,
-                               hull_compiled=_compiled_hull_for(n))
+                               hull_compiled=_compiled_hull_for(n), work=work)
     pos = {int(v): k for k, v in enumerate(idx)}
     pnodes = []
     for pt, nodes in prob.point_nodes:
@@ -1111,12 +1152,13 @@ def _coarse_problem(prob: _Problem, ell: np.ndarray) -> tuple[_Problem, np.ndarr
     return coarse, idx
 
 
-def _with_chains(prob: _Problem) -> _Problem:
-    """``prob`` (prepared without chains) with its polygons and reachable caps."""
+def _with_chains(prob: _Problem, work: bool = False) -> _Problem:
+    """``prob`` (prepared without chains) with its polygons and reachable caps (``work``: see
+    :func:`_chains`)."""
     from dataclasses import replace as dc_replace
 
     xn, cap_dp, ch = _polygons(prob.cap, prob.h, prob.hull_rows, prob.ipos, prob.ineg, prob.limits, True,
-                               compiled=True, hull_compiled=_compiled_hull_for(prob.s.size))
+                               compiled=True, hull_compiled=_compiled_hull_for(prob.s.size), work=work)
     return dc_replace(prob, xn=xn[1:], cap_dp=cap_dp, slopes=None, work=[], **ch)
 
 
@@ -1248,9 +1290,12 @@ def _dp(prob: _Problem, lo: np.ndarray, hi: np.ndarray, M: int, state: State | N
         L = prob.rq.size // max(n - 1, 1)
         if prob.slopes is None:     # once per problem: the chains' segment slopes, 2h, K/4h², uniform h
             h = prob.h
-            with np.errstate(divide="ignore", invalid="ignore"):
-                prob.slopes = (np.diff(prob.rk) / np.diff(prob.rq), np.diff(prob.lk) / np.diff(prob.lq), 2.0 * h,
-                               (K / 4.0) / (h * h), bool(np.ptp(h) <= 1e-12 * h.max()))
+            if prob.chain_slopes is not None:
+                rs_ls = prob.chain_slopes
+            else:
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    rs_ls = (np.diff(prob.rk) / np.diff(prob.rq), np.diff(prob.lk) / np.diff(prob.lq))
+            prob.slopes = (*rs_ls, 2.0 * h, (K / 4.0) / (h * h), bool(np.ptp(h) <= 1e-12 * h.max()))
         rs, ls, two_h, kq_h, uniform_h = prob.slopes
         fused = timeparam_jit.dp_pass((plo, span, phi, frac), prob.xn, (prob.rq, prob.rk, prob.lq, prob.lk, rs, ls), L,
                                       prob.xjb,
@@ -1870,18 +1915,18 @@ def parametrize(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, meth
         from engine import timeparam_jit
 
         timeparam_jit.kernel(int(np.size(path_s)))        # loads numba for big problems (see there)
-    prob = _prepare(path_s, X, dX, ddX, limits, chains=method == "dp")
+    prob = _prepare(path_s, X, dX, ddX, limits, chains=method == "dp", work=True)
     iterations: list[IterationLog] = []
     group = 1
     if method == "tube":
         ell = _group_length(prob)
         if ell is not None:
-            coarse, idx = _coarse_problem(prob, ell)
+            coarse, idx = _coarse_problem(prob, ell, work=True)
             sdot_c, iterations = _tube(coarse, state)
             sdot = _refine_to_nodes(prob.s, idx, sdot_c)
             group = max(1, round((prob.s.size - 1) / max(idx.size - 1, 1)))
         else:
-            prob = _with_chains(prob)
+            prob = _with_chains(prob, work=True)
             sdot, iterations = _tube(prob, state)
     elif method == "dp":
         lo, hi = _bounds_check(prob)

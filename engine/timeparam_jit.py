@@ -541,7 +541,7 @@ def _build_chains() -> Any:
     import numba
 
     @numba.njit(cache=True, nogil=True, error_model="numpy")
-    def _chains_k(allr, order, m, V, h, xn_cur, rq, rk, lq, lk, xjb, xjt, uhi, ulo, xkt):  # pragma: no cover
+    def _chains_k(allr, order, m, V, h, xn_cur, rq, rk, lq, lk, xjb, xjt, uhi, ulo, xkt, rs, ls):  # pragma: no cover
         # The numpy code of engine.timeparam._chains, element by element (the same operations in the
         # same order).  Returns False (nothing usable) where that code would take another branch: a
         # non-positive vertex determinant (parallel normals) or a NaN vertex.
@@ -600,16 +600,22 @@ def _build_chains() -> Any:
             uhi[b] = ub
             ulo[b] = lb
             xkt[b] = kt
+        # the chains' segment slopes, np.diff(rk) / np.diff(rq) (and the left chain's) over the flat arrays
+        for a in range(rq.size - 1):
+            rs[a] = (rk[a + 1] - rk[a]) / (rq[a + 1] - rq[a])
+            ls[a] = (lk[a + 1] - lk[a]) / (lq[a + 1] - lq[a])
         return True
 
     return _chains_k
 
 
-def chains(allr: np.ndarray, order: np.ndarray, m: np.ndarray, h: np.ndarray, xn_cur: np.ndarray
-           ) -> dict[str, np.ndarray] | None:
+def chains(allr: np.ndarray, order: np.ndarray, m: np.ndarray, h: np.ndarray, xn_cur: np.ndarray,
+           work: bool = False) -> dict[str, np.ndarray] | None:
     """The polygon chains of :func:`engine.timeparam._chains` from the hull vertex rows ``order``, ``m``
-    (bit for bit its numpy code's), or ``None`` (without numba, or where the numpy code handles parallel
-    normals or NaN vertices)."""
+    (bit for bit its numpy code's) and their segment slopes ``rs``, ``ls`` (``np.diff(rk) / np.diff(rq)``,
+    the same for the left chain: the quotients numpy's ``interp`` computes), or ``None`` (without numba,
+    or where the numpy code handles parallel normals or NaN vertices).  ``work``: the chain arrays are the
+    thread's :func:`scratch` arrays (valid until the next such call)."""
     if not _CHAINS:
         if kernel(0) is None:
             return None
@@ -622,12 +628,17 @@ def chains(allr: np.ndarray, order: np.ndarray, m: np.ndarray, h: np.ndarray, xn
     B = order.shape[0]
     V = int(m.max())
     L = V + 1
-    out = {k: np.empty(B * L) for k in ("rq", "rk", "lq", "lk")}
+    if work:
+        out = {k: scratch("chain_" + k, (B * L,)) for k in ("rq", "rk", "lq", "lk")}
+        out.update({k: scratch("chain_" + k, (max(B * L - 1, 0),)) for k in ("rs", "ls")})
+    else:
+        out = {k: np.empty(B * L) for k in ("rq", "rk", "lq", "lk")}
+        out.update({k: np.empty(max(B * L - 1, 0)) for k in ("rs", "ls")})
     out.update({k: np.empty(B) for k in ("xjb", "xjt", "uhi", "ulo", "xkt")})
     ok = _CHAINS[0](np.ascontiguousarray(allr, float), np.ascontiguousarray(order, np.int64),
                     np.ascontiguousarray(m, np.int64), V, np.ascontiguousarray(h, float),
                     np.ascontiguousarray(xn_cur, float), out["rq"], out["rk"], out["lq"], out["lk"], out["xjb"],
-                    out["xjt"], out["uhi"], out["ulo"], out["xkt"])
+                    out["xjt"], out["uhi"], out["ulo"], out["xkt"], out["rs"], out["ls"])
     return out if ok else None
 
 
@@ -720,6 +731,82 @@ def limit_ratios(d1: np.ndarray, d2: np.ndarray, h: np.ndarray, x0: np.ndarray, 
     acc, spd = _LIMITS[0](c(d1, float), c(d2, float), c(h, float), c(x0, float), c(u, float), c(tau, float),
                           c(A, float), c(V, float))
     return float(acc), float(spd)
+
+
+_ROWS: list[Any] = []
+
+
+def _build_rows() -> Any:
+    import numba
+
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
+    def _rows_k(P, Q, A, inv_sdd, rows, hull_rows):  # pragma: no cover - compiled
+        # engine.timeparam._prepare's numpy code element by element: g = P/A, c = Q/A as the rows
+        # (g, c) then (-g, -c) then (0, ±1/s̈_T); the hull rows are the rows times 1.0 or, for an inner
+        # Bernstein point inside the triangle (origin, first, last) of its own axis, times 0.0.
+        n1, p, nb = P.shape
+        G = p * nb
+        R = rows.shape[1]
+        prune = nb == 5
+        g = np.empty(nb)
+        c = np.empty(nb)
+        for i in range(n1):
+            for a in range(p):
+                for k in range(nb):
+                    g[k] = P[i, a, k] / A[a]
+                    c[k] = Q[i, a, k] / A[a]
+                    r = a * nb + k
+                    rows[i, r, 0] = g[k]
+                    rows[i, r, 1] = c[k]
+                    rows[i, G + r, 0] = -g[k]
+                    rows[i, G + r, 1] = -c[k]
+                    hull_rows[i, r, 0] = g[k] * 1.0
+                    hull_rows[i, r, 1] = c[k] * 1.0
+                    hull_rows[i, G + r, 0] = -g[k] * 1.0
+                    hull_rows[i, G + r, 1] = -c[k] * 1.0
+                if prune:
+                    det = g[0] * c[4] - c[0] * g[4]
+                    sd = det if abs(det) > 0 else 1.0
+                    for k in range(1, 4):
+                        al = (g[k] * c[4] - c[k] * g[4]) / sd
+                        be = (g[0] * c[k] - c[0] * g[k]) / sd
+                        if abs(det) > 0 and al >= 0 and be >= 0 and al + be <= 1.0 - 1e-12:
+                            r = a * nb + k
+                            hull_rows[i, r, 0] = g[k] * 0.0
+                            hull_rows[i, r, 1] = c[k] * 0.0
+                            hull_rows[i, G + r, 0] = -g[k] * 0.0
+                            hull_rows[i, G + r, 1] = -c[k] * 0.0
+            if R > 2 * G:
+                rows[i, 2 * G, 0] = 0.0
+                rows[i, 2 * G, 1] = inv_sdd
+                rows[i, 2 * G + 1, 0] = 0.0
+                rows[i, 2 * G + 1, 1] = -inv_sdd
+                for r in range(2 * G, R):
+                    hull_rows[i, r, 0] = rows[i, r, 0] * 1.0
+                    hull_rows[i, r, 1] = rows[i, r, 1] * 1.0
+        return 0
+
+    return _rows_k
+
+
+def constraint_rows(P: np.ndarray, Q: np.ndarray, A: np.ndarray, inv_sdd: float | None, rows: np.ndarray,
+                    hull_rows: np.ndarray) -> bool:
+    """Fill ``rows`` and ``hull_rows`` (N-1, R, 2) as :func:`engine.timeparam._prepare`'s numpy code does
+    (bit for bit) from the Bernstein coefficients ``P``, ``Q`` (N-1, p, 5 or 1) of the acceleration
+    constraints, the limits ``A`` (p,) and ``1/s̈_T`` (``None``: no s̈_T rows).  False (nothing written)
+    without numba (loaded)."""
+    if not _ROWS:
+        if kernel(0) is None:
+            return False
+        try:
+            _ROWS.append(_build_rows())
+        except Exception:  # noqa: BLE001 - see kernel()
+            _ROWS.append(None)
+    if _ROWS[0] is None:
+        return False
+    c = np.ascontiguousarray
+    _ROWS[0](c(P, float), c(Q, float), c(A, float), 0.0 if inv_sdd is None else float(inv_sdd), rows, hull_rows)
+    return True
 
 
 _HULL_SYM: list[Any] = []
@@ -884,20 +971,40 @@ def _build_hull_sym() -> Any:
                 r2[b, j] = x * x + y * y
         return 0
 
-    return _graham, _prep
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
+    def _assemble(up, kk, partner, order, m):  # pragma: no cover - compiled
+        # engine.timeparam._hull_sym_assemble: the half chain's row ids, then their mirror partners,
+        # zeros past 2k
+        B, W = order.shape
+        for b in range(B):
+            k = kk[b]
+            for t in range(k):
+                order[b, t] = up[b, t]
+                order[b, k + t] = partner[up[b, t]]
+            for t in range(2 * k, W):
+                order[b, t] = 0
+            m[b] = 2 * k
+        return 0
+
+    return _graham, _prep, _assemble
 
 
-def hull_sym_prep(pts: np.ndarray, ipos: np.ndarray, ineg: np.ndarray
+def hull_sym_prep(pts: np.ndarray, ipos: np.ndarray, ineg: np.ndarray, work: bool = False
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """The first lines of :func:`engine.timeparam._hull_sym` compiled: the half points of every row scaled
     by the row's largest |x| and |y|, turned into the upper half-plane, their row ids and squared radii
-    ``(px, py, idx, r2)``, bit for bit; ``None`` when numba is not loaded."""
+    ``(px, py, idx, r2)``, bit for bit; ``None`` when numba is not loaded.  ``work``: in the thread's
+    :func:`scratch` arrays (valid until the next such call)."""
     k = _hull_sym_kernels()
     if k is None:
         return None
     B, R = pts.shape[0], ipos.shape[0]
-    px, py, r2 = np.empty((B, R)), np.empty((B, R)), np.empty((B, R))
-    idx = np.empty((B, R), np.int64)
+    if work:
+        px, py, r2 = scratch("hs_px", (B, R)), scratch("hs_py", (B, R)), scratch("hs_r2", (B, R))
+        idx = scratch("hs_idx", (B, R), np.int64)
+    else:
+        px, py, r2 = np.empty((B, R)), np.empty((B, R)), np.empty((B, R))
+        idx = np.empty((B, R), np.int64)
     k[1](np.ascontiguousarray(pts, float), np.ascontiguousarray(ipos, np.int64),
          np.ascontiguousarray(ineg, np.int64), px, py, idx, r2)
     return px, py, idx, r2
@@ -931,6 +1038,27 @@ def hull_sym_rows(px: np.ndarray, py: np.ndarray, ang: np.ndarray, r2: np.ndarra
     k = np.zeros(B, np.int64)
     kern[0](px, py, ang, r2, np.ascontiguousarray(idx, np.int64), cd, sd, up, k)
     return up, k
+
+
+def hull_sym_order(px: np.ndarray, py: np.ndarray, ang: np.ndarray, r2: np.ndarray, idx: np.ndarray,
+                   cd: np.ndarray, sd: np.ndarray, partner: np.ndarray, work: bool = False
+                   ) -> tuple[np.ndarray, np.ndarray] | None:
+    """:func:`hull_sym_rows` followed by :func:`engine.timeparam._hull_sym_assemble` compiled: the hull
+    ``(order, m)`` of :func:`engine.timeparam._hull_sym`, bit for bit; ``partner`` maps every row id to
+    its mirror's.  ``work``: the arrays are the thread's :func:`scratch` arrays (valid until the next
+    such call).  ``None`` when numba is not loaded."""
+    kern = _hull_sym_kernels()
+    if kern is None:
+        return None
+    B, R = px.shape
+    up = scratch("hs_up", (B, max(R, 1)), np.int64) if work else np.empty((B, max(R, 1)), np.int64)
+    k = np.zeros(B, np.int64)
+    kern[0](px, py, ang, r2, np.ascontiguousarray(idx, np.int64), cd, sd, up, k)
+    K = max(int(k.max()), 1) if B else 1
+    order = scratch("hs_order", (B, 2 * K), np.int64) if work else np.empty((B, 2 * K), np.int64)
+    m = np.empty(B, np.int64)
+    kern[2](up, k, np.ascontiguousarray(partner, np.int64), order, m)
+    return order, m
 
 
 _HULL: list[Any] = []
@@ -1236,5 +1364,6 @@ def warm() -> bool:
     return True
 
 
-__all__ = ["IMPORT_THRESHOLD", "SCRATCH_MAX_ELEMENTS", "chains", "dp_pass", "forward_pass", "hulls", "kernel",
-           "hull_sym_prep", "hull_sym_rows", "limit_ratios", "scratch", "warm", "windows"]
+__all__ = ["IMPORT_THRESHOLD", "SCRATCH_MAX_ELEMENTS", "chains", "constraint_rows", "dp_pass", "forward_pass",
+           "hulls", "hull_sym_order", "hull_sym_prep", "hull_sym_rows", "kernel", "limit_ratios", "scratch", "warm",
+           "windows"]

@@ -3,8 +3,10 @@
 The former numpy expressions are kept here as the reference: the quintic's coefficients
 (``np.stack`` of the scaled terms), the constraint rows and the pre-pruned hull rows (stack,
 concatenate, ``rows * keep``), and the limit ratios of a law on the sub-grid (Horner from zero on
-(interval, axis, sub-point) arrays).  The new numpy code and the compiled kernels
-(engine.timeparam_jit, numba) must reproduce them bit for bit, so the laws do not change.
+(interval, axis, sub-point) arrays), the chains' segment slopes (np.diff quotients).  The new numpy
+code and the compiled kernels (engine.timeparam_jit, numba: constraint_rows, limit_ratios, the slopes
+made by chains) must reproduce them bit for bit, so the laws do not change.  parametrize keeps its
+problem's big arrays in the thread's work arrays: laws must not share them.
 """
 
 from __future__ import annotations
@@ -127,19 +129,29 @@ def _cases():
     yield "non-uniform, axis at rest", (s2, X2, dX2, ddX2), replace(lim, levels=60)
 
 
+@pytest.mark.parametrize("compiled", [False, True])
 @pytest.mark.parametrize("name,path,lim", list(_cases()), ids=[c[0] for c in _cases()])
-def test_setup_gives_the_former_bits(name, path, lim) -> None:
+def test_setup_gives_the_former_bits(name, path, lim, compiled, monkeypatch) -> None:
+    """The rows and hull rows by numpy and by the compiled kernel (timeparam_jit.constraint_rows), in
+    fresh arrays and in the thread's work arrays (parametrize's), equal the former construction."""
+    if compiled:
+        pytest.importorskip("numba")
+        from engine import timeparam_jit
+
+        assert timeparam_jit.kernel(1 << 62) is not None
+    monkeypatch.setattr(tp, "_NUMBA", compiled)
     s, X, dX, ddX = path
     d1, d2 = tp._quintic(s, X, dX, ddX)
     r1, r2 = _quintic_ref(s, X, dX, ddX)
     assert _same(d1, r1) and _same(d2, r2)
-    prob = tp._prepare(s, X, dX, ddX, lim, chains=False)
     rows, hull_rows, cap_v = _rows_ref(s, dX, ddX, d1, d2, lim)
-    assert _same(prob.rows, rows)
-    assert _same(prob.hull_rows, hull_rows)
-    assert _same(prob.cap_v, cap_v)
-    assert (np.signbit(prob.hull_rows) == np.signbit(hull_rows)).all()       # signed zeros too
-    assert (prob.hull_rows == 0).sum() > (prob.rows == 0).sum() or lim.accel_check == "arrival"
+    for work in (False, True):
+        prob = tp._prepare(s, X, dX, ddX, lim, chains=False, work=work)
+        assert _same(prob.rows, rows)
+        assert _same(prob.hull_rows, hull_rows)
+        assert _same(prob.cap_v, cap_v)
+        assert (np.signbit(prob.hull_rows) == np.signbit(hull_rows)).all()       # signed zeros too
+        assert (prob.hull_rows == 0).sum() > (prob.rows == 0).sum() or lim.accel_check == "arrival"
 
 
 @pytest.mark.parametrize("compiled", [False, True])
@@ -180,3 +192,38 @@ def test_compiled_limit_ratios_are_used_where_numba_is_loaded() -> None:
     A, V = np.asarray(example_limits().a_max), np.asarray(example_limits().v_max)
     res = timeparam_jit.limit_ratios(prob.d1, prob.d2, prob.h, x0, u, tau, A, V)
     assert res is not None and res == _ratios_ref(prob, v)
+
+
+def test_compiled_chain_slopes_are_numpys_quotients() -> None:
+    """The chains' segment slopes made by the compiled chains (with or without the thread's work arrays)
+    are the quotients the numpy pass computes, np.diff(rk) / np.diff(rq) (and the left chain's)."""
+    pytest.importorskip("numba")
+    from engine import timeparam_jit
+
+    assert timeparam_jit.kernel(1 << 62) is not None
+    for n in (300, 3000):
+        s, X, dX, ddX = example_path(n)
+        prob = tp._prepare(s, X, dX, ddX, replace(example_limits(), levels=100), chains=False)
+        ell = tp._group_length(prob)
+        for work in (False, True):
+            new = tp._with_chains(prob, work=work) if ell is None else tp._coarse_problem(prob, ell, work=work)[0]
+            assert new.chain_slopes is not None
+            with np.errstate(divide="ignore", invalid="ignore"):
+                rs, ls = np.diff(new.rk) / np.diff(new.rq), np.diff(new.lk) / np.diff(new.lq)
+            assert _same(new.chain_slopes[0], rs) and _same(new.chain_slopes[1], ls)
+
+
+def test_laws_do_not_share_the_work_arrays() -> None:
+    """parametrize's problem lives in the thread's work arrays during the call only: a law is not changed
+    by the next solve (of another problem), and solving the same problem again gives the same law."""
+    lim = replace(example_limits(), levels=60)
+    a = tp.parametrize(*example_path(400), lim)
+    snap = (a.s.copy(), a.sdot.copy(), a.t.copy(), [(it.sdot.copy(), it.lower.copy(), it.upper.copy())
+                                                   for it in a.iterations])
+    b = tp.parametrize(*example_path(700), replace(lim, levels=80))
+    assert b.s.size == 700
+    assert _same(a.s, snap[0]) and _same(a.sdot, snap[1]) and _same(a.t, snap[2])
+    for it, (v, lo, hi) in zip(a.iterations, snap[3]):
+        assert _same(it.sdot, v) and _same(it.lower, lo) and _same(it.upper, hi)
+    again = tp.parametrize(*example_path(400), lim)
+    assert _same(again.sdot, a.sdot) and again.total_time_s == a.total_time_s
