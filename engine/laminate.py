@@ -825,6 +825,7 @@ def run_laminate(
     state: State | None = None,
     upto: str = "nc",
     workers: int = 1,
+    pool: Any = None,
 ) -> LaminateResult:
     """Wind every enabled layer of ``job`` in order and join them into one program.
 
@@ -848,6 +849,10 @@ def run_laminate(
         those running).  The result is the same as with ``workers=1``, which runs everything in this
         process, layer after layer.  Ignored (one process) while other threads run (a GUI): a fork
         copies only the calling thread.
+    pool:
+        An :class:`engine.layer_pool.LayerPool`: the layers' pipelines run side by side in its spawned
+        worker processes instead (a process with threads, e.g. the GUI; ``workers`` is then the pool's).
+        The same result again.
     """
     from engine.pipeline import load_machine_for_job, run_pipeline
 
@@ -879,9 +884,11 @@ def run_laminate(
     reused: list[int] = []
     layer_upto = "blocks" if upto == "nc" else upto
     n = len(active)
-    parallel = workers > 1 and _can_fork()
+    if pool is not None:
+        workers = max(2, pool.workers)  # a layer the pool cannot take runs in this process
+    parallel = workers > 1 and (pool is not None or _can_fork())
     slots: list[LayerResult | _Prepared] = []  # parallel: in order, a layer's result or its preparation
-    sched = _Scheduler(jp, layer_upto, workers) if parallel else None
+    sched = _Scheduler(jp, layer_upto, workers, pool) if parallel else None
     if parallel:
         _preload()
         _remove_stale_files()
@@ -1107,8 +1114,9 @@ class _Scheduler:
     (a hoop layer costs less than its fork) or when it is the last one and no child runs.  The answers are
     taken in layer order, so the first failing layer's error is the one raised, as in one process."""
 
-    def __init__(self, jp: str | None, upto: str, workers: int) -> None:
+    def __init__(self, jp: str | None, upto: str, workers: int, pool: Any = None) -> None:
         self.jp, self.upto, self.workers, self.slots_free = jp, upto, workers, max(0, workers - 1)
+        self.pool = pool  # an engine.layer_pool.LayerPool: its workers instead of forked children
         self.queue: list[_Prepared] = []
         self.children: dict[int, _Child] = {}  # by layer index
         self.out: dict[int, Any] = {}
@@ -1141,7 +1149,10 @@ class _Scheduler:
         system refused the fork)."""
         import threading
 
-        if threading.active_count() == 1:
+        if self.pool is not None:
+            if _pool_pipeline(self.pool, self.jp, p, self.upto, lambda c: self.children.__setitem__(p.i, c)):
+                return
+        elif threading.active_count() == 1:
             try:
                 _fork_pipeline(self.jp, p, self.upto, lambda c: self.children.__setitem__(p.i, c))
                 return
@@ -1272,6 +1283,34 @@ def _fork_pipeline(jp: str | None, p: _Prepared, upto: str, register: Callable[[
     return child
 
 
+_POOL_MAX_POINTS = 2_000_000
+"""A layer whose line has more points is wound in the calling process rather than sent to a pool worker:
+pickling its line (~160 bytes a point) would hold the interpreter lock long enough to stall the GUI."""
+
+
+def _pool_pipeline(pool: Any, jp: str | None, p: _Prepared, upto: str, register: Callable[[Any], None]) -> bool:
+    """Send ``p`` to a worker of ``pool`` (:class:`engine.layer_pool.LayerPool`); False when none is free
+    or it could not take the layer (the caller runs it itself)."""
+    import os
+    import secrets
+
+    from engine.layer_pool import PoolChild
+
+    if np.size(p.line.z) > _POOL_MAX_POINTS:
+        return False
+    w = pool.acquire()
+    if w is None:
+        return False
+    tag = f"winder-{os.getpid()}-{p.i}-{secrets.token_hex(6)}"
+    try:
+        child = PoolChild(pool, w, jp, p, upto, [os.path.join(folder, tag) for folder in _answer_folders()])
+    except Exception:  # noqa: BLE001 - the layer would not pickle or the worker died: run it here
+        pool.discard(w)
+        return False
+    register(child)
+    return True
+
+
 def _answer_folders() -> list[str]:
     """Where children write their answers: shared memory first, then the temporary folder (a container's
     /dev/shm is often 64 MB)."""
@@ -1350,6 +1389,20 @@ class _TerminateAsInterrupt:
 
 
 def _pipeline_child(fd: int, jp: str | None, p: _Prepared, upto: str, paths: list[str]) -> None:
+    """A forked child's work: :func:`_pipeline_answer` written to the pipe ``fd``."""
+    import os
+
+    view = memoryview(_pipeline_answer(jp, p, upto, paths))
+    while view:
+        view = view[os.write(fd, view):]
+    os.close(fd)
+
+
+def _pipeline_answer(jp: str | None, p: _Prepared, upto: str, paths: list[str]) -> bytes:
+    """Run the pipeline of ``p``; the answer to send back: its result (line and surface left out: the
+    caller has them), the InputError it raised, or None after another error (the caller runs the layer
+    again and meets it itself), pickled with the arrays' data in the first of ``paths`` that takes them
+    (:func:`_pack`; else everything in the pickle)."""
     import os
     import pickle
 
@@ -1375,10 +1428,7 @@ def _pipeline_child(fd: int, jp: str | None, p: _Prepared, upto: str, paths: lis
                 pass
     if msg is None:  # no file at all: everything through the pipe
         msg = (pickle.dumps(out, protocol=5), None, [])
-    view = memoryview(pickle.dumps(msg, protocol=5))
-    while view:
-        view = view[os.write(fd, view):]
-    os.close(fd)
+    return pickle.dumps(msg, protocol=5)
 
 
 def _pack(obj: Any, path: str) -> tuple[bytes, list[tuple[int, int]]]:

@@ -13,6 +13,9 @@ from pathlib import Path
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 os.environ.setdefault("PYVISTA_OFF_SCREEN", "true")
+# the GUI's layers run one after the other in the test process (tests patch engine functions and count on
+# them); tests/test_gui_layer_pool.py turns the GUI's worker processes on
+os.environ.setdefault("WINDER_GUI_POOL", "0")
 
 import pytest  # noqa: E402
 from hypothesis import settings  # noqa: E402

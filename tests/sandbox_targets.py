@@ -26,3 +26,10 @@ def hog(*_args: Any) -> bytes:
 def echo(*args: Any) -> tuple[Any, ...]:
     """Returns its arguments."""
     return args
+
+
+def dies_at_start(*_args: Any) -> None:
+    """A layer-pool worker that ends before it is ready (a broken install)."""
+    import os
+
+    os._exit(3)

@@ -157,8 +157,10 @@ def laminate_task(job: Job, job_path: Path | None, previous: Any, upto: str = "n
 
     prev = previous if is_laminate(previous) else None
     names = [layer_name(lay, i) for i, lay in job.active_layers]
+    from winder_gui.tasks import gui_layer_pool
+
     res = run_laminate(job, job_path, previous=prev, state=LayerProgress(SubState(state, 0.0, 0.9), names),
-                       upto=upto)
+                       upto=upto, pool=gui_layer_pool())
     check_cancel(state)
     from engine.periodic import materialise_all
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import threading
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -342,6 +343,33 @@ ENGINE_MODULES: tuple[str, ...] = (
 )
 
 
+_POOL: list[Any] = []   # the process's LayerPool (or None), made once
+_POOL_LOCK = threading.Lock()
+
+
+def gui_layer_pool() -> Any:
+    """The GUI process's :class:`engine.layer_pool.LayerPool` for a laminate's layers (their pipelines run
+    side by side in its worker processes: this process has threads and must not fork), or None: one CPU,
+    ``WINDER_JOBS=1``, ``WINDER_GUI_POOL=0``, or no process could be made.  Made on first use, kept for
+    the session, stopped at exit."""
+    import os
+
+    with _POOL_LOCK:
+        if not _POOL:
+            pool = None
+            if os.environ.get("WINDER_GUI_POOL", "1").strip() != "0":
+                try:
+                    from engine.laminate import default_workers
+                    from engine.layer_pool import LayerPool
+
+                    n = default_workers()
+                    pool = LayerPool(n) if n > 1 else None
+                except Exception:  # noqa: BLE001 - no pool: the layers run one after the other here
+                    pool = None
+            _POOL.append(pool)
+        return _POOL[0]
+
+
 def warm_engine_imports() -> None:
     """Import the engine's heavy modules ahead of the first run (call from a background thread).
 
@@ -361,3 +389,6 @@ def warm_engine_imports() -> None:
         timeparam_jit.warm()
     except Exception:  # noqa: BLE001 - without numba the numpy passes run
         pass
+    pool = gui_layer_pool()
+    if pool is not None:  # its workers start (and import the engine) before the first run needs them
+        pool.warm()

@@ -1,0 +1,92 @@
+"""The GUI winds a laminate's layers side by side in its LayerPool's worker processes (engine.layer_pool):
+the program it shows and exports is the one process's (the CLI's with one process), and a cancel leaves
+no worker computing."""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import pytest
+from gui_helpers import close_window, shown_window
+
+import engine.laminate as lam
+from engine.job import load_job
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "resources" / "examples"
+
+
+@pytest.fixture
+def pooled(monkeypatch: pytest.MonkeyPatch):
+    """The GUI's pool turned on (the suite turns it off, tests/conftest.py), with two workers."""
+    from winder_gui import tasks
+
+    monkeypatch.setenv("WINDER_GUI_POOL", "1")
+    monkeypatch.setenv("WINDER_JOBS", "2")
+    monkeypatch.setattr(tasks, "_POOL", [])
+    pool = tasks.gui_layer_pool()
+    assert pool is not None and pool.workers == 2
+    pool.warm()
+    yield pool
+    pool.close()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+        return Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z"
+    except (ProcessLookupError, OSError):
+        return False
+
+
+def test_gui_run_uses_the_pool_and_exports_the_one_process_program(qtbot, tmp_path, pooled,
+                                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    path = EXAMPLES / "pressure_vessel.toml"
+    one = lam.run_laminate(load_job(path), str(path), workers=1)
+    sent: list[int] = []
+    orig = lam._pool_pipeline
+
+    def logged(pool, jp, p, upto, register):  # noqa: ANN001, ANN202
+        ok = orig(pool, jp, p, upto, register)
+        if ok:
+            sent.append(p.i)
+        return ok
+
+    monkeypatch.setattr(lam, "_pool_pipeline", logged)
+    w = shown_window(qtbot, path)
+    try:
+        w.auto_run = False
+        assert w.run_pipeline_now()
+        assert w.wait_idle(180000) and w.last_error == "", w.last_error
+        assert sorted(sent) == [0, 2], sent          # the polar and the helical layer, in the workers
+        out = tmp_path / "v.ngc"
+        assert w.export_nc(out) and w.wait_idle()
+        assert out.read_text() == one.nc_text          # what is exported is the one-process program
+    finally:
+        close_window(w)
+
+
+def test_gui_cancel_stops_the_pool_workers(qtbot, pooled, monkeypatch: pytest.MonkeyPatch) -> None:
+    path = EXAMPLES / "pressure_vessel.toml"
+    busy: list[int] = []
+    orig = lam._pool_pipeline
+
+    def logged(pool, jp, p, upto, register):  # noqa: ANN001, ANN202
+        return orig(pool, jp, p, upto, lambda c: (busy.append(c.pid), register(c)))
+
+    monkeypatch.setattr(lam, "_pool_pipeline", logged)
+    w = shown_window(qtbot, path)
+    try:
+        w.auto_run = False
+        assert w.run_pipeline_now()
+        qtbot.waitUntil(lambda: bool(busy), timeout=60000)
+        w.cancel_run()
+        assert w.wait_idle(180000)
+        assert w.result is None
+        deadline = time.monotonic() + 10
+        while any(_alive(pid) for pid in busy) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not any(_alive(pid) for pid in busy)   # the workers computing were stopped at once
+    finally:
+        close_window(w)
