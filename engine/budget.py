@@ -16,7 +16,10 @@ environment variable ``WINDER_MAX_MEMORY`` or, in the desktop application, Setti
 
 Stage estimates (measured, see ``benchmarks/bench_budget.py``): the whole pipeline keeps about
 :data:`BYTES_PER_LINE_POINT` bytes per point of the winding line (line, eye path, axes, blocks, time
-law and NC text together); the fixed cost of the interpreter and libraries is not counted.
+law and NC text together); the fixed cost of the interpreter and libraries is not counted.  A program
+of :data:`REPLICATED_MIN_CIRCUITS` circuits or more keeps its per-point arrays as circuit 0 + rule and
+needs :data:`BYTES_PER_REPLICATED_POINT` (``benchmarks/bench_big_variety.py``), unless the process
+materialises its results (the desktop application, :func:`set_results_materialised`).
 
 Other stages call :func:`check` with their own :class:`Estimate` (``count`` items × ``bytes_each``),
 so new layer kinds use the same mechanism::
@@ -47,6 +50,18 @@ BYTES_PER_LINE_POINT = 1000
 """Memory the pipeline keeps per point of the winding line, all stages together (bytes; measured
 about 700 on the example vessel with the tube time law, rounded up)."""
 
+BYTES_PER_REPLICATED_POINT = 250
+"""The same for a program of at least :data:`engine.periodic.DEFER_MIN_CIRCUITS` circuits, whose line,
+eye path and axis path are kept as circuit 0 + rule (issue 16): measured 110–140 bytes per point at the
+peak of ``winder run`` on 400 x 8 000 jobs (``benchmarks/bench_big_variety.py``: helical, polar and
+non-geodesic layers, the pipe, the bottle, a laminate; the interpreter included), rounded up so that a
+laminate's worker and the parent holding its result fit too.  Not used where the results are
+materialised (:func:`set_results_materialised`: the desktop application's views read whole arrays)."""
+
+REPLICATED_MIN_CIRCUITS = 100
+"""Circuits (of all repeats of a line together) from which the line is kept as circuit 0 + rule
+(= :data:`engine.periodic.DEFER_MIN_CIRCUITS`; a test keeps them equal)."""
+
 FIBRE_DIAMETER_MM = 0.005
 """The thinnest reinforcing fibre (carbon, about 5 µm): no band is narrower, no band thinner, and
 neighbouring circuits of a pattern are never closer (mm)."""
@@ -63,6 +78,32 @@ MAX_RADIUS_MM = 1e5
 
 _ENV = "WINDER_MAX_MEMORY"
 _override: int | None = None
+_materialised = False
+
+
+def set_results_materialised(flag: bool) -> None:
+    """Say whether this process materialises every per-point array of a result (the desktop application
+    does, for its views): a big program then needs :data:`BYTES_PER_LINE_POINT` per point, not
+    :data:`BYTES_PER_REPLICATED_POINT`."""
+    global _materialised
+    _materialised = bool(flag)
+
+
+def line_point_bytes(circuits: int, per_circuit: int, circuits_known: bool = True) -> float:
+    """Memory estimate (bytes) of a line of ``circuits`` circuits (all repeats together) of ``per_circuit``
+    points each, through the whole pipeline.  From :data:`REPLICATED_MIN_CIRCUITS` circuits on the
+    arrays are kept as circuit 0 + rule (:data:`BYTES_PER_REPLICATED_POINT`), unless this process
+    materialises its results.  ``circuits_known`` False: ``circuits`` is only an upper bound (the
+    circuits follow from the coverage), so a line of fewer circuits, just below the threshold and
+    materialised, is covered too."""
+    count = float(circuits) * float(per_circuit)
+    if _materialised or circuits < REPLICATED_MIN_CIRCUITS:
+        return count * BYTES_PER_LINE_POINT
+    rep = count * BYTES_PER_REPLICATED_POINT
+    if circuits_known:
+        return rep
+    below = float(REPLICATED_MIN_CIRCUITS - 1) * float(per_circuit) * BYTES_PER_LINE_POINT
+    return max(rep, min(count * BYTES_PER_LINE_POINT, below))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -225,7 +266,9 @@ def check_winding_spec(spec: Any, r_max_mm: float, band_width_mm: float, thickne
         fld = "winding.layers"
     per_circuit = 2 * int(spec.points_per_pass) + sum(dwell_points(float(d) + 180.0) for d in spec.dwell_deg)
     count = float(per_layer) * float(layers) * float(per_circuit)
-    est = Estimate("winding-line points", count, BYTES_PER_LINE_POINT, field=fld,
+    known = spec.circuits is not None or spec.pattern_p is not None
+    each = line_point_bytes(per_layer * layers, per_circuit, known) / max(count, 1.0)
+    est = Estimate("winding-line points", count, each, field=fld,
                    detail=f"{why} × {layers} layer{'s' * (layers != 1)} × about {per_circuit} points a circuit")
     check(est, file=file)
     return est
@@ -333,6 +376,7 @@ def check_laminate(job: Any, mandrel: Any, *, file: str | Path | None = None) ->
     r_max = float(mandrel.r_max)
     length = float(mandrel.z_max - mandrel.z_min)
     total = 0.0
+    total_bytes = 0.0
     worst: tuple[float, str | None] = (-1.0, None)
     for i, layer in job.active_layers:
         if isinstance(layer, SkipLayer):
@@ -383,10 +427,11 @@ def check_laminate(job: Any, mandrel: Any, *, file: str | Path | None = None) ->
                                  field=where(f) if f else None) from None
             est = Estimate(est.what, est.count, est.bytes_each, field=where(est.field or ""), detail=est.detail)
         total += est.count
+        total_bytes += est.bytes
         if est.count > worst[0]:
             worst = (est.count, est.field)
-    est = Estimate("points in all layers", total, BYTES_PER_LINE_POINT, field=worst[1] or "layer",
-                   detail="the layers' results are kept together")
+    est = Estimate("points in all layers", total, total_bytes / total if total > 0 else BYTES_PER_LINE_POINT,
+                   field=worst[1] or "layer", detail="the layers' results are kept together")
     check(est, file=file)
     return est
 

@@ -291,13 +291,48 @@ def _smooth(m: FloatArray, y: FloatArray, width: float) -> FloatArray:
 
 def dwell_length(line: Any, side: int) -> float:
     """Laid length (mm) of the dwell arcs at the left (0) or right (1) end of ``line`` over all circuits."""
+    zt = line.z_turn[side]
+    tol = 1e-6 * max(1.0, abs(zt))
+    if _kept_as_rule(line):  # a big program: piece by piece, the same numbers summed in the same order
+        from engine.periodic import deferred, field_rows, row_chunks
+
+        dw = deferred(line, "dwell")
+        if dw is not None and dw.kind == "tile" and dw.patch_rows is None and not np.any(dw.base):
+            return 0.0
+        parts = []
+        for a, b in row_chunks(line.n_points):
+            ds = np.diff(field_rows(line, "s", a, b))
+            at = np.abs(field_rows(line, "z", a, b)[1:] - zt) <= tol
+            parts.append(ds[field_rows(line, "dwell", a, b)[1:] & at])
+        return float(np.concatenate(parts).sum())
     if not line.dwell.any():
         return 0.0
     ds = np.diff(line.s)
     on = line.dwell[1:]
-    zt = line.z_turn[side]
-    at = np.abs(line.z[1:] - zt) <= 1e-6 * max(1.0, abs(zt))
+    at = np.abs(line.z[1:] - zt) <= tol
     return float(ds[on & at].sum())
+
+
+def _kept_as_rule(line: Any) -> bool:
+    """True for a line whose per-point arrays are kept as circuit 0 + rule (a program of at least
+    :data:`engine.periodic.DEFER_MIN_CIRCUITS` circuits): read it piece by piece, do not materialise it."""
+    from engine.periodic import CircuitArray
+
+    return hasattr(line, "n_points") and any(isinstance(v, CircuitArray) for v in vars(line).values())
+
+
+def _pass_fields(line: Any, pass_no: int, names: tuple[str, ...]) -> tuple[Any, ...]:
+    """``pass_id`` and the fields ``names`` of ``line``, only circuit 0's rows (and the closing one) when
+    every point of pass ``pass_no`` lies there (a line kept as circuit 0 + rule, passes numbered on
+    circuit by circuit), else the whole arrays.  Selecting pass ``pass_no`` gives the same points either way."""
+    from engine.periodic import deferred, field_rows
+
+    d = deferred(line, "pass_id")
+    if d is not None and d.kind == "shift" and d.patch_rows is None and float(d.step) > 0 and \
+            pass_no < int(np.min(d.base)) + float(d.step):  # circuit k >= 1 holds passes >= min + k·step
+        m = int(d.m)
+        return tuple(field_rows(line, f, 0, m + 1) for f in ("pass_id", *names))
+    return tuple(getattr(line, f) for f in ("pass_id", *names))
 
 
 def off_part_length(line: Any) -> float:
@@ -342,8 +377,9 @@ def layer_thickness(surface: Any, line: Any, band_width: float, band_thickness: 
         A = passes * 2.0 * math.pi * r * tb * cover * g
     else:
         # centre line's Clairaut function C(z) on its outgoing pass (circuit 0, pass 0, no dwell)
-        sel = (line.pass_id == 0) & ~line.dwell
-        zc, Cc = line.z[sel], line.C[sel]
+        pid, dw, zl, Cl = _pass_fields(line, 0, ("dwell", "z", "C"))
+        sel = (pid == 0) & ~dw
+        zc, Cc = zl[sel], Cl[sel]
         order = np.argsort(zc)
         zc, Cc = zc[order], Cc[order]
         # fibres of the band with C below the centre's turn beyond the centre's turning parallel (toward the
@@ -1003,8 +1039,10 @@ def _can_fork() -> bool:
 
 def _pipeline_cost(p: _Prepared) -> float:
     """A layer's pipeline cost in arbitrary units: its line points, a hoop's much cheaper per point."""
+    from engine.periodic import raw_field
+
     w = 0.1 if isinstance(p.layer, HoopLayer) else 1.0
-    return w * float(np.size(p.line.z))
+    return w * float(len(raw_field(p.line, "z")))  # (a big line's z is not materialised to count it)
 
 
 _PIPELINE_MODULES = ("engine.payout", "engine.kinematics", "engine.blocks", "engine.timeparam",
@@ -1585,20 +1623,13 @@ def _figures(job: Job, i: int, name: str, layer: Any, ljob: Job, surface: Any, l
     zc = 0.5 * (za + zb)
     rc = float(surface.r(zc))
     # angle on the cylinder middle: from the outgoing pass
-    sel = (line.pass_id == line.pass_id[0]) & ~line.dwell
-    beta_c = float(np.interp(zc, *_sorted(line.z[sel], line.beta[sel])))
-    # laid volume: band length at mid-thickness (circumferential stretch (r + t n_r/2)/r) × b × t_b
-    t_line = np.interp(line.z, th.z, th.t)
-    nr_line = np.interp(line.z, th.z, th.nr)
-    stretch = 1.0 + 0.5 * t_line * nr_line * np.sin(line.beta) ** 2 / np.maximum(line.r, 1e-300)
-    ds = np.diff(line.s)
-    on_part = np.ones(ds.size, dtype=bool)
-    if layer.kind != "hoop":
-        for side in (0, 1):
-            if line.end_kinds[side] == "open":
-                zt = line.z_turn[side]
-                on_part &= ~(line.dwell[1:] & (np.abs(line.z[1:] - zt) <= 1e-6 * max(1.0, abs(zt))))
-    length_mid = float(np.sum((ds * 0.5 * (stretch[1:] + stretch[:-1]))[on_part]))
+    from engine.periodic import field_rows
+
+    p0 = int(field_rows(line, "pass_id", 0, 1)[0])
+    pid, dw, zl, bl = _pass_fields(line, p0, ("dwell", "z", "beta"))
+    sel = (pid == p0) & ~dw
+    beta_c = float(np.interp(zc, *_sorted(zl[sel], bl[sel])))
+    length_mid = _length_mid(line, th, layer.kind)
     vol = length_mid * b * tb
     mat = find_material(band.material)
     tows = layer.band.tows if layer.band.tows is not None else getattr(job.band, "tows", None)
@@ -1626,11 +1657,52 @@ def _figures(job: Job, i: int, name: str, layer: Any, ljob: Job, surface: Any, l
         "radius_cyl_mm": rc, "coverage": coverage,
         "thickness_cyl_mm": float(th.at(zc)), "thickness_max_mm": float(th.t.max()),
         "thickness_pole_mm": _pole_thickness(th, b),
-        "time_s": time_s, "fibre_length_m": float(line.s[-1]) * 1e-3,
+        "time_s": time_s, "fibre_length_m": float(field_rows(line, "s", line.n_points - 1, line.n_points)[0]) * 1e-3,
         "fibre_mass_kg": mass_f, "resin_mass_kg": mass_r, "material": mat.name,
         "volume_laid_mm3": vol, "volume_between_mm3": th.volume_mm3,
         "pole_radii_after_mm": None,
     }
+
+
+def _length_mid(line: Any, th: Thickness, kind: str) -> float:
+    """Laid band length at mid-thickness (mm): the line's length with each step stretched circumferentially
+    by (r + t n_r/2)/r (t, n_r of the layer's thickness ``th`` where the step lies), dwell arcs on pins
+    beyond an open end (off the part) left out.  A line kept as circuit 0 + rule (a big program) is
+    read piece by piece (:func:`engine.periodic.row_chunks`; the stretch of a repeating circuit made
+    once): the same numbers, summed in the same order."""
+
+    def stretch_of(z: FloatArray, beta: FloatArray, r: FloatArray) -> FloatArray:
+        t_line = np.interp(z, th.z, th.t)
+        nr_line = np.interp(z, th.z, th.nr)
+        return 1.0 + 0.5 * t_line * nr_line * np.sin(beta) ** 2 / np.maximum(r, 1e-300)
+
+    open_ends = [line.z_turn[side] for side in (0, 1) if kind != "hoop" and line.end_kinds[side] == "open"]
+
+    def steps(s: FloatArray, stretch: FloatArray, dwell: Any, z: Any) -> FloatArray:
+        ds = np.diff(s)
+        on_part = np.ones(ds.size, dtype=bool)
+        for zt in open_ends:
+            on_part &= ~(dwell()[1:] & (np.abs(z()[1:] - zt) <= 1e-6 * max(1.0, abs(zt))))
+        return (ds * 0.5 * (stretch[1:] + stretch[:-1]))[on_part]
+
+    if not _kept_as_rule(line):
+        return float(np.sum(steps(line.s, stretch_of(line.z, line.beta, line.r), lambda: line.dwell,
+                                  lambda: line.z)))
+    from engine.periodic import field_rows, row_chunks, tile_base, tile_rows
+
+    n = line.n_points
+    bases = [tile_base(line, f) for f in ("z", "beta", "r")]
+    m = int(line.points_per_circuit)
+    st0 = stretch_of(*bases) if all(b_ is not None and b_.shape[0] == m + 1 for b_ in bases) else None
+    parts = []
+    for a, b in row_chunks(n):
+        if st0 is not None:
+            st = tile_rows(st0, m, n, a, b)
+        else:
+            st = stretch_of(field_rows(line, "z", a, b), field_rows(line, "beta", a, b), field_rows(line, "r", a, b))
+        parts.append(steps(field_rows(line, "s", a, b), st, lambda a=a, b=b: field_rows(line, "dwell", a, b),
+                           lambda a=a, b=b: field_rows(line, "z", a, b)))
+    return float(np.sum(np.concatenate(parts)))
 
 
 def _pole_thickness(th: Thickness, b: float) -> list[float]:

@@ -2402,7 +2402,7 @@ def _extend_replicated(eye: EyePath, line: Any) -> EyePath | None:
     if one.index.size != m + 1:      # zero-length steps dropped: evaluate point by point
         return None
 
-    from engine.periodic import CircuitArray, field_rows, raw_field
+    from engine.periodic import CircuitArray, field_rows, raw_field_or
 
     # the eye path's per-point arrays are kept as circuit 0 + rule (engine.periodic.CircuitArray, the
     # arithmetic of the arrays made before: bit for bit) and materialised on first read
@@ -2418,7 +2418,7 @@ def _extend_replicated(eye: EyePath, line: Any) -> EyePath | None:
 
     # the line's own points are circuit 0's turned by the same k·Δv with the same arithmetic
     # (engine.winding._assemble): where they match bit for bit the eye path shares the line's array
-    xyz = raw_field(line, "xyz") if hasattr(line, "xyz") else None
+    xyz = raw_field_or(line, "xyz")   # (hasattr would materialise it)
     contact: Any = None
     if xyz is not None:
         c0 = one.contact_xyz

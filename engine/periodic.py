@@ -32,6 +32,9 @@ DEFER_MIN_CIRCUITS = 100
 #: relative tolerance of the periodicity check of the axis path (of 1 + the axis' largest |value|)
 PERIODIC_RTOL = 1e-9
 
+#: rows per piece where a whole per-point field is reduced piece by piece (:func:`row_chunks`)
+CHUNK_ROWS = 1 << 19
+
 #: the short path: this many circuits (circuit 0 may differ from the others by its start; 1 and 2 are compared)
 _SHORT_CIRCUITS = 3
 
@@ -389,6 +392,13 @@ def raw_field(obj: Any, name: str) -> Any:
     return v if isinstance(v, CircuitArray) else getattr(obj, name)
 
 
+def raw_field_or(obj: Any, name: str, default: Any = None) -> Any:
+    """:func:`raw_field`, or ``default`` when ``obj`` has no field ``name`` (``hasattr`` would materialise a
+    deferred field to answer)."""
+    v = getattr(obj, "__dict__", {}).get(name)
+    return v if isinstance(v, CircuitArray) else getattr(obj, name, default)
+
+
 def field_take(obj: Any, name: str, idx: np.ndarray) -> np.ndarray:
     """Rows ``idx`` of the per-point field ``name`` of ``obj``, without materialising it."""
     d = deferred(obj, name)
@@ -407,6 +417,39 @@ def field_rows(obj: Any, name: str, start: int, stop: int) -> np.ndarray:
     """Rows ``start .. stop-1`` of the per-point field ``name`` of ``obj``, without materialising it."""
     d = deferred(obj, name)
     return getattr(obj, name)[start:stop] if d is None else d.rows(start, stop)
+
+
+def row_chunks(n: int, chunk: int = CHUNK_ROWS) -> list[tuple[int, int]]:
+    """Row ranges ``[a, b)`` covering rows ``0 .. n-1`` in pieces of at most ``chunk`` rows, each piece
+    starting at the last row of the one before (so the differences of consecutive rows, ``np.diff``, are
+    taken exactly once, piece by piece)."""
+    chunk = max(int(chunk), 2)
+    out = []
+    a = 0
+    while True:
+        b = min(a + chunk, n)
+        out.append((a, b))
+        if b >= n:
+            return out
+        a = b - 1
+
+
+def tile_base(obj: Any, name: str) -> np.ndarray | None:
+    """Circuit 0's rows (``m + 1``, the closing point last) of field ``name`` of ``obj`` when it is kept
+    as a ``"tile"`` :class:`CircuitArray` without patched rows (every circuit repeats circuit 0), else None."""
+    d = deferred(obj, name)
+    if d is None or d.kind != "tile" or d.patch_rows is not None:
+        return None
+    return np.asarray(d.base)[:d.m + 1]
+
+
+def tile_rows(base: np.ndarray, m: int, n: int, start: int, stop: int) -> np.ndarray:
+    """Rows ``start .. stop-1`` of the ``n``-row tiled array whose circuit 0 is ``base`` (``m + 1`` rows): row
+    i is ``base[i mod m]``, the last row ``base[m]`` (:meth:`CircuitArray.rows` of a ``"tile"`` array)."""
+    i = np.arange(start, stop)
+    j = i % m
+    j[i == n - 1] = m
+    return base[j]
 
 
 def materialise_all(obj: Any) -> Any:

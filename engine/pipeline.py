@@ -740,11 +740,11 @@ def _periodic_pieces(res: PipelineResult) -> list[tuple[int, int]] | None:
     """The circuits of an axis path replicated by :func:`engine.periodic.replicate_axes` (circuits 1 ..
     n-1 are circuit 1 with the mandrel advanced by a constant: nothing to check point by point), when the
     eye path maps line points to path points one to one; else None."""
-    from engine.periodic import circuit_pieces, field_rows, raw_field
+    from engine.periodic import circuit_pieces, field_rows, raw_field_or
 
     if res.axes is None or res.eye is None or getattr(res.axes, "circuits", None) is None:
         return None
-    idx = raw_field(res.eye, "index") if hasattr(res.eye, "index") else None
+    idx = raw_field_or(res.eye, "index")
     n = np.shape(res.axes.q)[0]
     if (idx is None or len(idx) != n or int(field_rows(res.eye, "index", 0, 1)[0]) != 0
             or int(field_rows(res.eye, "index", n - 1, n)[0]) != n - 1):

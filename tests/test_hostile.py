@@ -99,7 +99,9 @@ def test_absurd_jobs_are_refused_before_work_naming_file_line_field(tmp_path, ca
 
 
 def test_memory_budget_names_the_estimate_and_can_be_raised(tmp_path, capsys) -> None:
-    job = _job(tmp_path, PIPE.replace("points_per_pass = 100", "points_per_pass = 100\ncircuits = 400"))
+    # (400 circuits are kept as circuit 0 + rule, engine.budget.BYTES_PER_REPLICATED_POINT: 1 000 points a
+    # pass make it ~200 MB)
+    job = _job(tmp_path, PIPE.replace("points_per_pass = 100", "points_per_pass = 1000\ncircuits = 400"))
     rc, _, err = _cli(capsys, "trajectory", str(job), "--json", "--max-memory", "64M")
     assert rc == 2 and "field 'winding.circuits'" in err and "64 MB" in err and "--max-memory" in err
     assert re.search(r"about [\d,]+ winding-line points", err)

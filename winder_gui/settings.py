@@ -56,6 +56,7 @@ def apply_memory_budget() -> int:
     from engine import budget
     from engine.errors import InputError
 
+    budget.set_results_materialised(True)  # the views read whole arrays: a big program is materialised here
     text = str(app_settings().value(MEMORY_KEY, "") or "")
     try:
         budget.set_max_memory(budget.parse_size(text) if text else None)

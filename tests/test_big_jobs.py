@@ -1,0 +1,161 @@
+"""Big programs on any job (issue 16, target 2): what a 400 x 8 000 job needs, checked on scaled-down
+programs of just over DEFER_MIN_CIRCUITS circuits (the big cases themselves are in
+benchmarks/bench_big_variety.py):
+
+* the laminate's per-layer figures (thickness, dwell lengths, laid length, the angle on the cylinder)
+  read a line kept as circuit 0 + rule piece by piece, never materialising it, with the same numbers
+  bit for bit as on the materialised line;
+* the payout and blocks stages do not materialise the line's points or the eye path's index to test
+  whether they exist;
+* the memory budget's default accepts the target's job (it refused it: 6 GB estimated for ~1 GB used)
+  and still refuses what does not fit.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from engine import budget
+from engine.errors import InputError
+from engine.job import build_mandrel, load_job
+from engine.periodic import DEFER_MIN_CIRCUITS, CircuitArray, deferred, row_chunks, tile_rows
+from engine.winding import PER_POINT_FIELDS, winding_line_for_job
+
+ROOT = Path(__file__).resolve().parents[1]
+EX = ROOT / "resources" / "examples"
+
+
+def _line(name: str, points: int = 60):
+    path = EX / f"{name}.toml"
+    job = load_job(path)
+    win = {**job.winding.model_dump(), "circuits": DEFER_MIN_CIRCUITS + 3, "points_per_pass": points}
+    if name == "pressure_vessel":   # a geodesic at 40 deg: dwell arcs on its turnaround parallels (the pipe: pins)
+        win.update(mode="geodesic", angles=[{"z_mm": 150.0, "angle_deg": 40.0}], dwell_deg=(30.0, 45.0))
+    job = job.replace(winding=win)
+    return job, build_mandrel(job, path), winding_line_for_job(job, path)
+
+
+def _kept(line) -> list[str]:
+    """The per-point fields still kept as circuit 0 + rule, none of them made whole."""
+    return [f for f in PER_POINT_FIELDS
+            if isinstance(vars(line).get(f), CircuitArray) and vars(line)[f]._full is None]
+
+
+def test_row_chunks_cover_every_step_once() -> None:
+    for n, chunk in ((1, 4), (2, 2), (10, 3), (10, 10), (11, 10), (1000, 7)):
+        ch = row_chunks(n, chunk)
+        assert ch[0][0] == 0 and ch[-1][1] == n
+        assert all(b - a <= max(chunk, 2) for a, b in ch)
+        steps = np.concatenate([np.arange(a, b - 1) for a, b in ch])   # step i = rows i, i+1
+        assert np.array_equal(steps, np.arange(n - 1))
+    base = np.arange(6.0) * 10   # m = 5 and the closing row
+    full = np.concatenate([np.tile(base[:5], 3), base[5:]])
+    assert np.array_equal(tile_rows(base, 5, 16, 0, 16), full)
+    assert np.array_equal(tile_rows(base, 5, 16, 4, 12), full[4:12])
+
+
+@pytest.mark.parametrize("name", ["pressure_vessel", "pipe"])
+def test_layer_figures_of_a_big_line_equal_the_materialised_line(name: str) -> None:
+    """layer_thickness, dwell_length (both ends), the laid length at mid-thickness and the layer's figures
+    on a 103-circuit line kept as circuit 0 + rule: nothing materialised, bit for bit the numbers of the
+    same line made whole (the vessel: dwell arcs on the domes; the pipe: turns on pins beyond open ends,
+    left out of the laid length)."""
+    from engine.laminate import _figures, _length_mid, dwell_length, layer_thickness
+
+    job, mandrel, line = _line(name)
+    assert len(_kept(line)) == len(PER_POINT_FIELDS)
+    b, tb = job.band.width_mm, job.band.thickness_mm
+    th = layer_thickness(mandrel, line, b, tb, "helical")
+    dw = [dwell_length(line, side) for side in (0, 1)]
+    mid = _length_mid(line, th, "helical")
+    figs = _figures(job, 0, "h", job.layers[0], job, mandrel, line, th, None)
+    assert len(_kept(line)) == len(PER_POINT_FIELDS), "a big line must be read without materialising it"
+
+    whole = replace(line)   # every field read: plain arrays
+    assert not any(isinstance(vars(whole)[f], CircuitArray) for f in PER_POINT_FIELDS)
+    th_w = layer_thickness(mandrel, whole, b, tb, "helical")
+    for f in ("m", "z", "r", "t", "z_out", "r_out"):
+        assert np.array_equal(getattr(th, f), getattr(th_w, f)), f
+    assert th.volume_mm3 == th_w.volume_mm3
+    assert dw == [dwell_length(whole, side) for side in (0, 1)] and max(dw) > 0
+    assert mid == _length_mid(whole, th_w, "helical")
+    assert figs == _figures(job, 0, "h", job.layers[0], job, mandrel, whole, th_w, None)
+    # and against an independent sum: the steps' lengths, stretched, without the open ends' pins
+    s = np.asarray(whole.s)
+    laid = float(s[-1] - s[0]) - (sum(dw) if name == "pipe" else 0.0)  # the pins' arcs are not on the part
+    assert laid <= mid <= 1.02 * laid   # stretched by (r + t n_r/2)/r >= 1 on these convex parts
+    assert figs["fibre_length_m"] == float(s[-1]) * 1e-3
+
+
+def test_pipeline_keeps_a_big_line_as_rules() -> None:
+    """The payout stage finds the line's points without materialising them (hasattr did: 147 MB on the
+    400 x 8 000 job) and the blocks stage the eye path's index (49 MB); the laminate's figures likewise."""
+    from engine.laminate import run_laminate
+
+    path = EX / "pressure_vessel.toml"
+    job = load_job(path)
+    helical = next(lay for lay in job.layers if lay.kind == "helical")
+    job = job.replace(layers=[helical.model_copy(update={"circuits": DEFER_MIN_CIRCUITS + 2,
+                                                         "points_per_pass": 60})],
+                      payout={**job.payout.model_dump(), "grid_points": 200})
+    res = run_laminate(job, path, upto="blocks", workers=1)
+    r = res.layers[0].result
+    assert r.eye.report.get("replicated_circuits") == DEFER_MIN_CIRCUITS + 2
+    assert deferred(r.line, "xyz") is not None and deferred(r.eye, "index") is not None
+    # the line's s is the eye's x (read whole by the blocks stage); the rest stays rules
+    assert set(_kept(r.line)) >= set(PER_POINT_FIELDS) - {"s", "v"}
+
+
+def _spec(circuits: int | None, points: int, **kw):
+    from engine.job import WindingSpec
+
+    return WindingSpec(circuits=circuits, points_per_pass=points, **kw)
+
+
+def test_default_budget_accepts_the_target_job_and_refuses_what_does_not_fit() -> None:
+    """400 circuits x 8 000 points per pass (issue 16's target, ~1 GB measured) fits the default 4 GB
+    budget; it was refused (6 GB estimated at the materialised 1 000 bytes per point).  The same job
+    with results materialised (the desktop application) is still refused, and so are a small budget and
+    a job too big for the replicated estimate."""
+    assert budget.REPLICATED_MIN_CIRCUITS == DEFER_MIN_CIRCUITS
+    assert budget.max_memory_bytes() == budget.DEFAULT_MAX_MEMORY_BYTES
+    est = budget.check_winding_spec(_spec(400, 8000), 100.0, 8.0)
+    assert est.bytes <= 2 * 2**30 and est.count > 6.4e6
+    try:
+        budget.set_results_materialised(True)
+        with pytest.raises(InputError, match="memory budget"):
+            budget.check_winding_spec(_spec(400, 8000), 100.0, 8.0)
+    finally:
+        budget.set_results_materialised(False)
+    budget.set_max_memory(512 * 2**20)
+    try:
+        with pytest.raises(InputError, match="winding.circuits"):
+            budget.check_winding_spec(_spec(400, 8000), 100.0, 8.0)
+    finally:
+        budget.set_max_memory(None)
+    with pytest.raises(InputError, match="memory budget"):
+        budget.check_winding_spec(_spec(4000, 8000), 100.0, 8.0)   # 64 M points: ~16 GB even as rules
+    # below the threshold the materialised figure holds: 99 circuits cost more than 100
+    small = budget.check_winding_spec(_spec(99, 8000), 100.0, 8.0).bytes
+    big = budget.check_winding_spec(_spec(100, 8000), 100.0, 8.0).bytes
+    assert small > 3 * big
+    # circuits from the coverage are an upper bound: a line of fewer circuits, materialised, is covered
+    cov = budget.check_winding_spec(_spec(None, 8000), 100.0, 2.0)   # up to 315 circuits
+    assert cov.bytes >= 99 * 16_000 * budget.BYTES_PER_LINE_POINT * 0.99
+    assert cov.count == pytest.approx(math.ceil(2 * math.pi * 100 / 2.0) * (2 * 8000 + 2 * 90))
+
+
+def test_default_budget_accepts_a_big_laminate_layer(tmp_path: Path) -> None:
+    """check_laminate (every layer and their sum) accepts a hoop + helical 400 x 8 000 laminate at the
+    default budget; the sum of the layers uses each layer's own estimate."""
+    path = EX / "pressure_vessel.toml"
+    job = load_job(path)
+    hoop, helical = (next(lay for lay in job.layers if lay.kind == k) for k in ("hoop", "helical"))
+    job = job.replace(layers=[hoop, helical.model_copy(update={"circuits": 400, "points_per_pass": 8000})])
+    est = budget.check_laminate(job, build_mandrel(job, path), file=path)
+    assert est.count > 6.4e6 and est.bytes < 2.5 * 2**30
