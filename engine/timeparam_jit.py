@@ -281,14 +281,17 @@ def _build_fused() -> Any:
         pm = np.empty(M)                 # prefix minima of J at the departure node
         pmi = pm.view(np.int64)
         infbits = np.int64(0x7FF0000000000000)
+        u1 = np.uint64(1)
+        him = np.int64(-4096)            # the masks as constants (12 low bits; dp_pass checks the arguments)
+        lom = np.int64(4095)
         total = 0
         acc = 0
         first = 0
         for i in range(n1):
             # --- windows of interval i (the same arithmetic as _windows) -------------------------
             s0 = i * L
-            ar = s0
-            al = s0
+            ar = np.uint64(s0)             # indices known >= 0: unsigned (no negative-index wraparound code)
+            al = np.uint64(s0)
             off = 3.0 * i
             lo_p = plo[i]
             spi = sp_p[i]
@@ -303,7 +306,7 @@ def _build_fused() -> Any:
                 xj = v * v
                 xq[j] = xj
                 qq[j] = xj / xni + off
-            e = s0 + L - 1
+            e = np.uint64(s0 + L - 1)
             for j in range(M):                      # the chain walks (np.interp's arithmetic)
                 xj = xq[j]
                 good = xj >= xlo and xj <= xhi and not (degn and j >= 1)
@@ -314,30 +317,30 @@ def _build_fused() -> Any:
                     if q >= rq[e]:
                         ub = rk[e]
                     else:
-                        while rq[ar + 1] <= q:
-                            ar += 1
+                        while rq[ar + u1] <= q:
+                            ar += u1
                         if rq[ar] == q:
                             ub = rk[ar]
                         else:
                             slope = rs[ar]
                             ub = slope * (q - rq[ar]) + rk[ar]
                             if ub != ub:
-                                ub = slope * (q - rq[ar + 1]) + rk[ar + 1]
-                                if ub != ub and rk[ar] == rk[ar + 1]:
+                                ub = slope * (q - rq[ar + u1]) + rk[ar + u1]
+                                if ub != ub and rk[ar] == rk[ar + u1]:
                                     ub = rk[ar]
                     if q >= lq[e]:
                         lb = lk[e]
                     else:
-                        while lq[al + 1] <= q:
-                            al += 1
+                        while lq[al + u1] <= q:
+                            al += u1
                         if lq[al] == q:
                             lb = lk[al]
                         else:
                             slope = ls[al]
                             lb = slope * (q - lq[al]) + lk[al]
                             if lb != lb:
-                                lb = slope * (q - lq[al + 1]) + lk[al + 1]
-                                if lb != lb and lk[al] == lk[al + 1]:
+                                lb = slope * (q - lq[al + u1]) + lk[al + u1]
+                                if lb != lb and lk[al] == lk[al + u1]:
                                     lb = lk[al]
                     good = ub >= lb and ub >= 0
                 okj[j] = good
@@ -371,15 +374,15 @@ def _build_fused() -> Any:
                 else:
                     y = yl[j]
                     yi = 0 if y < 0 else (nb - 1 if y >= nb - 1 else int(y))
-                    kl = t_lo[yi]
+                    kl = t_lo[np.uint64(yi)]
                     y = yh[j]
                     yi = 0 if y < 0 else (nb - 1 if y >= nb - 1 else int(y))
-                    kh = t_hi[yi]
+                    kh = t_hi[np.uint64(yi)]
                     kix = kl if kl < M - 1 else M - 1
-                    if kl <= M - 1 and lev[i, kix] < pk_lo:
+                    if kl <= M - 1 and levf[np.uint64(i * M + kix)] < pk_lo:
                         kl += 1
                     kix = kh if kh > 0 else 0
-                    if kh >= 0 and lev[i, kix] > pk_hi:
+                    if kh >= 0 and levf[np.uint64(i * M + kix)] > pk_hi:
                         kh -= 1
                 c = kh - kl + 1
                 if c <= 0:
@@ -437,14 +440,14 @@ def _build_fused() -> Any:
                     if kf - k0 < top:
                         top = kf - k0
                     for w in range(top, -1, -1):
-                        k = k0 + w
-                        g = base + k
+                        k = np.uint64(k0 + w)
+                        g = np.uint64(base) + k
                         vk = levf[g]
                         ssum = vk + vj
                         cost = th / ssum
                         if best < infbits:
                             fb[0] = pm[k] + cost
-                            if (ib[0] & himask) > best:
+                            if (ib[0] & him) > best:
                                 break
                         if use_k:
                             diff = vj - vk
@@ -453,7 +456,7 @@ def _build_fused() -> Any:
                             diff *= kqi
                             cost += diff
                         fb[0] = Jf[g] + cost
-                        ci = (ib[0] & himask) | (g & lomask)
+                        ci = (ib[0] & him) | (np.int64(g) & lom)
                         if ci < best:
                             best = ci
                 Jraw[base + M + j] = best
@@ -510,7 +513,7 @@ def dp_pass(levels: tuple[np.ndarray, ...], xn: np.ndarray, ch: tuple[np.ndarray
             _FUSED.append(_build_fused())
         except Exception:  # noqa: BLE001 - see kernel()
             _FUSED.append(None)
-    if _FUSED[0] is None:
+    if _FUSED[0] is None or lomask != 4095 or himask != -4096:    # (the kernel's constants: 12 low bits)
         return None
     plo_, span, phi, frac = levels
     n, M = plo_.size, frac.size
