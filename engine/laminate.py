@@ -294,11 +294,22 @@ def dwell_length(line: Any, side: int) -> float:
     zt = line.z_turn[side]
     tol = 1e-6 * max(1.0, abs(zt))
     if _kept_as_rule(line):  # a big program: piece by piece, the same numbers summed in the same order
-        from engine.periodic import deferred, field_rows, row_chunks
+        from engine.periodic import field_rows, field_take, row_chunks, tile_base
 
-        dw = deferred(line, "dwell")
-        if dw is not None and dw.kind == "tile" and dw.patch_rows is None and not np.any(dw.base):
-            return 0.0
+        n, m = line.n_points, int(line.points_per_circuit)
+        dw0, z0 = tile_base(line, "dwell"), tile_base(line, "z")
+        if dw0 is not None and z0 is not None and dw0.shape[0] == z0.shape[0] == m + 1:
+            # every circuit's dwell rows are circuit 0's: the steps ending on them, circuit after circuit
+            j = np.flatnonzero(dw0 & (np.abs(z0 - zt) <= tol))
+            body = j[j < m]
+            ends = (np.arange(line.circuits, dtype=np.int64)[:, None] * m + body[None, :]).ravel()
+            if j.size and j[-1] == m:
+                ends = np.append(ends, n - 1)
+            ends = ends[ends >= 1]
+            if not ends.size:
+                return 0.0
+            ds = field_take(line, "s", ends) - field_take(line, "s", ends - 1)
+            return float(ds.sum())
         parts = []
         for a, b in row_chunks(line.n_points):
             ds = np.diff(field_rows(line, "s", a, b))
