@@ -378,12 +378,10 @@ def _build_fused() -> Any:
                     y = yh[j]
                     yi = 0 if y < 0 else (nb - 1 if y >= nb - 1 else int(y))
                     kh = t_hi[np.uint64(yi)]
-                    kix = kl if kl < M - 1 else M - 1
-                    if kl <= M - 1 and levf[np.uint64(i * M + kix)] < pk_lo:
-                        kl += 1
+                    kix = kl if kl < M - 1 else M - 1          # the corrections without branches
+                    kl += (kl <= M - 1) & (levf[np.uint64(i * M + kix)] < pk_lo)
                     kix = kh if kh > 0 else 0
-                    if kh >= 0 and levf[np.uint64(i * M + kix)] > pk_hi:
-                        kh -= 1
+                    kh -= (kh >= 0) & (levf[np.uint64(i * M + kix)] > pk_hi)
                 c = kh - kl + 1
                 if c <= 0:
                     klo[j] = 0
