@@ -10,13 +10,15 @@ Two measured costs of a ``winder run`` that are not computation:
   the array API and that SciPy's array-API code uses only for CuPy and PyTorch.  :func:`install` hides
   those not-yet-imported submodules from NumPy's ``__all__``/``__dir__`` while that one module is
   executed, and restores both right after; ``numpy.testing`` and the rest stay importable as before.
-* The narrowest-band LP needs only SciPy's HiGHS extension (``scipy.optimize._highspy._core``), but
-  ``import scipy.optimize._highspy._core`` first runs ``scipy.optimize``'s ``__init__``, which imports
-  all its solvers and ``scipy.spatial`` (~0.06 s more).  :func:`extension_module` loads such an
-  extension from its file under its own name, holding that module's own import lock (the lock the
-  ordinary import machinery takes for it, never the interpreter-wide lock, which could deadlock with a
-  thread importing SciPy), and registers it in ``sys.modules``: a later ``import scipy.optimize`` then
-  uses this module and does not load the extension a second time.
+* The narrowest-band LP needs only SciPy's HiGHS extension (``scipy.optimize._highspy._core``) and the
+  clearance distances only SciPy's k-d tree (``scipy.spatial._ckdtree``), but importing either runs its
+  package's ``__init__`` first: ``scipy.optimize``'s imports all its solvers and ``scipy.spatial``,
+  ``scipy.spatial``'s imports ``distance``, ``transform`` and ``scipy.special`` (~0.06 s and ~0.1 s).
+  :func:`extension_module` loads such an extension from its file under its own name, holding that
+  module's own import lock (the lock the ordinary import machinery takes for it, never the
+  interpreter-wide lock, which could deadlock with a thread importing SciPy), and registers it in
+  ``sys.modules``: a later ``import scipy.optimize`` or ``import scipy.spatial`` then uses this module
+  and does not load the extension a second time (:func:`ckdtree` is ``scipy.spatial.cKDTree``).
 
 Both change nothing numerical: the same modules run the same code.
 """
@@ -132,22 +134,37 @@ def extension_module(name: str) -> Any | None:
         return _ordinary(name)
     if path is None:
         return _ordinary(name)
-    with _ModuleLockManager(name):  # the lock an ordinary import of `name` takes: it waits for us, then finds it
+    try:
+        with _ModuleLockManager(name):  # the lock an ordinary import of `name` takes: it waits, then finds it
+            mod = sys.modules.get(name)
+            if mod is None:
+                try:
+                    loader = importlib.machinery.ExtensionFileLoader(name, path)
+                    spec = importlib.util.spec_from_file_location(name, path, loader=loader)
+                    if spec is None:
+                        raise ImportError(name)
+                    new = importlib.util.module_from_spec(spec)
+                    loader.exec_module(new)
+                except Exception:  # noqa: BLE001
+                    new = None
+                if new is not None:
+                    sys.modules[name] = new
+                mod = new
+    except RuntimeError:  # the import machinery's deadlock detection (another thread holds what we wait for)
         mod = sys.modules.get(name)
-        if mod is None:
-            try:
-                loader = importlib.machinery.ExtensionFileLoader(name, path)
-                spec = importlib.util.spec_from_file_location(name, path, loader=loader)
-                if spec is None:
-                    raise ImportError(name)
-                new = importlib.util.module_from_spec(spec)
-                loader.exec_module(new)
-            except Exception:  # noqa: BLE001
-                new = None
-            if new is not None:
-                sys.modules[name] = new
-            mod = new
     return mod if mod is not None else _ordinary(name)
+
+
+def ckdtree() -> Any:
+    """SciPy's ``cKDTree`` class, from its extension (``scipy.spatial._ckdtree``) without importing the
+    rest of ``scipy.spatial`` (its ``__init__`` imports ``distance``, ``transform`` and ``scipy.special``:
+    ~0.1 s of a one-shot run that needs the k-d tree alone); ``scipy.spatial.cKDTree`` is the same class."""
+    mod = extension_module("scipy.spatial._ckdtree")
+    if mod is not None and hasattr(mod, "cKDTree"):
+        return mod.cKDTree
+    from scipy.spatial import cKDTree
+
+    return cKDTree
 
 
 def _ordinary(name: str) -> Any | None:

@@ -1057,9 +1057,9 @@ def _pipeline_cost(p: _Prepared) -> float:
 
 
 _PIPELINE_MODULES = ("engine.payout", "engine.kinematics", "engine.blocks", "engine.timeparam",
-                     "scipy.sparse", "scipy.linalg", "scipy.spatial")
+                     "scipy.sparse", "scipy.linalg")
 """What the layers' pipelines import: imported once here before the forks instead of once per child.
-(``scipy.optimize``'s HiGHS extension: :func:`_preload` takes it through ``engine.payout._highs_core``.)"""
+(SciPy's HiGHS and k-d tree extensions: :func:`_preload` loads them alone, engine._lightimport.)"""
 
 
 def _preload() -> None:
@@ -1069,7 +1069,10 @@ def _preload() -> None:
         importlib.import_module(name)
     from engine.payout import _highs_core
 
-    _highs_core()  # the narrowest-band LP's HiGHS (imports scipy.optimize), once for every child
+    _highs_core()  # the narrowest-band LP's HiGHS, once for every child
+    from engine._lightimport import ckdtree
+
+    ckdtree()      # and the clearance distances' k-d tree
 
 
 class _Failed:

@@ -379,8 +379,9 @@ def mandrel_distance(mandrel: Any, z: np.ndarray, rho: np.ndarray, step_mm: floa
 def mandrel_distance_fn(mandrel: Any, step_mm: float = 0.05, upto_mm: float = np.inf) -> Any:
     """:func:`mandrel_distance` as a function ``(z, rho, upto=upto_mm) -> distance`` (the sampled generatrix
     built once; a smaller ``upto`` makes the k-d tree queries cheaper)."""
-    from scipy.spatial import cKDTree
+    from engine._lightimport import ckdtree
 
+    cKDTree = ckdtree()  # scipy.spatial.cKDTree, without the rest of scipy.spatial
     zs = np.linspace(mandrel.z_min, mandrel.z_max, 2001)
     rs = np.asarray(mandrel.r(zs), dtype=float)
     arc = np.concatenate(([0.0], np.cumsum(np.hypot(np.diff(zs), np.diff(rs)))))

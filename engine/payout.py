@@ -302,8 +302,9 @@ class _Contour:
     """
 
     def __init__(self, mandrel: Any, n: int = 6000) -> None:
-        from scipy.spatial import cKDTree
+        from engine._lightimport import ckdtree
 
+        cKDTree = ckdtree()  # scipy.spatial.cKDTree, without the rest of scipy.spatial
         z, r = mandrel.sample(n)
         self.z, self.r = np.asarray(z, float), np.asarray(r, float)
         self.r = np.maximum(self.r, 0.0)

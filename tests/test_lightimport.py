@@ -98,3 +98,39 @@ def test_winder_process_looks_for_no_pydantic_plugins_unless_the_user_says() -> 
         assert got["env"] == want
         # the job schema built without the scan; the user's own setting is kept (and pydantic then looks)
         assert got == {"rc": 0, "env": want, "scanned": user is not None}
+
+
+def test_ckdtree_without_scipy_spatial_then_scipy_spatial_uses_it() -> None:
+    got = _run(
+        "import sys, json\n"
+        "import numpy as np\n"
+        "from engine import _lightimport\n"
+        "K = _lightimport.ckdtree()\n"
+        "before = 'scipy.spatial' in sys.modules\n"
+        "d, i = K(np.array([[0.0, 0.0], [3.0, 4.0]])).query([[3.0, 3.0]])\n"
+        "import scipy.spatial\n"
+        "print(json.dumps({'before': before, 'same': scipy.spatial.cKDTree is K, 'd': float(d[0]), 'i': int(i[0])}))\n"
+    )
+    assert got == {"before": False, "same": True, "d": 1.0, "i": 1}
+
+
+def test_example_runs_import_only_the_scipy_parts_they_use(tmp_path) -> None:
+    """Start-up (issue 16): a `winder run` of the examples, in one process and with its layers side by side,
+    imports none of scipy.optimize, scipy.spatial, scipy.special, scipy.sparse.linalg, numpy.f2py or
+    numpy.testing (each a heavy import the run does not need)."""
+    heavy = ("scipy.optimize", "scipy.spatial", "scipy.special", "scipy.sparse.linalg", "numpy.f2py", "numpy.testing")
+    for example in ("pipe", "pressure_vessel"):
+        for jobs in ("1", "2"):
+            out = subprocess.run(
+                [sys.executable, "-c",
+                 "import sys, json\n"
+                 f"sys.argv = ['winder', 'run', 'resources/examples/{example}.toml', "
+                 f"'-o', {str(tmp_path / 'o.ngc')!r}, '--quiet']\n"
+                 "from engine.cli import main\n"
+                 "rc = main()\n"
+                 f"print(json.dumps({{'rc': rc, 'heavy': [m for m in {heavy!r} if m in sys.modules]}}))\n"],
+                capture_output=True, text=True, timeout=300, cwd=ROOT,
+                env={**os.environ, "PYTHONPATH": str(ROOT), "WINDER_JOBS": jobs})
+            assert out.returncode == 0, out.stderr
+            got = json.loads(out.stdout.strip().splitlines()[-1])
+            assert got == {"rc": 0, "heavy": []}, (example, jobs, got)
