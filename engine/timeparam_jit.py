@@ -820,6 +820,10 @@ def _build_hull_sym() -> Any:
     def _graham(px, py, ang, r2, idx, cd, sd, up, kk):  # pragma: no cover - compiled
         B, R = px.shape[0], px.shape[1]
         o = np.empty(R, np.int64)
+        o2 = np.empty(R, np.int64)
+        bk = np.empty(R, np.int64)
+        hist = np.empty(65, np.int64)
+        bscale = 63.0 / np.pi
         ka = np.empty(R)
         kq = np.empty(R)
         X = np.empty(R)
@@ -839,10 +843,26 @@ def _build_hull_sym() -> Any:
             for j in range(R):
                 ka[j] = ang[b, j]
                 kq[j] = -r2[b, j]
+            # (a stable counting pass into 64 buckets of the angle, a monotone map, first: the insertion
+            # sort below, with the same comparisons, then has few moves left; the same order)
+            for q in range(65):
+                hist[q] = 0
             for j in range(R):
+                v = ka[j] * bscale
+                q = 63 if not v < 63.0 else (0 if not v > 0.0 else int(v))
+                bk[j] = q
+                hist[q + 1] += 1
+            for q in range(64):
+                hist[q + 1] += hist[q]
+            for j in range(R):
+                q = bk[j]
+                o2[hist[q]] = j
+                hist[q] += 1
+            for jj in range(R):
+                j = o2[jj]
                 va = ka[j]
                 vq = kq[j]
-                t = j - 1
+                t = jj - 1
                 while t >= 0:
                     u = o[t]
                     if ka[u] > va or (ka[u] == va and kq[u] > vq):

@@ -227,3 +227,27 @@ def test_laws_do_not_share_the_work_arrays() -> None:
         assert _same(it.sdot, v) and _same(it.lower, lo) and _same(it.upper, hi)
     again = tp.parametrize(*example_path(400), lim)
     assert _same(again.sdot, a.sdot) and again.total_time_s == a.total_time_s
+
+
+def test_compiled_reference_hull_sorts_ties_and_signed_zero_angles_as_numpy() -> None:
+    """The compiled reference hull buckets the angles before its insertion sort: points on the negative
+    x axis (turned to angle -0.0), on the positive one (+0.0), many on one ray, and zero rows keep
+    numpy's lexsort order, so the vertices are _hull_sym's numpy ones."""
+    pytest.importorskip("numba")
+    from engine import timeparam_jit
+
+    assert timeparam_jit.warm()
+    rng = np.random.default_rng(7)
+    for _ in range(60):
+        B, H = int(rng.integers(1, 20)), int(rng.integers(4, 40))
+        ang = rng.choice([0.0, np.pi, 0.5, 1.0, np.pi / 2, 2.5], size=(B, H))
+        rad = rng.choice([0.0, 0.5, 1.0, 2.0], size=(B, H))
+        half = np.stack([rad * np.cos(ang), rad * np.sin(ang)], -1)
+        half[..., 1][np.abs(half[..., 1]) < 1e-12] = 0.0             # exact axes: ±0 angles after turning
+        half[:, 0] = [1.0, 0.0]
+        half[:, 1] = [0.0, 1.0]                                        # the origin strictly inside
+        pts = np.concatenate([half, -half], 1)
+        ipos, ineg = np.arange(H), np.arange(H, 2 * H)
+        a = tp._hull_sym(pts, ipos, ineg, compiled=False)
+        b = tp._hull_sym(pts, ipos, ineg, compiled=True)
+        assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
