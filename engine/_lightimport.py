@@ -174,3 +174,15 @@ def _ordinary(name: str) -> Any | None:
         return importlib.import_module(name)
     except ImportError:
         return None
+
+
+def flapack() -> Any:
+    """SciPy's LAPACK wrappers (``scipy.linalg._flapack``: ``dgtsv``, ``dpbtrf``, ``dpbtrs``, ... -- the
+    functions ``scipy.linalg.lapack`` re-exports) without importing ``scipy.linalg`` (~0.03 s of a one-shot
+    run whose only use of it is two banded solves); ``scipy.linalg.lapack`` where that file is absent."""
+    mod = extension_module("scipy.linalg._flapack")
+    if mod is not None and all(hasattr(mod, f) for f in ("dgtsv", "dpbtrf", "dpbtrs")):
+        return mod
+    import scipy.linalg.lapack as lapack
+
+    return lapack

@@ -6,7 +6,7 @@ spline re-fit of a grown laminate surface (:class:`engine.mandrel.SplineSegment`
 of the axis path at its knots for the time law.  :class:`CubicSpline` here builds the same banded
 system as :class:`scipy.interpolate.CubicSpline` for the boundary conditions the engine uses
 (not-a-knot, first or second derivative given), solves it with the same LAPACK routine
-(``scipy.linalg.solve_banded``; ``scipy.linalg`` is loaded by the payout anyway) and evaluates the
+(``dgtsv``, as ``scipy.linalg.solve_banded`` calls it, without importing ``scipy.linalg``) and evaluates the
 pieces with the same floating-point operations as SciPy's ``PPoly``.  The results are SciPy's bit
 for bit (tests/test_knot_spline.py checks that on random data, inside and outside the knots).
 Fewer than four knots fall back to SciPy itself (its special cases: a line or a parabola).
@@ -26,8 +26,6 @@ BC = Any
 
 def _slopes(x: FloatArray, y: FloatArray, bc: tuple[BC, BC]) -> tuple[FloatArray, FloatArray, FloatArray]:
     """(dx, secant slopes, derivatives s at the knots) of CubicSpline.__init__, row for row."""
-    from scipy.linalg import solve_banded
-
     n = x.shape[0]
     dx = np.diff(x)
     dxr = dx.reshape((dx.shape[0],) + (1,) * (y.ndim - 1))
@@ -65,9 +63,26 @@ def _slopes(x: FloatArray, y: FloatArray, bc: tuple[BC, BC]) -> tuple[FloatArray
         A[1, -1] = 2 * dx[-1]
         A[-1, -2] = dx[-1]
         b[-1] = 0.5 * bc_end[1] * dx[-1] ** 2 + 3 * (y[-1] - y[-2])
-    s = solve_banded((1, 1), A, b.reshape(n, -1), overwrite_ab=True, overwrite_b=True,
-                     check_finite=False).reshape(b.shape)
+    s = _solve_tridiagonal(A, b.reshape(n, -1)).reshape(b.shape)
     return dxr, slope, s
+
+
+def _solve_tridiagonal(A: FloatArray, b: FloatArray) -> FloatArray:
+    """``scipy.linalg.solve_banded((1, 1), A, b, overwrite_ab=True, overwrite_b=True, check_finite=False)``
+    for float64 ``A`` (3, n >= 2) and ``b`` (n, k): the LAPACK call it makes (``dgtsv`` on A's three rows,
+    overwritten), without importing ``scipy.linalg`` (engine._lightimport.flapack)."""
+    from engine._lightimport import flapack
+
+    if A.dtype != np.float64 or b.dtype != np.float64 or A.shape[1] < 2:
+        from scipy.linalg import solve_banded
+
+        return solve_banded((1, 1), A, b, overwrite_ab=True, overwrite_b=True, check_finite=False)
+    _du2, _d, _du, x, info = flapack().dgtsv(A[2, :-1], A[1, :], A[0, 1:], b, True, True, True, True)
+    if info > 0:
+        raise np.linalg.LinAlgError("singular matrix")
+    if info < 0:
+        raise ValueError(f"illegal value in {-info}-th argument of internal gbsv/gtsv")
+    return x
 
 
 def _bc(bc_type: BC) -> tuple[BC, BC]:

@@ -1057,9 +1057,9 @@ def _pipeline_cost(p: _Prepared) -> float:
 
 
 _PIPELINE_MODULES = ("engine.payout", "engine.kinematics", "engine.blocks", "engine.timeparam",
-                     "scipy.sparse", "scipy.linalg")
+                     "scipy.sparse")
 """What the layers' pipelines import: imported once here before the forks instead of once per child.
-(SciPy's HiGHS and k-d tree extensions: :func:`_preload` loads them alone, engine._lightimport.)"""
+(SciPy's HiGHS, k-d tree and LAPACK extensions: :func:`_preload` loads them alone, engine._lightimport.)"""
 
 
 def _preload() -> None:
@@ -1070,9 +1070,10 @@ def _preload() -> None:
     from engine.payout import _highs_core
 
     _highs_core()  # the narrowest-band LP's HiGHS, once for every child
-    from engine._lightimport import ckdtree
+    from engine._lightimport import ckdtree, flapack
 
     ckdtree()      # and the clearance distances' k-d tree
+    flapack()      # and the banded solves' LAPACK
 
 
 class _Failed:

@@ -1981,8 +1981,12 @@ class _CyclicKKT:
         self.qo = np.asarray(Qc[idx, (idx + 1) % m]).ravel()
 
     def factor(self, d: FloatArray) -> Callable[[FloatArray], FloatArray]:
-        from scipy.linalg.lapack import dpbtrf, dpbtrs  # what cholesky_banded / cho_solve_banded call,
-        # without their per-call argument checks (~0.15 ms each, 3–4 calls per Newton step)
+        from engine._lightimport import flapack
+
+        # what cholesky_banded / cho_solve_banded call, without their per-call argument checks (~0.15 ms
+        # each, 3–4 calls per Newton step) and without importing scipy.linalg
+        lp = flapack()
+        dpbtrf, dpbtrs = lp.dpbtrf, lp.dpbtrs
 
         m = self.m
         dg = self.qd + np.bincount(self.j1, d * self.w1 * self.w1, m) + np.bincount(self.j2, d * self.w2 * self.w2, m)

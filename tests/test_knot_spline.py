@@ -54,3 +54,22 @@ def test_exact_cubic_and_shapes() -> None:
     cs = CubicSpline(x, y)
     assert np.shape(cs(1.5)) == ()
     np.testing.assert_allclose(cs(1.5), 2 * 1.5**3 - 1.5**2 + 4.5 - 5, rtol=1e-12)
+
+
+def test_tridiagonal_solve_is_solve_banded_bit_for_bit() -> None:
+    """knot_spline._solve_tridiagonal (LAPACK's dgtsv without importing scipy.linalg) against
+    scipy.linalg.solve_banded((1, 1), ...) on random diagonally dominant and general systems."""
+    from scipy.linalg import solve_banded
+
+    from engine.knot_spline import _solve_tridiagonal
+
+    rng = np.random.default_rng(11)
+    for k in range(60):
+        n, m = int(rng.integers(2, 40)), int(rng.integers(1, 4))
+        A = rng.normal(size=(3, n))
+        if k % 2:
+            A[1] += 4.0 * np.sign(A[1])
+        b = rng.normal(size=(n, m))
+        want = solve_banded((1, 1), A.copy(), b.copy(), overwrite_ab=True, overwrite_b=True, check_finite=False)
+        got = _solve_tridiagonal(A.copy(), b.copy())
+        assert np.array_equal(got, want), k

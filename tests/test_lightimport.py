@@ -116,9 +116,10 @@ def test_ckdtree_without_scipy_spatial_then_scipy_spatial_uses_it() -> None:
 
 def test_example_runs_import_only_the_scipy_parts_they_use(tmp_path) -> None:
     """Start-up (issue 16): a `winder run` of the examples, in one process and with its layers side by side,
-    imports none of scipy.optimize, scipy.spatial, scipy.special, scipy.sparse.linalg, numpy.f2py or
-    numpy.testing (each a heavy import the run does not need)."""
-    heavy = ("scipy.optimize", "scipy.spatial", "scipy.special", "scipy.sparse.linalg", "numpy.f2py", "numpy.testing")
+    imports none of scipy.optimize, scipy.spatial, scipy.special, scipy.sparse.linalg, scipy.linalg,
+    numpy.f2py or numpy.testing (each a heavy import the run does not need)."""
+    heavy = ("scipy.optimize", "scipy.spatial", "scipy.special", "scipy.sparse.linalg", "scipy.linalg", "numpy.f2py",
+             "numpy.testing")
     for example in ("pipe", "pressure_vessel"):
         for jobs in ("1", "2"):
             out = subprocess.run(
