@@ -872,9 +872,15 @@ def _prepare(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, chains:
     A = np.asarray(limits.a_max, float)
     V = np.asarray(limits.v_max, float)
     d1, d2 = _quintic(s, X, dX, ddX)
+    if work:                       # the thread's work arrays for what is used here only (no fresh pages)
+        from engine.timeparam_jit import scratch as _wk
+    else:
+        def _wk(name: str, shape: tuple[int, ...]) -> np.ndarray:
+            return np.empty(shape)
 
     # axis speed caps: Bernstein bound of |X'| on both adjacent intervals
-    bb = np.abs(d1 @ _P2B.T, out=np.empty_like(d1))
+    bb = np.matmul(d1, _P2B.T, out=_wk("prepare_bb", d1.shape))
+    np.abs(bb, out=bb)
     b1 = np.maximum(bb[..., 0], bb[..., 1])                   # (N-1, p); max over the 5 (exact in any order)
     for k in range(2, 5):
         np.maximum(b1, bb[..., k], out=b1)
@@ -917,11 +923,14 @@ def _prepare(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, chains:
         P = ddX[1:, :, None]                                            # (N-1, p, 1)
         Q = (2 * h[:, None] * ddX[1:] + dX[1:])[:, :, None]
     else:
-        Pp = np.concatenate([d2, np.zeros(d2.shape[:-1] + (1,))], axis=-1)       # degree 3 -> 4 slots
-        Qp = d1.copy()
-        Qp[..., 1:] += 2.0 * h[:, None, None] * d2
-        P = Pp @ _P2B.T
-        Q = Qp @ _P2B.T
+        Pp = _wk("prepare_Pp", d1.shape)                                   # degree 3 -> 4 slots
+        Pp[..., :4] = d2
+        Pp[..., 4] = 0.0
+        Qp = _wk("prepare_Qp", d1.shape)
+        np.copyto(Qp, d1)
+        Qp[..., 1:] += np.multiply(2.0 * h[:, None, None], d2, out=_wk("prepare_h2", d2.shape))
+        P = np.matmul(Pp, _P2B.T, out=_wk("prepare_P", d1.shape))
+        Q = np.matmul(Qp, _P2B.T, out=_wk("prepare_Q", d1.shape))
     G = P.shape[1] * P.shape[2]
     extra = math.isfinite(limits.sddot_max)
     R = 2 * G + 2 * extra
