@@ -44,6 +44,8 @@ $(STAMP): pyproject.toml
 	@[ -x $(VPY) ] || $(PYTHON) -m venv $(VENV)
 	$(VPY) -m pip install -q --upgrade pip
 	$(VPY) -m pip install -q -e ".[test,bench]"
+	@# compile the time law's numba kernels into their on-disk cache now: the first big run would pay ~7 s
+	$(VPY) -c "from engine.timeparam_jit import warm; warm()"
 	touch $(STAMP)
 
 lint: venv
