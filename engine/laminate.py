@@ -1883,9 +1883,11 @@ def _last_laid_point(machine: Any, q_end: FloatArray, layer: LayerResult) -> Flo
     r = layer.result
     if r is None or r.axes is None or r.blocks is None:
         return None
-    i = int(np.asarray(r.blocks.index)[-1])
-    e_own = np.asarray(r.axes.eye_xyz, dtype=float)[i]
-    c_own = np.asarray(r.axes.contact_xyz, dtype=float)[i]
+    from engine.periodic import field_take
+
+    i = np.asarray(r.blocks.index)[-1:].astype(np.int64)   # one row (a big path's points stay rules)
+    e_own = np.asarray(field_take(r.axes, "eye_xyz", i), dtype=float)[0]
+    c_own = np.asarray(field_take(r.axes, "contact_xyz", i), dtype=float)[0]
     e_join = forward_kinematics(machine, np.asarray(q_end, dtype=float)[None, :], fibre=False)[0][0]
     turn = math.atan2(e_join[1], e_join[0]) - math.atan2(e_own[1], e_own[0])
     ct, st = math.cos(turn), math.sin(turn)

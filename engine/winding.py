@@ -125,9 +125,15 @@ class WindingLine:
     def slip_lambda(self, z0_mm: float, z1_mm: float) -> float:
         """The largest |λ| on the slip range [z0, z1] (mm): of the line's points there and of a turnaround
         dwell on a parallel there (k_g/k_n = r' of the dwell, not part of ``max_abs_lambda``)."""
+        from engine.periodic import tile_base
+
         tol = 1e-9 * max(1.0, abs(z0_mm), abs(z1_mm))
-        on = (self.z >= z0_mm - tol) & (self.z <= z1_mm + tol) & ~self.dwell
-        best = float(np.max(np.abs(self.lam[on]))) if on.any() else 0.0
+        # every circuit repeats circuit 0's z, dwell and λ where they are kept so: its points alone (the same maximum)
+        z, dw, lam = (tile_base(self, f) for f in ("z", "dwell", "lam"))
+        if z is None or dw is None or lam is None:
+            z, dw, lam = self.z, self.dwell, self.lam
+        on = (z >= z0_mm - tol) & (z <= z1_mm + tol) & ~dw
+        best = float(np.max(np.abs(lam[on]))) if on.any() else 0.0
         for t in self.turnarounds:
             zd, lam = t.get("dwell_z_mm"), t.get("dwell_lambda")
             if t.get("dwell_deg", 0.0) > 0 and zd is not None and lam is not None and \

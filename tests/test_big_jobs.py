@@ -93,22 +93,36 @@ def test_layer_figures_of_a_big_line_equal_the_materialised_line(name: str) -> N
 
 
 def test_pipeline_keeps_a_big_line_as_rules() -> None:
-    """The payout stage finds the line's points without materialising them (hasattr did: 147 MB on the
-    400 x 8 000 job) and the blocks stage the eye path's index (49 MB); the laminate's figures likewise."""
-    from engine.laminate import run_laminate
+    """A helical layer of 102 circuits then a hoop, joined into one program: the payout stage finds the
+    line's points without materialising them (hasattr did: 147 MB on the 400 x 8 000 job), the blocks
+    stage the eye path's index (49 MB), the layer's figures the line's fields, the transition check the
+    last laid point (the axis path's eye and contact points, 2 x 147 MB) and the slip check the line's
+    λ; the last laid point and the slip figures equal those of the materialised arrays."""
+    from engine.laminate import _last_laid_point, run_laminate
 
     path = EX / "pressure_vessel.toml"
     job = load_job(path)
-    helical = next(lay for lay in job.layers if lay.kind == "helical")
+    helical, hoop = (next(lay for lay in job.layers if lay.kind == k) for k in ("helical", "hoop"))
     job = job.replace(layers=[helical.model_copy(update={"circuits": DEFER_MIN_CIRCUITS + 2,
-                                                         "points_per_pass": 60})],
+                                                         "points_per_pass": 60, "close_by": None}), hoop],
                       payout={**job.payout.model_dump(), "grid_points": 200})
-    res = run_laminate(job, path, upto="blocks", workers=1)
-    r = res.layers[0].result
+    res = run_laminate(job, path, upto="nc", workers=1)
+    lr = res.layers[0]
+    r = lr.result
     assert r.eye.report.get("replicated_circuits") == DEFER_MIN_CIRCUITS + 2
     assert deferred(r.line, "xyz") is not None and deferred(r.eye, "index") is not None
     # the line's s is the eye's x (read whole by the blocks stage); the rest stays rules
     assert set(_kept(r.line)) >= set(PER_POINT_FIELDS) - {"s", "v"}
+    assert all(deferred(r.axes, f) is not None for f in ("eye_xyz", "contact_xyz"))
+    q_end = np.asarray(r.axes.q)[np.asarray(r.blocks.index)[-1]]
+    got = _last_laid_point(res.machine, q_end, lr)
+    zs = [(z0, z0 + 40.0) for z0 in (-70.0, 0.0, 340.0)]
+    slips = [r.line.slip_lambda(a, b) for a, b in zs]
+    assert deferred(r.axes, "eye_xyz") is not None and len(_kept(r.line)) >= len(PER_POINT_FIELDS) - 2
+    # the same from the materialised arrays
+    whole = replace(lr, result=replace(r, axes=replace(r.axes), line=replace(r.line)))
+    assert np.array_equal(got, _last_laid_point(res.machine, q_end, whole))
+    assert slips == [whole.result.line.slip_lambda(a, b) for a, b in zs] and max(slips) > 0
 
 
 def _spec(circuits: int | None, points: int, **kw):
