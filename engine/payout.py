@@ -2407,7 +2407,7 @@ def _extend_replicated(eye: EyePath, line: Any) -> EyePath | None:
     if one.index.size != m + 1:      # zero-length steps dropped: evaluate point by point
         return None
 
-    from engine.periodic import CircuitArray, field_rows, raw_field_or
+    from engine.periodic import CircuitArray, DerivedArray, field_rows, raw_field_or
 
     # the eye path's per-point arrays are kept as circuit 0 + rule (engine.periodic.CircuitArray, the
     # arithmetic of the arrays made before: bit for bit) and materialised on first read
@@ -2438,15 +2438,18 @@ def _extend_replicated(eye: EyePath, line: Any) -> EyePath | None:
     if contact is None:
         contact = turned(one.contact_xyz)
     s_all = np.asarray(line.s, dtype=float)
-    x = s_all if eye.parameter == "s" else v
     l, R = tile(one.l), tile(one.R)
-    V = v + tile(one.V - np.asarray(one_line.v, dtype=float)).materialise()
-    lam = s_all + l.materialise() - one.k * R.materialise()
+    # V, λ, u and x_mid: made on first read from their operands, with the whole-array arithmetic
+    # (engine.periodic.DerivedArray; no stage of a CLI run reads them whole)
+    v_rule = dv if dv is not None else v
+    x = s_all if eye.parameter == "s" else v
+    V = DerivedArray("add", (v_rule, tile(one.V - np.asarray(one_line.v, dtype=float))), n)
+    lam = DerivedArray("pulled", (s_all, l, R, one.k), n)
     out = EyePath(
         x=x, index=CircuitArray("shift", np.arange(m + 1, dtype=np.int64), nc, m, m), l=l, Z=tile(one.Z), R=R,
         V=V, eye_xyz=turned(one.eye_xyz), contact_xyz=contact, fibre_dir=turned(one.fibre_dir),
-        s=s_all, lam_pulled=lam, u=np.diff(lam) / np.diff(x), x_mid=0.5 * (x[1:] + x[:-1]), law=eye.law,
-        k=one.k, parameter=eye.parameter,
+        s=s_all, lam_pulled=lam, u=DerivedArray("slope", (lam, x), n - 1), x_mid=DerivedArray("mid", (x,), n - 1),
+        law=eye.law, k=one.k, parameter=eye.parameter,
     )
     return _with_report(out, {"law": eye.law, "extended_from_points": int(eye.x.size), "points": n,
                               "replicated_circuits": nc})

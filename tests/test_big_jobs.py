@@ -114,6 +114,11 @@ def test_pipeline_keeps_a_big_line_as_rules() -> None:
     # the line's s is the eye's x (read whole by the blocks stage); the rest stays rules
     assert set(_kept(r.line)) >= set(PER_POINT_FIELDS) - {"s", "v"}
     assert all(deferred(r.axes, f) is not None for f in ("eye_xyz", "contact_xyz"))
+    # the eye path's V, λ, u, x_mid: never read whole by the run; made on first read, as the expressions
+    assert all(deferred(r.eye, f) is not None for f in ("V", "lam_pulled", "u", "x_mid"))
+    x, lam = np.asarray(r.eye.x), np.asarray(r.eye.lam_pulled)
+    assert np.array_equal(r.eye.u, np.diff(lam) / np.diff(x))
+    assert np.array_equal(r.eye.x_mid, 0.5 * (x[1:] + x[:-1]))
     q_end = np.asarray(r.axes.q)[np.asarray(r.blocks.index)[-1]]
     got = _last_laid_point(res.machine, q_end, lr)
     zs = [(z0, z0 + 40.0) for z0 in (-70.0, 0.0, 340.0)]
@@ -197,3 +202,37 @@ def test_circuit_array_rows_by_circuit_equal_materialised(kind: str) -> None:
                 b = int(rng.integers(a, ca.n + 1))
                 got = ca.rows(a, b)
                 assert got.dtype == full.dtype and np.array_equal(got, full[a:b]), (a, b)
+
+
+def test_derived_arrays_equal_the_whole_array_expressions() -> None:
+    """DerivedArray (the eye path's V, λ, u, x_mid of a replicated program): rows at random ranges, take at
+    random indices and the whole array equal the whole-array expressions bit for bit, from plain and
+    CircuitArray operands; a pickled one (a laminate worker's answer) gives the same array."""
+    import pickle
+
+    from engine.periodic import DerivedArray
+
+    rng = np.random.default_rng(11)
+    nc, m = 40, 23
+    n = nc * m + 1
+    s = CircuitArray("shift", np.cumsum(rng.random(m + 1)), nc, m, 3.7)
+    lt, rt = CircuitArray("tile", rng.normal(size=m + 1), nc, m), CircuitArray("tile", rng.normal(size=m + 1), nc, m)
+    sw, lw, rw = s.materialise(), lt.materialise(), rt.materialise()
+    lam = DerivedArray("pulled", (sw, lt, rt, 2), n)
+    cases = [
+        (DerivedArray("add", (s, lt), n), sw + lw),
+        (lam, sw + lw - 2 * rw),
+        (DerivedArray("slope", (lam, sw), n - 1), np.diff(sw + lw - 2 * rw) / np.diff(sw)),
+        (DerivedArray("mid", (s,), n - 1), 0.5 * (sw[1:] + sw[:-1])),
+    ]
+    for d, ref in cases:
+        assert d.shape == ref.shape and len(d) == ref.size
+        assert np.array_equal(d.materialise(), ref) and np.array_equal(d.array(), ref)
+        for _ in range(50):
+            a = int(rng.integers(0, d.n))
+            b = int(rng.integers(a, d.n + 1))
+            assert np.array_equal(d.rows(a, b), ref[a:b])
+        idx = rng.integers(0, d.n, size=60)
+        assert np.array_equal(d.take(idx), ref[idx])
+        d2 = pickle.loads(pickle.dumps(DerivedArray(d.op, d.args, d.n), protocol=5))
+        assert np.array_equal(d2.materialise(), ref)
