@@ -1017,6 +1017,13 @@ def default_workers() -> int:
         return n
     if sys.platform == "darwin" or not _can_fork():
         return 1
+    return available_cpus()
+
+
+def available_cpus() -> int:
+    """The CPUs this process may run on (its affinity), within the cgroup's CPU quota (a container's limit)."""
+    import os
+
     try:
         n = len(os.sched_getaffinity(0))
     except AttributeError:  # pragma: no cover - not Linux

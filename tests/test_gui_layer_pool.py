@@ -90,3 +90,39 @@ def test_gui_cancel_stops_the_pool_workers(qtbot, pooled, monkeypatch: pytest.Mo
         assert not any(_alive(pid) for pid in busy)   # the workers computing were stopped at once
     finally:
         close_window(w)
+
+
+@pytest.mark.parametrize(("env", "want"), [({"WINDER_GUI_POOL": "0"}, None), ({"WINDER_JOBS": "1"}, None),
+                                            ({"WINDER_JOBS": "3"}, 3)])
+def test_gui_pool_size_follows_the_settings(monkeypatch: pytest.MonkeyPatch, env: dict, want: int | None) -> None:
+    """One worker per CPU available (not 1 because the GUI's threads forbid forking); WINDER_JOBS overrides,
+    WINDER_JOBS=1 and WINDER_GUI_POOL=0 turn the pool off."""
+    from winder_gui import tasks
+
+    monkeypatch.setenv("WINDER_GUI_POOL", "1")
+    monkeypatch.delenv("WINDER_JOBS", raising=False)
+    for k, v in env.items():
+        monkeypatch.setenv(k, v)
+    monkeypatch.setattr(tasks, "_POOL", [])
+    pool = tasks.gui_layer_pool()
+    try:
+        assert (pool.workers if pool is not None else None) == want
+        assert tasks.gui_layer_pool() is pool            # one pool for the process
+    finally:
+        if pool is not None:
+            pool.close()
+
+
+def test_gui_pool_default_is_the_cpus_available(monkeypatch: pytest.MonkeyPatch) -> None:
+    from engine.laminate import available_cpus
+    from winder_gui import tasks
+
+    monkeypatch.setenv("WINDER_GUI_POOL", "1")
+    monkeypatch.delenv("WINDER_JOBS", raising=False)
+    monkeypatch.setattr(tasks, "_POOL", [])
+    pool = tasks.gui_layer_pool()
+    try:
+        assert (pool.workers if pool is not None else 1) == available_cpus()
+    finally:
+        if pool is not None:
+            pool.close()

@@ -349,20 +349,21 @@ _POOL_LOCK = threading.Lock()
 
 def gui_layer_pool() -> Any:
     """The GUI process's :class:`engine.layer_pool.LayerPool` for a laminate's layers (their pipelines run
-    side by side in its worker processes: this process has threads and must not fork), or None: one CPU,
-    ``WINDER_JOBS=1``, ``WINDER_GUI_POOL=0``, or no process could be made.  Made on first use, kept for
-    the session, stopped at exit."""
-    import os
+    side by side in its worker processes: this process has threads and must not fork), with one worker
+    per CPU available (``WINDER_JOBS`` overrides), or None: one CPU, ``WINDER_JOBS=1``,
+    ``WINDER_GUI_POOL=0``, or no process could be made.  Made on first use, kept for the session,
+    stopped at exit."""
 
     with _POOL_LOCK:
         if not _POOL:
             pool = None
             if os.environ.get("WINDER_GUI_POOL", "1").strip() != "0":
                 try:
-                    from engine.laminate import default_workers
+                    from engine.laminate import available_cpus
                     from engine.layer_pool import LayerPool
 
-                    n = default_workers()
+                    env = os.environ.get("WINDER_JOBS", "").strip()
+                    n = int(env) if env.isdigit() else available_cpus()
                     pool = LayerPool(n) if n > 1 else None
                 except Exception:  # noqa: BLE001 - no pool: the layers run one after the other here
                     pool = None
