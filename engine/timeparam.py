@@ -1121,18 +1121,6 @@ def _coarse_problem(prob: _Problem, ell: np.ndarray, work: bool = False) -> tupl
     n_acc = 2 * prob.p * n_bern                                      # acceleration rows (± pairs)
     at_start = inner_rows & (order < n_acc) & (pos_of[np.minimum(order, n_rows - 1)] % n_bern == 0) & (n_bern > 1)
     keep &= inner_rows
-    vert = allr[np.arange(allr.shape[0])[:, None], order] * keep[..., None]   # (N-1, R, 2)
-    vert_later = vert * ~at_start[..., None]
-    rr = np.where((slot >= 1)[..., None, None], vert_later[fi], vert[fi])   # (B, mx, R, 2)
-    g = rr[..., 0]
-    cc = rr[..., 1] + 2.0 * off[..., None] * g
-    rows = np.stack([g, cc], axis=-1) * valid[..., None, None]
-    rows = rows.reshape(B, mx * R, 2)
-    # both signs of every vertex row: the set stays centrally symmetric for _hull_sym (the compiled
-    # hull does not need it; a mirror that is not a vertex is dropped by it)
-    rows = np.concatenate([rows, -rows], axis=1)
-    ipos = np.arange(mx * R)
-    ineg = mx * R + ipos
     # caps of the inner nodes (slot >= 1): x_a + 2u·off <= cap², as a ± pair (the minus side only cuts
     # x < 0, outside every level range)
     capf = prob.cap[fi]
@@ -1140,7 +1128,25 @@ def _coarse_problem(prob: _Problem, ell: np.ndarray, work: bool = False) -> tupl
     icap = np.where(inner, 1.0 / np.where(inner, capf * capf, 1.0), 0.0)
     icap = np.where(inner & (capf <= 0), 0.0, icap)                    # zero caps are coarse nodes
     crow = np.stack([icap, 2.0 * off * icap], axis=-1)                 # (B, mx, 2)
-    rows = np.concatenate([rows, crow, -crow], axis=1)
+    rows = None
+    if _NUMBA:                         # the lines below in one compiled loop (the same bits; no temporaries)
+        from engine import timeparam_jit
+
+        rows = timeparam_jit.group_rows(allr, order, keep, at_start, fi, off, valid, crow)
+    if rows is None:
+        vert = allr[np.arange(allr.shape[0])[:, None], order] * keep[..., None]   # (N-1, R, 2)
+        vert_later = vert * ~at_start[..., None]
+        rr = np.where((slot >= 1)[..., None, None], vert_later[fi], vert[fi])   # (B, mx, R, 2)
+        g = rr[..., 0]
+        cc = rr[..., 1] + 2.0 * off[..., None] * g
+        rows = np.stack([g, cc], axis=-1) * valid[..., None, None]
+        rows = rows.reshape(B, mx * R, 2)
+        # both signs of every vertex row: the set stays centrally symmetric for _hull_sym (the compiled
+        # hull does not need it; a mirror that is not a vertex is dropped by it)
+        rows = np.concatenate([rows, -rows], axis=1)
+        rows = np.concatenate([rows, crow, -crow], axis=1)
+    ipos = np.arange(mx * R)
+    ineg = mx * R + ipos
     base = 2 * mx * R
     ipos = np.r_[ipos, base + np.arange(mx)]
     ineg = np.r_[ineg, base + mx + np.arange(mx)]

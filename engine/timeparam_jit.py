@@ -810,6 +810,76 @@ def constraint_rows(P: np.ndarray, Q: np.ndarray, A: np.ndarray, inv_sdd: float 
     return True
 
 
+_GROUPS: list[Any] = []
+
+
+def _build_groups() -> Any:
+    import numba
+
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
+    def _group_rows_k(allr, order, keep, at_start, fi, off, valid, crow, rows):  # pragma: no cover - compiled
+        # engine.timeparam._coarse_problem's numpy code element by element: the vertex rows of every
+        # interval of a group (times 1.0 / 0.0 for kept / dropped vertices, for a later slot also for a
+        # row at τ = 0), (g, c + 2·off·g) times 1.0 / 0.0 for valid / padded slots, then the same
+        # negated, then the cap rows and their negatives.
+        B, mx = fi.shape
+        R = order.shape[1]
+        half = mx * R
+        for b in range(B):
+            for t in range(mx):
+                i = fi[b, t]
+                o2 = 2.0 * off[b, t]
+                vm = 1.0 if valid[b, t] else 0.0
+                for r in range(R):
+                    kp = 1.0 if keep[i, r] else 0.0
+                    o = order[i, r]
+                    g = allr[i, o, 0] * kp
+                    c = allr[i, o, 1] * kp
+                    if t >= 1:
+                        la = 0.0 if at_start[i, r] else 1.0
+                        g = g * la
+                        c = c * la
+                    c = c + o2 * g
+                    g = g * vm
+                    c = c * vm
+                    q = t * R + r
+                    rows[b, q, 0] = g
+                    rows[b, q, 1] = c
+                    rows[b, half + q, 0] = -g
+                    rows[b, half + q, 1] = -c
+                rows[b, 2 * half + t, 0] = crow[b, t, 0]
+                rows[b, 2 * half + t, 1] = crow[b, t, 1]
+                rows[b, 2 * half + mx + t, 0] = -crow[b, t, 0]
+                rows[b, 2 * half + mx + t, 1] = -crow[b, t, 1]
+        return 0
+
+    return _group_rows_k
+
+
+def group_rows(allr: np.ndarray, order: np.ndarray, keep: np.ndarray, at_start: np.ndarray, fi: np.ndarray,
+               off: np.ndarray, valid: np.ndarray, crow: np.ndarray) -> np.ndarray | None:
+    """The node groups' constraint rows of :func:`engine.timeparam._coarse_problem` (bit for bit its numpy
+    code's): ``rows`` (B, 2·mx·R + 2·mx, 2) from the intervals' rows ``allr``, their hull vertex ids
+    ``order`` (N-1, R), ``keep`` and ``at_start`` masks, the groups' intervals ``fi`` (B, mx), offsets
+    ``off`` (mm), ``valid`` slots and cap rows ``crow`` (B, mx, 2); ``None`` without numba (loaded)."""
+    if not _GROUPS:
+        if kernel(0) is None:
+            return None
+        try:
+            _GROUPS.append(_build_groups())
+        except Exception:  # noqa: BLE001 - see kernel()
+            _GROUPS.append(None)
+    if _GROUPS[0] is None:
+        return None
+    B, mx = fi.shape
+    R = order.shape[1]
+    rows = np.empty((B, 2 * mx * R + 2 * mx, 2))
+    c = np.ascontiguousarray
+    _GROUPS[0](c(allr, float), c(order, np.int64), c(keep, np.bool_), c(at_start, np.bool_), c(fi, np.int64),
+               c(off, float), c(valid, np.bool_), c(crow, float), rows)
+    return rows
+
+
 _HULL_SYM: list[Any] = []
 
 
@@ -1386,5 +1456,5 @@ def warm() -> bool:
 
 
 __all__ = ["IMPORT_THRESHOLD", "SCRATCH_MAX_ELEMENTS", "chains", "constraint_rows", "dp_pass", "forward_pass",
-           "hulls", "hull_sym_order", "hull_sym_prep", "hull_sym_rows", "kernel", "limit_ratios", "scratch", "warm",
-           "windows"]
+           "group_rows", "hulls", "hull_sym_order", "hull_sym_prep", "hull_sym_rows", "kernel", "limit_ratios",
+           "scratch", "warm", "windows"]

@@ -251,3 +251,24 @@ def test_compiled_reference_hull_sorts_ties_and_signed_zero_angles_as_numpy() ->
         a = tp._hull_sym(pts, ipos, ineg, compiled=False)
         b = tp._hull_sym(pts, ipos, ineg, compiled=True)
         assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+
+
+@pytest.mark.parametrize("n", [3000, 6000])
+def test_compiled_group_rows_are_the_numpy_rows(n: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The node groups' rows by the compiled loop (timeparam_jit.group_rows) are the numpy code's bit for bit
+    (signed zeros of dropped and padded rows included), hence the same coarse problem."""
+    pytest.importorskip("numba")
+    from engine import timeparam_jit
+
+    assert timeparam_jit.kernel(1 << 62) is not None
+    s, X, dX, ddX = example_path(n)
+    prob = tp._prepare(s, X, dX, ddX, replace(example_limits(), levels=100), chains=False)
+    ell = tp._group_length(prob)
+    assert ell is not None
+    new, idx = tp._coarse_problem(prob, ell)
+    monkeypatch.setattr(timeparam_jit, "group_rows", lambda *a: None)
+    ref, idx_ref = tp._coarse_problem(prob, ell)
+    assert np.array_equal(idx, idx_ref)
+    for k in ("rows", "hull_rows", "ipos", "ineg", "rq", "rk", "lq", "lk", "xjb", "xjt", "cap_dp", "xn"):
+        assert _same(getattr(new, k), getattr(ref, k)), k
+    assert (np.signbit(new.rows) == np.signbit(ref.rows)).all()
