@@ -632,12 +632,24 @@ def _geodesic_pass(
     return _finish(grid, C, lam, v, s, "geodesic", pieces, bridging, notes)
 
 
-def _bridging(grid: wc.PassGrid, C: FloatArray, lam: FloatArray, k: int = 10) -> list[tuple[float, float]]:
+BRIDGING_CHECK_POINTS = 25_000
+"""Points inside the steps of a pass at which :func:`_bridging` checks (6), at least: 10 per step up to
+2 500 steps (the default 2 000 points per pass and its refined grids, up to ~2 400 steps on the shipped
+examples: all of them keep 10), fewer per step on a denser pass (at least 3), so that the check of an
+8 000-point pass is no coarser in z than the default's and costs about as much (the mandrel's r, r',
+r'' at every check point: ~0.5 s a line on the isotensoid vessel at 8 000 points per pass with 10 per
+step)."""
+
+
+def _bridging(grid: wc.PassGrid, C: FloatArray, lam: FloatArray, k: int | None = None) -> list[tuple[float, float]]:
     """Every z range (mm) where the band bridges (constraint (6), the bracket of (3) below 0).
 
     Checked at the nodes (knots, joints and r'' extrema among them) and at ``k`` points inside every
-    step, with C between the nodes from the cubic Hermite interpolant of ODE (3) in t.
+    step (default: 10, fewer on a pass of more than 2 500 steps, :data:`BRIDGING_CHECK_POINTS`), with C
+    between the nodes from the cubic Hermite interpolant of ODE (3) in t.
     """
+    if k is None:
+        k = max(3, min(10, -(-BRIDGING_CHECK_POINTS // max(grid.n - 1, 1))))
     rn, _, _ = wc.node_geometry(grid)
     F = _bracket(grid, C)
     bad_node = F < -1e-9 * np.maximum(1.0, rn)

@@ -236,3 +236,41 @@ def test_derived_arrays_equal_the_whole_array_expressions() -> None:
         assert np.array_equal(d.take(idx), ref[idx])
         d2 = pickle.loads(pickle.dumps(DerivedArray(d.op, d.args, d.n), protocol=5))
         assert np.array_equal(d2.materialise(), ref)
+
+
+def test_bridging_check_of_a_dense_pass_finds_the_same_runs(monkeypatch: pytest.MonkeyPatch) -> None:
+    """At 8 000 points per pass the no-bridging check takes fewer points per step (BRIDGING_CHECK_POINTS:
+    ~4 instead of 10, still at least as dense in z as the default pass's): a geodesic forced over a
+    waist reports the same bridging runs as with 10 per step (within one step), and as an independent
+    scan of the bound C_b(z) > C."""
+    from test_constraints import BAND, c_bound, waisted
+
+    import engine.winding as W
+    from engine.job import WindingSpec
+
+    m = waisted(9, [0.1, 0.2, 0.3, 0.4, 0.45, 0.55, 0.6, 0.7, 0.8, 0.9], 0.6, 0.5, (15.0, 15.0))
+    spec = WindingSpec(mode="geodesic", points_per_pass=8000)
+    calls: list[int] = []
+    orig = W._bridging
+
+    def spy(grid, C, lam, k=None):  # noqa: ANN001, ANN202
+        calls.append(grid.n)
+        return orig(grid, C, lam, k)
+
+    monkeypatch.setattr(W, "_bridging", spy)
+    wl = W.winding_line(m, BAND, 0.5, spec)
+    assert calls and min(calls) > 2500          # the dense rule applies
+    monkeypatch.setattr(W, "_bridging", lambda grid, C, lam, k=None: orig(grid, C, lam, 10))
+    ref = W.winding_line(m, BAND, 0.5, spec)
+    assert wl.bridging and len(wl.bridging) == len(ref.bridging)
+    step = (wl.z_turn[1] - wl.z_turn[0]) / 8000
+    for (a, b), (c, d) in zip(wl.bridging, ref.bridging):
+        assert abs(a - c) <= step and abs(b - d) <= step
+    z = np.linspace(*wl.z_turn, 200_001)
+    C = float(wl.C[~wl.dwell][0])
+    bad = c_bound(m, z) > C
+    edges = np.flatnonzero(np.diff(bad.astype(int)))
+    runs = list(zip(z[edges[0::2] + 1], z[edges[1::2]]))
+    assert len(runs) == len(wl.bridging)
+    for (a, b), (c, d) in zip(runs, wl.bridging):
+        assert abs(a - c) < 0.2 and abs(b - d) < 0.2
