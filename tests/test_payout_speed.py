@@ -96,12 +96,13 @@ def test_tube_margin_closes_at_the_optimum() -> None:
     geo, env, _ = payout._prepare(line, mandrel, job.payout, job.payout.parameter, 300, None, None)
     tube = payout._Tube(payout._Problem(geo, env, job.payout.impregnation_k))
     margins = []
-    for t in (t13 - 1e-2, t13 - 1e-4, t13 - 1e-6, t13):
-        assert tube.solve(t, None) is not None
-        margins.append(tube.margin())
+    with np.errstate(divide="ignore", invalid="ignore"):  # as the stages run it (payout._quiet_fp)
+        for t in (t13 - 1e-2, t13 - 1e-4, t13 - 1e-6, t13):
+            assert tube.solve(t, None) is not None
+            margins.append(tube.margin())
+        assert tube.solve(t13 + 1e-6, None) is None
     assert all(m1 > m2 for m1, m2 in zip(margins, margins[1:], strict=False))
     assert margins[-1] < 1e-6 * margins[0]
-    assert tube.solve(t13 + 1e-6, None) is None
 
 
 def test_build_equals_the_broadcast_formula() -> None:
