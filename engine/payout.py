@@ -2409,9 +2409,14 @@ def _extend_replicated(eye: EyePath, line: Any) -> EyePath | None:
         if not np.array_equal(a[:-1].reshape(nc, m), np.broadcast_to(a[:m], (nc, m))) or a[-1] != a[m]:
             return None
     dv = deferred(line, "v")
-    v = dv.materialise() if dv is not None else np.asarray(line.v, dtype=float)   # not kept by the line
     kk = np.arange(nc)
-    if np.any(np.abs(v[kk * m] - v[0] - kk * float(twist)) > 1e-9 * (1.0 + abs(float(v[-1])))):
+    if dv is not None:   # a rule: the circuits' first rows and the last one only (v made below if x is v)
+        v: FloatArray | None = None
+        v_start, v_last = dv.take(kk * m), float(dv.rows(n - 1, n)[0])
+    else:
+        v = np.asarray(line.v, dtype=float)
+        v_start, v_last = v[kk * m], float(v[-1])
+    if np.any(np.abs(v_start - v_start[0] - kk * float(twist)) > 1e-9 * (1.0 + abs(v_last))):
         return None
     one_line = take(0)
     one = _extend_pointwise(eye, one_line)
@@ -2453,7 +2458,10 @@ def _extend_replicated(eye: EyePath, line: Any) -> EyePath | None:
     # V, λ, u and x_mid: made on first read from their operands, with the whole-array arithmetic
     # (engine.periodic.DerivedArray; no stage of a CLI run reads them whole)
     v_rule = dv if dv is not None else v
-    x = s_all if eye.parameter == "s" else v
+    if eye.parameter == "s":
+        x = s_all
+    else:
+        x = v if v is not None else dv.materialise()   # type: ignore[union-attr]
     V = DerivedArray("add", (v_rule, tile(one.V - np.asarray(one_line.v, dtype=float))), n)
     lam = DerivedArray("pulled", (s_all, l, R, one.k), n)
     out = EyePath(

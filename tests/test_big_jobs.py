@@ -274,3 +274,24 @@ def test_bridging_check_of_a_dense_pass_finds_the_same_runs(monkeypatch: pytest.
     assert len(runs) == len(wl.bridging)
     for (a, b), (c, d) in zip(runs, wl.bridging):
         assert abs(a - c) < 0.2 and abs(b - d) < 0.2
+
+
+@pytest.mark.parametrize("parameter", ["s", "v"])
+def test_replicated_eye_path_of_a_rule_line_equals_that_of_the_whole_line(parameter: str) -> None:
+    """The payout's replicated eye path of a line kept as rules (v read at the circuits' first rows only; V,
+    λ, u, x_mid derived) equals, field by field and bit for bit, the one made from the same line with
+    every field a plain array, for both process parameters; the line's v is not materialised (parameter s)."""
+    from engine.payout import extend_to_line, payout_for_job
+
+    job, mandrel, line = _line("pressure_vessel", points=80)
+    job = job.replace(payout={**job.payout.model_dump(), "grid_points": 200, "parameter": parameter})
+    eye1 = payout_for_job(job, line, mandrel)
+    rep = extend_to_line(eye1, line)
+    if parameter == "s":
+        assert "v" in _kept(line)
+    ref = extend_to_line(eye1, replace(line))
+    assert rep.report.get("replicated_circuits") == ref.report.get("replicated_circuits") == line.circuits
+    for name in ("x", "index", "l", "Z", "R", "V", "eye_xyz", "contact_xyz", "fibre_dir", "s", "lam_pulled", "u",
+                 "x_mid"):
+        a, b = getattr(rep, name), getattr(ref, name)
+        assert a.dtype == b.dtype and np.array_equal(a, b), name
