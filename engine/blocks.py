@@ -132,23 +132,35 @@ def time_metric(q: np.ndarray, fmax: np.ndarray) -> np.ndarray:
     (s; ``q`` (N, axes) in controller units, ``fmax`` units/s).
 
     The same values as ``cumsum(max(|diff(q)| / fmax, axis=1))`` bit for bit (a maximum is exact);
-    taken column by column, as numpy's reduction over a short last axis is four times slower."""
+    taken column by column, as numpy's reduction over a short last axis is four times slower, and
+    :data:`TIME_METRIC_CHUNK` rows at a time (the work arrays stay in the cache and are not fresh
+    pages: on a 6.4 M-point path they were two more 49 MB arrays), the running sum carried from piece
+    to piece (``cumsum`` adds left to right: the same sums)."""
     q = np.asarray(q, dtype=float)
     n = q.shape[0]
     w = np.empty(n)
     w[0] = 0.0
     if n < 2:
         return w
-    m = None
-    for k in range(q.shape[1]):
-        c = np.subtract(q[1:, k], q[:-1, k])
-        np.abs(c, out=c)
-        c /= fmax[k]
-        m = c if m is None else np.maximum(m, c, out=m)
-    if m is None:
+    if q.shape[1] == 0:
         raise ValueError("time_metric: the axis path has no axes")
-    np.cumsum(m, out=w[1:])
+    for s0 in range(0, n - 1, TIME_METRIC_CHUNK):
+        s1 = min(s0 + TIME_METRIC_CHUNK, n - 1)
+        qc = q[s0:s1 + 1]
+        m = None
+        for k in range(q.shape[1]):
+            c = np.subtract(qc[1:, k], qc[:-1, k])
+            np.abs(c, out=c)
+            c /= fmax[k]
+            m = c if m is None else np.maximum(m, c, out=m)
+        seg = w[s0:s1 + 1]          # seg[0] = w[s0], the sum so far
+        seg[1:] = m
+        np.cumsum(seg, out=seg)
     return w
+
+
+TIME_METRIC_CHUNK = 1 << 15
+"""Path steps per piece of :func:`time_metric`."""
 
 
 def make_blocks(machine: MachineTemplate, axis_path: AxisPath, tol_mm: float = 0.05, cyclic: bool = True,

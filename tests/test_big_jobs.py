@@ -295,3 +295,18 @@ def test_replicated_eye_path_of_a_rule_line_equals_that_of_the_whole_line(parame
                  "x_mid"):
         a, b = getattr(rep, name), getattr(ref, name)
         assert a.dtype == b.dtype and np.array_equal(a, b), name
+
+
+@pytest.mark.parametrize("chunk", [1, 2, 7, 1 << 15])
+def test_time_metric_in_pieces_is_the_17_metric_bit_for_bit(monkeypatch: pytest.MonkeyPatch, chunk: int) -> None:
+    """time_metric taken TIME_METRIC_CHUNK steps at a time, the running sum carried: the whole-array
+    (17) metric bit for bit, at every size around the piece boundaries."""
+    import engine.blocks as B
+
+    monkeypatch.setattr(B, "TIME_METRIC_CHUNK", chunk)
+    rng = np.random.default_rng(8)
+    fmax = np.array([1000.0, 20.0, 300.0, 7.5])
+    for n in (1, 2, 3, 8, 15, 16, 100, 70_001):
+        q = np.cumsum(rng.normal(size=(n, 4)), axis=0) * 1e3
+        ref = np.concatenate(([0.0], np.cumsum(np.max(np.abs(np.diff(q, axis=0)) / fmax, axis=1))))
+        assert np.array_equal(B.time_metric(q, fmax), ref), n
