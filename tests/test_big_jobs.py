@@ -128,6 +128,13 @@ def test_pipeline_keeps_a_big_line_as_rules() -> None:
     whole = replace(lr, result=replace(r, axes=replace(r.axes), line=replace(r.line)))
     assert np.array_equal(got, _last_laid_point(res.machine, q_end, whole))
     assert slips == [whole.result.line.slip_lambda(a, b) for a, b in zs] and max(slips) > 0
+    # the desktop application's worker makes every field whole before its views read them
+    from engine.payout import EYE_PATH_FIELDS
+    from engine.periodic import materialise_all
+
+    materialise_all(r.eye)
+    assert all(isinstance(vars(r.eye)[f], np.ndarray) for f in EYE_PATH_FIELDS)
+    assert np.array_equal(r.eye.u, np.diff(r.eye.lam_pulled) / np.diff(r.eye.x))
 
 
 def _spec(circuits: int | None, points: int, **kw):
