@@ -27,7 +27,8 @@ must not be refused; if a ``winder run`` is, that is printed and the case runs a
 ``WINDER_MAX_MEMORY=64G``.  Printed per case: wall (the whole command, interpreter start and NC file
 included), CPU (user + system of the process and of its children: ``winder run`` forks one worker per
 heavy layer), peak RSS of the process and of its largest child (``ru_maxrss``), and the ratios to the
-targets 12 s and 1.2 GB (1228.8 MB); ``!`` marks a figure over its target, ``~`` one within 10 % of it.
+targets 12 s and 1.2 GB (1228.8 MB); ``!`` marks a figure over its target, ``~`` one within 10 % of it;
+and the memory budget's estimate of the job (``engine.budget``), which must bound the peak.
 
 ``--cold-numba`` runs each case with an empty numba cache: a first run after installing without
 ``make venv`` (which compiles the time law's kernels) pays ~7 s more CPU compiling them.
@@ -184,14 +185,38 @@ def _run(mode: str, args: list[str], budget: str | None, d: Path) -> dict[str, A
     return r
 
 
+def budget_estimate_mb(name: str, job_path: Path) -> float:
+    """The memory budget's estimate of the job (engine.budget, MB): an upper bound of its peak RSS."""
+    if str(ROOT) not in sys.path:
+        sys.path.insert(0, str(ROOT))
+    from engine import budget
+    from engine.job import build_mandrel, load_job
+
+    job = load_job(job_path)
+    if name == "vessel-pipeline":
+        job = job.replace(winding={**job.winding.model_dump(), "circuits": CIRCUITS, "points_per_pass": POINTS})
+    mandrel = build_mandrel(job, job_path)
+    budget.set_max_memory(2**45)
+    try:
+        if name == "vessel-pipeline":
+            est = budget.check_winding_spec(job.winding, float(mandrel.r_max), job.band.width_mm,
+                                            job.band.thickness_mm)
+        else:
+            est = budget.check_laminate(job, mandrel)
+    finally:
+        budget.set_max_memory(None)
+    return est.bytes / 2**20
+
+
 def run_case(name: str, d: Path) -> dict[str, Any]:
     """One case in a fresh process; a ``winder run`` case first with the default memory budget."""
     _label, make = CASES[name]
     if make is None:
         return {**_run("pipeline", [str(EX / "pressure_vessel.toml"), str(CIRCUITS), str(POINTS)], None, d),
-                "refused": None}
+                "refused": None, "estimate_mb": budget_estimate_mb(name, EX / "pressure_vessel.toml")}
     job = d / f"{name}.toml"
     job.write_text(tomli_w.dumps(make()), encoding="utf-8")
+    estimate = budget_estimate_mb(name, job)
     args = ["run", str(job), "-o", str(d / f"{name}.ngc"), "--quiet", "--report", str(d / f"{name}.json")]
     if name in FORCE:
         args.append("--force")
@@ -201,6 +226,7 @@ def run_case(name: str, d: Path) -> dict[str, Any]:
         refused = r["stderr"].strip().splitlines()[-1]
         r = _run("cli", args, "64G", d)
     r["refused"] = refused
+    r["estimate_mb"] = estimate
     rep = d / f"{name}.json"
     if rep.exists():
         data = json.loads(rep.read_text())
@@ -250,7 +276,7 @@ def main() -> int:
             stg = ", ".join(f"{k} {v:.2f}" for k, v in (r.get("stages") or {}).items())
             print(f"  {name}: stages {stg}", flush=True)
     print(f"\n{'case':<44} {'wall s':>7} {'CPU s':>7} {'RSS MB':>7} {'child MB':>8} {'wall/12s':>9} "
-          f"{'RSS/1.2GB':>9}  load  budget")
+          f"{'RSS/1.2GB':>9} {'est. MB':>8} {'RSS/est':>7}  load  budget")
     for name, r in rows:
         cpu = r.get("cpu_self", float("nan")) + r.get("cpu_children", 0.0)
         rss = max(r.get("rss_self_mb", float("nan")), r.get("rss_children_mb", 0.0))
@@ -260,10 +286,15 @@ def main() -> int:
         fails += bad
         budget = "REFUSED" if r.get("refused") else ("default" if r["budget"] is None else r["budget"])
         print(f"{CASES[name][0]:<44} {r['wall']:7.2f} {cpu:7.2f} {r.get('rss_self_mb', float('nan')):7.0f} "
-              f"{child:8.0f} {rw:8.2f}{_mark(rw)} {rm:8.2f}{_mark(rm)}  {r['load']:4.2f}  {budget}"
+              f"{child:8.0f} {rw:8.2f}{_mark(rw)} {rm:8.2f}{_mark(rm)} {r['estimate_mb']:8.0f} "
+              f"{rss / r['estimate_mb']:7.2f}  {r['load']:4.2f}  {budget}"
               + ("" if r["returncode"] == 0 else f"  exit {r['returncode']}"))
     print(f"\n{len(rows) - fails} of {len(rows)} cases within both targets "
           "(RSS ratio: the larger of the process' and its largest child's peak)")
+    over = [name for name, r in rows if max(r.get("rss_self_mb", 0.0), r.get("rss_children_mb", 0.0))
+            > r["estimate_mb"]]
+    print("the memory budget's estimate (engine.budget) bounds every peak" if not over else
+          f"the memory budget's estimate is BELOW the peak of: {', '.join(over)}")
     return 0
 
 
