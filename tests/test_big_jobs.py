@@ -30,6 +30,12 @@ ROOT = Path(__file__).resolve().parents[1]
 EX = ROOT / "resources" / "examples"
 
 
+@pytest.fixture(autouse=True)
+def _cli_process(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A command-line process: results are not materialised (a GUI test earlier in the same session sets it)."""
+    monkeypatch.setattr(budget, "_materialised", False)
+
+
 def _line(name: str, points: int = 60):
     path = EX / f"{name}.toml"
     job = load_job(path)
@@ -152,12 +158,10 @@ def test_default_budget_accepts_the_target_job_and_refuses_what_does_not_fit() -
     assert budget.max_memory_bytes() == budget.DEFAULT_MAX_MEMORY_BYTES
     est = budget.check_winding_spec(_spec(400, 8000), 100.0, 8.0)
     assert est.bytes <= 2 * 2**30 and est.count > 6.4e6
-    try:
-        budget.set_results_materialised(True)
-        with pytest.raises(InputError, match="memory budget"):
-            budget.check_winding_spec(_spec(400, 8000), 100.0, 8.0)
-    finally:
-        budget.set_results_materialised(False)
+    budget.set_results_materialised(True)     # (undone by the fixture)
+    with pytest.raises(InputError, match="memory budget"):
+        budget.check_winding_spec(_spec(400, 8000), 100.0, 8.0)
+    budget.set_results_materialised(False)
     budget.set_max_memory(512 * 2**20)
     try:
         with pytest.raises(InputError, match="winding.circuits"):
