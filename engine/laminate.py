@@ -1204,21 +1204,24 @@ class _Scheduler:
             check_cancel(state)
         check_cancel(state)
 
-    def _spawn(self, p: _Prepared, sub: State | None) -> None:
-        """``p`` to a new child; run here where forking is not possible any more (a thread started, the
-        system refused the fork)."""
+    def _spawn(self, p: _Prepared, sub: State | None, here: bool = True) -> bool:
+        """``p`` to a new child (True); where forking is not possible any more (a thread started, the
+        system refused the fork) or the pool cannot take it: run here (``here``) or leave it to the
+        caller (False)."""
         import threading
 
         if self.pool is not None:
             if _pool_pipeline(self.pool, self.jp, p, self.upto, lambda c: self.children.__setitem__(p.i, c)):
-                return
+                return True
         elif threading.active_count() == 1:
             try:
                 _fork_pipeline(self.jp, p, self.upto, lambda c: self.children.__setitem__(p.i, c))
-                return
+                return True
             except OSError:
                 pass
-        self.out[p.i] = self._here(p, sub)
+        if here:
+            self.out[p.i] = self._here(p, sub)
+        return False
 
     def close(self) -> None:
         """Stop and reap every child, close its pipe, remove its files (idempotent)."""
@@ -1230,10 +1233,9 @@ class _Scheduler:
         A hoop layer with a helical or polar layer still to come is queued: it will be far cheaper than
         that one, and this process winds it while that one runs (its fork would cost about as much)."""
         self._poll()
-        if more and self._running() < self.slots_free and not (isinstance(p.layer, HoopLayer) and heavier_later):
-            self._spawn(p, None)
-        else:
-            self.queue.append(p)
+        if not (more and self._running() < self.slots_free and not (isinstance(p.layer, HoopLayer) and heavier_later)
+                and self._spawn(p, None, here=False)):
+            self.queue.append(p)  # wound later, with its progress and cancel (finish)
 
     def _here(self, p: _Prepared, state: State | None) -> Any:
         from engine.errors import Cancelled
@@ -1343,6 +1345,14 @@ def _fork_pipeline(jp: str | None, p: _Prepared, upto: str, register: Callable[[
     return child
 
 
+def _budget_state() -> tuple[int | None, bool]:
+    """This process's memory budget settings (engine.budget), for a pool worker to apply (a spawned process
+    does not inherit them as a forked child does)."""
+    from engine import budget
+
+    return budget._override, budget._materialised
+
+
 _POOL_MAX_POINTS = 2_000_000
 """A layer whose line has more points is wound in the calling process rather than sent to a pool worker:
 pickling its line (~160 bytes a point) would hold the interpreter lock long enough to stall the GUI."""
@@ -1355,15 +1365,17 @@ def _pool_pipeline(pool: Any, jp: str | None, p: _Prepared, upto: str, register:
     import secrets
 
     from engine.layer_pool import PoolChild
+    from engine.periodic import raw_field
 
-    if np.size(p.line.z) > _POOL_MAX_POINTS:
+    if len(raw_field(p.line, "z")) > _POOL_MAX_POINTS:  # counted without materialising the line
         return False
     w = pool.acquire()
     if w is None:
         return False
     tag = f"winder-{os.getpid()}-{p.i}-{secrets.token_hex(6)}"
     try:
-        child = PoolChild(pool, w, jp, p, upto, [os.path.join(folder, tag) for folder in _answer_folders()])
+        child = PoolChild(pool, w, jp, p, upto, [os.path.join(folder, tag) for folder in _answer_folders()],
+                          _budget_state())
     except Exception:  # noqa: BLE001 - the layer would not pickle or the worker died: run it here
         pool.discard(w)
         return False

@@ -33,12 +33,29 @@ def _pool_main(conn: Any) -> None:
 
     _preload()
     conn.send_bytes(b"ready")
+    from engine import budget
+
     while True:
         try:
-            jp, p, upto, paths = conn.recv()
+            jp, p, upto, paths, (max_memory, materialised) = conn.recv()
         except (EOFError, OSError):
             return
-        conn.send_bytes(_pipeline_answer(jp, p, upto, paths))
+        budget.set_max_memory(max_memory)           # the owner's memory budget, as a forked child has it
+        budget.set_results_materialised(materialised)
+        answer = _pipeline_answer(jp, p, upto, paths)
+        try:
+            conn.send_bytes(answer)
+        except OSError:  # the owner is gone: nobody will map or remove the answer file
+            for path in paths:
+                try:
+                    os.unlink(path)
+                except OSError:
+                    pass
+            return
+
+
+_READY_TIMEOUT_S = 120.0
+"""How long a worker may take to start and import the engine before it counts as failed (s)."""
 
 
 class _Worker:
@@ -56,11 +73,12 @@ class _Worker:
     def pid(self) -> int:
         return int(self.proc.pid or 0)
 
-    def wait_ready(self) -> bool:
-        """Until the worker has imported its modules; False if it died meanwhile."""
+    def wait_ready(self, timeout_s: float = _READY_TIMEOUT_S) -> bool:
+        """Until the worker has imported its modules; False if it died meanwhile or took longer than
+        ``timeout_s`` (a hung start)."""
         if not self.ready:
             try:
-                self.ready = self.conn.recv_bytes() == b"ready"
+                self.ready = self.conn.poll(timeout_s) and self.conn.recv_bytes() == b"ready"
             except (EOFError, OSError):
                 return False
         return self.ready
@@ -173,11 +191,11 @@ class PoolChild:
     """A layer running in a pool worker, with the interface of :class:`engine.laminate._Child`."""
 
     def __init__(self, pool: LayerPool, worker: _Worker, jp: str | None, p: Any, upto: str,
-                 paths: list[str]) -> None:
+                 paths: list[str], budget_state: tuple[int | None, bool] = (None, False)) -> None:
         self.pool, self.worker, self.layer, self.paths = pool, worker, p, paths
         self.pid, self.fd = worker.pid, worker.conn.fileno()
         self.done = False
-        worker.conn.send((jp, p, upto, paths))
+        worker.conn.send((jp, p, upto, paths, budget_state))
 
     def ready(self) -> bool:
         """Whether it has answered (or died)."""

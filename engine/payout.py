@@ -206,8 +206,9 @@ class _Geo:
         B = mu + r * a
         b2 = b * b
         disc = np.sqrt(np.maximum(B * B - b2 * (mu * mu - r * r), 0.0))
-        neg = (mu * mu - r * r) / (B - disc)  # 0/0, x/0 possible: run under _quiet_fp (no warning)
-        pos = (B + disc) / b2
+        with np.errstate(divide="ignore", invalid="ignore"):  # called outside the _quiet_fp stages too
+            neg = (mu * mu - r * r) / (B - disc)
+            pos = (B + disc) / b2
         return np.where(B <= 0, neg, pos)
 
     def dR_dl(self, l: FloatArray) -> FloatArray:

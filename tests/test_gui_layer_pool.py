@@ -113,7 +113,7 @@ def test_gui_pool_size_follows_the_settings(monkeypatch: pytest.MonkeyPatch, env
             pool.close()
 
 
-def test_gui_pool_default_is_the_cpus_available(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_gui_pool_default_is_the_cpus_available_up_to_eight(monkeypatch: pytest.MonkeyPatch) -> None:
     from engine.laminate import available_cpus
     from winder_gui import tasks
 
@@ -122,7 +122,7 @@ def test_gui_pool_default_is_the_cpus_available(monkeypatch: pytest.MonkeyPatch)
     monkeypatch.setattr(tasks, "_POOL", [])
     pool = tasks.gui_layer_pool()
     try:
-        assert (pool.workers if pool is not None else 1) == available_cpus()
+        assert (pool.workers if pool is not None else 1) == min(available_cpus(), tasks._POOL_MAX_WORKERS)
     finally:
         if pool is not None:
             pool.close()

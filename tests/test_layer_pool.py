@@ -103,9 +103,10 @@ def test_cancel_kills_the_busy_workers_and_the_pool_refills(layup, pool) -> None
     busy: list[int] = []
     orig = lam._Scheduler._spawn
 
-    def spawn(self, p, sub):  # noqa: ANN001, ANN202
-        orig(self, p, sub)
+    def spawn(self, p, sub, here=True):  # noqa: ANN001, ANN202
+        ok = orig(self, p, sub, here)
         busy.extend(c.pid for c in self.children.values())
+        return ok
 
     def lam_children() -> list[int]:
         return busy
@@ -166,3 +167,45 @@ def test_a_pool_whose_workers_cannot_start_gives_up_and_runs_here(layup, monkeyp
         assert p._closed and p.pids() == []       # it stopped trying after a few failed starts
     finally:
         p.close()
+
+
+def test_a_layer_the_pool_cannot_take_is_wound_with_progress_and_cancel(layup, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A busy, closed or failing pool: the layer is wound in the calling thread later, with its share of the
+    progress and the cancel checks (not with no state at all), and the program is the same."""
+    from engine.state import RecordingState
+
+    class Refusing:
+        workers = 2
+
+        def acquire(self):  # noqa: ANN202
+            return None
+
+    job, one = layup
+    states: list[bool] = []
+    here = lam._Scheduler._here
+
+    def logged(self, p, state):  # noqa: ANN001, ANN202
+        states.append(state is not None)
+        return here(self, p, state)
+
+    monkeypatch.setattr(lam._Scheduler, "_here", logged)
+    _same_result(one, _in_thread(lambda: lam.run_laminate(job, pool=Refusing(), state=RecordingState())))
+    assert states and all(states), states
+
+
+def test_pool_size_check_does_not_materialise_the_line(layup, pool, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The pool's size limit counts the line's points from its stored field (a big line kept as circuit 0 +
+    rule is not made whole to be measured)."""
+    import engine.periodic as per
+
+    job, one = layup
+    seen: list[int] = []
+    orig = per.raw_field
+
+    def counted(obj, name):  # noqa: ANN001, ANN202
+        seen.append(1)
+        return orig(obj, name)
+
+    monkeypatch.setattr(per, "raw_field", counted)
+    _same_result(one, _in_thread(lambda: lam.run_laminate(job, pool=pool)))
+    assert seen

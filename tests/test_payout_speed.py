@@ -213,3 +213,18 @@ def test_highs_core_while_another_thread_imports_scipy() -> None:
                              cwd=root, env={**os.environ, "PYTHONPATH": str(root)})
         assert out.returncode == 0 and out.stdout.strip() == "ok", (delay, out.stderr)
 
+
+
+def test_closed_form_inverse_outside_the_quiet_stages_warns_nothing() -> None:
+    """_Geo.l_of_mu is called outside the (13)/(14) stages too (the LP/QP stages, the final law): its
+    0/0 and x/0 branches (b = 0) are discarded without a floating-point warning."""
+    import warnings
+
+    job, mandrel, line = _coarse_example("pipe")
+    geo, _env, _ = payout._prepare(line, mandrel, job.payout, job.payout.parameter, 300, None, None)
+    flat = payout._Geo(geo.line, geo.x, geo.a, np.zeros_like(geo.b), geo.c, geo.index)
+    mu = np.abs(geo.line.r) + 50.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        l = flat.l_of_mu(mu, 1)
+    assert l.shape == mu.shape

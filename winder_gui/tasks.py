@@ -344,6 +344,7 @@ ENGINE_MODULES: tuple[str, ...] = (
 
 
 _POOL: list[Any] = []   # the process's LayerPool (or None), made once
+_POOL_MAX_WORKERS = 8
 _POOL_LOCK = threading.Lock()
 
 
@@ -357,13 +358,15 @@ def gui_layer_pool() -> Any:
     with _POOL_LOCK:
         if not _POOL:
             pool = None
-            if os.environ.get("WINDER_GUI_POOL", "1").strip() != "0":
+            # POSIX: the scheduler selects on the workers' pipes and removes answer files it has mapped
+            if os.environ.get("WINDER_GUI_POOL", "1").strip() != "0" and os.name == "posix":
                 try:
                     from engine.laminate import available_cpus
                     from engine.layer_pool import LayerPool
 
                     env = os.environ.get("WINDER_JOBS", "").strip()
-                    n = int(env) if env.isdigit() else available_cpus()
+                    # more workers than heavy layers are rare; each costs ~0.4 s of CPU to start and ~35 MB
+                    n = int(env) if env.isdigit() else min(available_cpus(), _POOL_MAX_WORKERS)
                     pool = LayerPool(n) if n > 1 else None
                 except Exception:  # noqa: BLE001 - no pool: the layers run one after the other here
                     pool = None
