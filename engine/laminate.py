@@ -1144,13 +1144,7 @@ class _Child:
         self.reaped = True
 
     def remove_files(self) -> None:
-        import os
-
-        for path in self.paths:
-            try:
-                os.unlink(path)
-            except FileNotFoundError:
-                pass
+        _remove_files(self.paths)
 
     def close(self) -> None:
         """Stop it if it still runs, reap it, close its pipe and remove its files."""
@@ -1381,6 +1375,17 @@ def _pool_pipeline(pool: Any, jp: str | None, p: _Prepared, upto: str, register:
         return False
     register(child)
     return True
+
+
+def _remove_files(paths: list[str]) -> None:
+    """Remove a child's answer files (those that exist; a cleanup never raises)."""
+    import os
+
+    for path in paths:
+        try:
+            os.unlink(path)
+        except OSError:
+            pass
 
 
 def _answer_folders() -> list[str]:

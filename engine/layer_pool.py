@@ -17,7 +17,6 @@ computing (their CPU is free at once) and the pool starts fresh ones behind them
 
 from __future__ import annotations
 
-import os
 import threading
 from typing import Any
 
@@ -29,7 +28,7 @@ def _pool_main(conn: Any) -> None:
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the owner stops its workers itself
-    from engine.laminate import _pipeline_answer, _preload
+    from engine.laminate import _pipeline_answer, _preload, _remove_files
 
     _preload()
     conn.send_bytes(b"ready")
@@ -46,11 +45,7 @@ def _pool_main(conn: Any) -> None:
         try:
             conn.send_bytes(answer)
         except OSError:  # the owner is gone: nobody will map or remove the answer file
-            for path in paths:
-                try:
-                    os.unlink(path)
-                except OSError:
-                    pass
+            _remove_files(paths)
             return
 
 
@@ -232,13 +227,9 @@ class PoolChild:
             self._stop()
 
     def remove_files(self) -> None:
-        for path in self.paths:
-            try:
-                os.unlink(path)
-            except FileNotFoundError:
-                pass
-            except OSError:
-                pass
+        from engine.laminate import _remove_files
+
+        _remove_files(self.paths)
 
     def close(self) -> None:
         """Stop it if it is still computing, remove its files (idempotent)."""
