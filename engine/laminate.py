@@ -1943,6 +1943,7 @@ def transition_clearance(machine: Any, blocks: Any, layers: list[LayerResult],
         _segment_min_rho,
         capsule_min_distance,
         mandrel_distance_fn,
+        radial_prune,
         support_obstacles,
     )
 
@@ -1994,7 +1995,7 @@ def transition_clearance(machine: Any, blocks: Any, layers: list[LayerResult],
             # against the surface the last laid point lies on; dips within 0.1 mm of it are the sampled
             # surface's own roughness at the point
             fn = distance_to(laid[j].surface)
-            dmin = capsule_min_distance(fn, eye, along, length, -0.1)
+            dmin = capsule_min_distance(fn, eye, along, length, -0.1, prune=radial_prune(fn, eye, along, -0.1))
             depths.append(float(max(0.0, -float(dmin.min()))) if float(dmin.min()) < -0.1 else 0.0)
         a_rep = np.broadcast_to(anchor, eye.shape)
         for ob in support_obstacles(bare, setup):

@@ -437,7 +437,95 @@ def mandrel_distance_fn(mandrel: Any, step_mm: float = 0.05, upto_mm: float = np
         body = inside & (rho < rin)
         return np.where(body, -np.where(np.isinf(d), rin - rho, d), d)
 
+    rmax: list[_RangeMax] = []
+
+    def radius_max(z0: np.ndarray, z1: np.ndarray) -> np.ndarray:
+        """Largest radius of the body's sampled generatrix (the one :func:`dist` tells inside from outside
+        by) over ``z0 <= z <= z1`` (mm; -inf where that range misses the body), end faces included."""
+        if not rmax:
+            rmax.append(_RangeMax(zd, prof[:, 1]))
+        return rmax[0](np.maximum(z0, zlo), np.minimum(z1, zhi))
+
+    dist.radius_max = radius_max  # type: ignore[attr-defined]
+    # the sampled generatrix is a polyline of these vertices: a point inside the body by a radial gap g is
+    # within g + half the longest edge of a sample
+    dist.sample_gap = float(np.hypot(np.diff(zd), np.diff(prof[:, 1])).max()) if zd.size > 1 else 0.0  # type: ignore[attr-defined]
     return dist
+
+
+class _RangeMax:
+    """Maximum over ``lo <= x <= hi`` of the piecewise-linear function through ``(x_j, y_j)`` (x
+    nondecreasing), vectorised: the two ends interpolated and the vertices between them by a sparse table
+    (O(n log n) once, O(1) a query)."""
+
+    def __init__(self, x: np.ndarray, y: np.ndarray) -> None:
+        self.x, self.y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+        levels = [self.y]
+        k = 1
+        while 2 * k <= self.y.size:
+            prev = levels[-1]
+            levels.append(np.maximum(prev[:-k], prev[k:]))
+            k *= 2
+        self.levels = levels
+
+    def __call__(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+        out = np.maximum(np.interp(lo, self.x, self.y), np.interp(hi, self.x, self.y))
+        j0 = np.searchsorted(self.x, lo, "right")
+        j1 = np.searchsorted(self.x, hi, "left") - 1
+        span = j1 - j0 + 1
+        has = np.flatnonzero(span > 0)
+        if has.size:
+            k = np.floor(np.log2(span[has])).astype(np.int64)
+            k = np.where((1 << (k + 1)) <= span[has], k + 1, k)          # log2's rounding at powers of 2
+            k = np.where((1 << k) > span[has], k - 1, k)
+            for lev in np.unique(k):
+                sel = has[k == lev]
+                row = self.levels[int(lev)]
+                w = 1 << int(lev)
+                out[sel] = np.maximum(out[sel], np.maximum(row[j0[sel]], row[j1[sel] - w + 1]))
+        return np.where(lo <= hi, out, -np.inf)
+
+
+def radial_prune(dist: Any, a: np.ndarray, u: np.ndarray, need_mm: np.ndarray | float) -> Any:
+    """A ``prune`` for :func:`capsule_min_distance` with ``dist`` from :func:`mandrel_distance_fn`: the pieces
+    ``a + t u``, ``t0 <= t <= t1`` of the segments that cannot come below ``need_mm`` anywhere, told by
+    the piece's closest approach to the axis against the body's largest radius over its z range:
+
+    - ``need >= 0``: the piece stays at least ``need`` above every radius of the body within ``need`` of
+      its z range (every sample is then at least ``need`` away);
+    - ``need < 0``: no point of the piece is inside the body by more than ``−need`` less half the longest
+      edge of the sampled generatrix (a point inside by a radial gap ``g`` has ``dist >= −(g + edge/2)``),
+      with 1e-6 mm to spare.
+
+    Both only ever drop pieces whose every value is at least ``need``: the search's values below ``need``
+    are the same numbers with and without it."""
+    a = np.asarray(a, dtype=float)
+    u = np.asarray(u, dtype=float)
+    need = np.broadcast_to(np.asarray(need_mm, dtype=float), (a.shape[0],))
+    radius_max = getattr(dist, "radius_max", None)
+    edge = float(getattr(dist, "sample_gap", np.inf))
+    if radius_max is None or not np.isfinite(edge):
+        return None
+    uu = np.einsum("ij,ij->i", u[:, :2], u[:, :2])
+    au = np.einsum("ij,ij->i", a[:, :2], u[:, :2])
+
+    def prune(i: np.ndarray, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ts = np.where(uu[i] > 0.0, -au[i] / uu[i], t0)
+        ts = np.clip(ts, t0, t1)
+        p = a[i, :2] + ts[:, None] * u[i, :2]
+        rho = np.hypot(p[:, 0], p[:, 1])
+        rho = rho - 1e-9 * np.maximum(1.0, rho)                         # its rounding, to the safe side
+        za, zb = a[i, 2] + t0 * u[i, 2], a[i, 2] + t1 * u[i, 2]
+        z0, z1 = np.minimum(za, zb), np.maximum(za, zb)
+        n = need[i]
+        pos = n >= 0.0
+        grow = np.where(pos, n, 0.0) + 1e-9 * np.maximum(1.0, np.abs(z1))
+        r = radius_max(z0 - grow, z1 + grow)
+        return np.where(pos, rho - r >= n, r - rho < -n - 0.5 * edge - 1e-6)
+
+    return prune
 
 
 def head_axis(machine: MachineTemplate, axes: AxisPath) -> np.ndarray:
@@ -476,7 +564,7 @@ def head_axis_q(machine: MachineTemplate, q: np.ndarray) -> np.ndarray:
 
 
 def capsule_min_distance(dist: Any, a: np.ndarray, u: np.ndarray, length_mm: np.ndarray | float,
-                         need_mm: np.ndarray | float, tol_mm: float = 0.05) -> np.ndarray:
+                         need_mm: np.ndarray | float, tol_mm: float = 0.05, prune: Any = None) -> np.ndarray:
     """Smallest ``dist(z, rho)`` over the segments ``a + t u``, ``0 <= t <= length_mm`` (N,), mm (``length_mm``
     one for all or one per segment).
 
@@ -486,7 +574,12 @@ def capsule_min_distance(dist: Any, a: np.ndarray, u: np.ndarray, length_mm: np.
     distance d cannot come nearer than d - h; intervals that could still come below ``need_mm`` (or below
     the best value found) are halved until h <= ``tol_mm``.  The answer is a distance the segment reaches;
     where it is below ``need_mm`` it is the minimum within ``tol_mm``, elsewhere the minimum is at least
-    ``need_mm - tol_mm``."""
+    ``need_mm - tol_mm``.
+
+    ``prune(i, t0, t1)``, optional (e.g. :func:`radial_prune`): True for the pieces ``t0 <= t <= t1`` of the
+    segments ``i`` that are certainly at least ``need_mm`` away everywhere; they are not searched.  A
+    piece it drops holds no value below ``need_mm``, so every answer below ``need_mm`` is the same number
+    with it; the others are still distances the segments reach, at least ``need_mm``."""
     a = np.asarray(a, dtype=float)
     n = a.shape[0]
     need = np.broadcast_to(np.asarray(need_mm, dtype=float), (n,))
@@ -505,6 +598,11 @@ def capsule_min_distance(dist: Any, a: np.ndarray, u: np.ndarray, length_mm: np.
     half = 0.5 * length[idx]             # one interval per segment to start: most are cut at once
     tc = half.copy()
     while idx.size:
+        if prune is not None:
+            keep = ~prune(idx, tc - half, tc + half)
+            idx, tc, half = idx[keep], tc[keep], half[keep]
+            if not idx.size:
+                break
         d = at(idx, tc, top + float(half.max()) + 1.0)    # farther centres are cut whatever their distance
         np.minimum.at(best, idx, d)
         keep = (d - half < np.minimum(best[idx], need[idx])) & (half > tol_mm)
@@ -1048,5 +1146,5 @@ def _precheck_carriage(job: Any, machine: MachineTemplate, mandrel: Any, line: A
 __all__ = ["Locator", "Obstacle", "Placement", "ViolationGroup", "apply_setup", "capsule_min_distance",
            "carriage_index", "carriage_need", "clearance_violations", "compatible_posts", "controller_for",
            "fit_eye_radius", "group_violations", "head_axis", "head_axis_q", "hold_back_turns", "limit_speed_steps",
-           "mandrel_distance_fn", "monotone_eye_azimuth", "nc_move_lines", "place_on_machine",
+           "mandrel_distance_fn", "monotone_eye_azimuth", "nc_move_lines", "place_on_machine", "radial_prune",
            "placement_report", "post_mismatch", "precheck", "support_obstacles"]

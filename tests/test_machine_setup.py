@@ -479,6 +479,115 @@ def test_capsule_distance_against_dense_sampling_of_its_axis() -> None:
     assert np.all(g2[ref <= 0.0] < 0.0) and np.all(g2[ref > need + 0.05] >= need - 0.05)
 
 
+def test_range_max_of_a_polyline_against_brute_force() -> None:
+    """The sparse-table range maximum of a piecewise-linear function (machine_setup._RangeMax) against the
+    maximum of the function sampled at its vertices in range and at both ends: equal bit for bit, for
+    ranges of every length (powers of two among them), ranges ending on vertices, outside the data and
+    empty (lo > hi: -inf)."""
+    from engine.machine_setup import _RangeMax
+
+    rng = np.random.default_rng(11)
+    x = np.cumsum(rng.uniform(0.0, 1.0, 257))
+    x[40:44] = x[40]                                  # a repeated abscissa (a vertical step)
+    y = rng.normal(size=x.size)
+    rm = _RangeMax(x, y)
+    lo = np.concatenate([rng.uniform(x[0] - 5.0, x[-1] + 5.0, 3000), x[:64], x[[0, 0, 5, 40]]])
+    span = np.concatenate([rng.uniform(-1.0, 80.0, 3000), np.zeros(64), x[[0, 1, 45, 44]] - x[0]])
+    hi = lo + span
+    hi[3000:3064] = x[np.minimum(np.arange(64) + 2 ** (np.arange(64) % 8), x.size - 1)]   # spans of 2^k vertices
+    got = rm(lo, hi)
+    for k in range(lo.size):
+        if lo[k] > hi[k]:
+            assert got[k] == -np.inf
+            continue
+        inner = y[(x > lo[k]) & (x < hi[k])]
+        ref = max(np.interp(lo[k], x, y), np.interp(hi[k], x, y), inner.max() if inner.size else -np.inf)
+        assert got[k] == ref, (k, lo[k], hi[k])
+
+
+def _random_segments(rng, n, r_lo, r_hi, z_lo, z_hi):
+    phi = rng.uniform(0, 2 * np.pi, n)
+    rr = rng.uniform(r_lo, r_hi, n)
+    a = np.stack([rr * np.cos(phi), rr * np.sin(phi), rng.uniform(z_lo, z_hi, n)], axis=1)
+    u = rng.normal(size=(n, 3))
+    return a, u / np.linalg.norm(u, axis=1, keepdims=True)
+
+
+@pytest.mark.parametrize("need", [-0.1, -2.0, 0.0, 4.0])
+def test_radial_prune_drops_only_pieces_that_stay_above_the_need(need) -> None:
+    """radial_prune (the piece's closest approach to the axis against the body's largest radius over its
+    z range) is sound: every piece it drops, sampled every 0.01 mm, has every sampled distance >= need -
+    on a vessel with domes and a cone, for segments from inside, through and around the bodies; and it
+    does drop pieces (most of those that stay clear)."""
+    from engine.machine_setup import mandrel_distance_fn, radial_prune
+
+    rng = np.random.default_rng(5)
+    for body in (Mandrel.vessel(80.0, 200.0, "hemisphere", pole_radii=20.0), Mandrel.cone(60.0, 90.0, 300.0)):
+        fn = mandrel_distance_fn(body)
+        a, u = _random_segments(rng, 400, 20.0, 150.0, body.z_min - 60.0, body.z_max + 60.0)
+        prune = radial_prune(fn, a, u, need)
+        i = np.repeat(np.arange(a.shape[0]), 4)
+        t0 = rng.uniform(0.0, 150.0, i.size)
+        t1 = t0 + rng.choice([0.05, 0.8, 6.0, 60.0], i.size)
+        drop = prune(i, t0, t1)
+        assert 0.2 * i.size < drop.sum() < i.size
+        for k in np.flatnonzero(drop):
+            t = np.linspace(t0[k], t1[k], max(int((t1[k] - t0[k]) / 0.01), 2) + 1)
+            p = a[i[k]] + t[:, None] * u[i[k]]
+            d = fn(p[:, 2], np.hypot(p[:, 0], p[:, 1]), abs(need) + 5.0)
+            assert d.min() >= need, (k, d.min())
+
+
+def test_capsule_search_with_radial_prune_keeps_every_value_below_the_need() -> None:
+    """capsule_min_distance with radial_prune: every answer below ``need`` is the same number as without
+    it (the same answers below need, for segments ending deep inside a vessel, passing through it and
+    staying clear), with far fewer distance evaluations when the segments stay clear of the body."""
+    from engine.machine_setup import capsule_min_distance, mandrel_distance_fn, radial_prune
+
+    ves = Mandrel.vessel(80.0, 200.0, "hemisphere", pole_radii=20.0)
+    fn = mandrel_distance_fn(ves)
+    rng = np.random.default_rng(3)
+    a, u = _random_segments(rng, 300, 40.0, 160.0, -80.0, 280.0)
+    calls: list[int] = []
+
+    def counted(z, rho, upto=None):  # noqa: ANN001, ANN202
+        calls.append(np.size(z))
+        return fn(z, rho, upto)
+
+    for need in (-0.1, -3.0, 2.0):
+        calls.clear()
+        ref = capsule_min_distance(counted, a, u, 120.0, need)
+        n_ref = sum(calls)
+        calls.clear()
+        got = capsule_min_distance(counted, a, u, 120.0, need, prune=radial_prune(fn, a, u, need))
+        below = ref < need
+        assert 20 <= below.sum() < a.shape[0]
+        assert np.array_equal(got < need, below) and np.array_equal(got[below], ref[below])
+        assert np.all(got[~below] >= need)
+        assert sum(calls) < n_ref
+    # fibres tangent to a cylinder's surface from outside (the pipe's transitions): all pruned at once
+    pipe = Mandrel.pipe(50.0, 300.0)
+    fp = mandrel_distance_fn(pipe)
+    phi = np.linspace(0.0, 2 * np.pi, 50, endpoint=False)
+    anchor = np.stack([50.0 * np.cos(phi), 50.0 * np.sin(phi), np.linspace(20.0, 280.0, 50)], axis=1)
+    tang = np.stack([-np.sin(phi), np.cos(phi), 0.3 * np.ones_like(phi)], axis=1)
+    tang /= np.linalg.norm(tang, axis=1, keepdims=True)
+    eye = anchor + 80.0 * tang
+    along = -tang
+
+    def counted_pipe(z, rho, upto=None):  # noqa: ANN001, ANN202
+        calls.append(np.size(z))
+        return fp(z, rho, upto)
+
+    calls.clear()
+    ref = capsule_min_distance(counted_pipe, eye, along, 80.0, -0.1)
+    n_ref = sum(calls)
+    calls.clear()
+    got = capsule_min_distance(counted_pipe, eye, along, 80.0, -0.1, prune=radial_prune(fp, eye, along, -0.1))
+    assert ref.min() >= -0.1 and got.min() >= -0.1
+    assert sum(calls) == 2 * eye.shape[0] and n_ref > 20 * eye.shape[0]
+
+
 def test_head_axis_of_a_lathe_is_radial_and_the_capsule_is_checked(monkeypatch) -> None:
     """On a fixed-radius lathe the head's roll axis is machine x, away from the mandrel: in the mandrel
     frame the eye's radial unit vector (closed form).  With head_length_mm the head is a capsule: a head
