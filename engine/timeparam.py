@@ -1242,6 +1242,12 @@ def _pool() -> ThreadPoolExecutor:
     return _POOL[0]
 
 
+def shutdown_pool() -> None:
+    """Stop the chunk-building thread (finishing what it was given; a later time law starts a new one)."""
+    while _POOL:
+        _POOL.pop().shutdown(wait=True)
+
+
 def _forward_compiled(chunks: list[tuple[int, int]], uniform_h: bool, two_h: np.ndarray, kq_h: np.ndarray,
                       levf: np.ndarray, klo: np.ndarray, cnt: np.ndarray, bad: np.ndarray, use_k: bool, M: int,
                       Jraw: np.ndarray) -> bool:

@@ -5,10 +5,9 @@ application, anything else is a sub-command (``winder --help``).
 """
 
 import multiprocessing
-import sys
 
-from engine.cli import main
+from engine.cli import entry
 
 if __name__ == "__main__":
     multiprocessing.freeze_support()  # no-op unless a library starts worker processes
-    sys.exit(main())
+    entry()

@@ -74,7 +74,7 @@ def test_spec_files_exist() -> None:
 def test_entry_script_compiles_and_calls_the_cli() -> None:
     src = (INSTALLER / "winder_entry.py").read_text(encoding="utf-8")
     compile(src, "winder_entry.py", "exec")
-    assert "from engine.cli import main" in src
+    assert "from engine.cli import entry" in src and "entry()" in src
 
 
 def test_runtime_hook_points_occt_at_the_bundle(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:

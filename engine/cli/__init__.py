@@ -49,6 +49,40 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+_GUI_RAN: list[bool] = []
+
+
+def entry() -> None:
+    """The ``winder`` program (console script, ``python -m engine``, the frozen build): :func:`main`, then
+    :func:`exit_now` with its exit code."""
+    exit_now(main())
+
+
+def exit_now(rc: int) -> None:
+    """End the process with exit code ``rc`` the quick way once a command is done: the ``atexit`` handlers
+    run and the standard streams are flushed, as at a normal exit, but the interpreter is not torn down
+    (freeing every module and array costs 0.05-0.09 s, a twelfth of a one-layer run; issue 16).  The
+    normal exit (``sys.exit``) instead after the GUI (Qt objects are owed their destructors), where
+    another non-daemon thread still runs, or when a stream cannot be flushed (its error is then reported
+    as Python reports it)."""
+    import atexit
+    import os
+    import threading
+
+    if "engine.timeparam" in sys.modules:
+        sys.modules["engine.timeparam"].shutdown_pool()
+    others = [t for t in threading.enumerate() if t is not threading.main_thread() and not t.daemon and t.is_alive()]
+    if _GUI_RAN or others:
+        sys.exit(rc)
+    atexit._run_exitfuncs()
+    try:
+        sys.stdout.flush()
+        sys.stderr.flush()
+    except Exception:  # noqa: BLE001 - e.g. a closed pipe: the normal exit reports it and sets the code
+        sys.exit(rc)
+    os._exit(rc)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``winder``; returns the process exit code."""
     args_list = list(sys.argv[1:] if argv is None else argv)
@@ -63,6 +97,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     ):
         from winder_gui.app import main as gui_main  # lazy: the CLI never needs Qt
 
+        _GUI_RAN.append(True)
         return int(gui_main(args_list))
     parser = build_parser()
     args = parser.parse_args(args_list)
