@@ -1367,10 +1367,15 @@ def _pool_pipeline(pool: Any, jp: str | None, p: _Prepared, upto: str, register:
     if w is None:
         return False
     tag = f"winder-{os.getpid()}-{p.i}-{secrets.token_hex(6)}"
+    paths = [os.path.join(folder, tag) for folder in _answer_folders()]
     try:
-        child = PoolChild(pool, w, jp, p, upto, [os.path.join(folder, tag) for folder in _answer_folders()],
-                          _budget_state())
-    except Exception:  # noqa: BLE001 - the layer would not pickle or the worker died: run it here
+        message = PoolChild.message(jp, p, upto, paths, _budget_state())
+    except Exception:  # noqa: BLE001 - the layer would not pickle: run it here; the worker stays as it is
+        pool.release(w)
+        return False
+    try:
+        child = PoolChild(pool, w, p, paths, message)
+    except Exception:  # noqa: BLE001 - the worker died: run it here, a fresh one replaces it
         pool.discard(w)
         return False
     register(child)

@@ -78,7 +78,10 @@ class _Worker:
                 return False
         return self.ready
 
-    def kill(self) -> None:
+    def kill(self, close_conn: bool = True) -> None:
+        """Kill the process; ``close_conn`` also closes the pool's end of the connection (only the thread
+        that reads it may do that: closed under a waiting reader, its descriptor could be reused by a file
+        opened meanwhile; a killed worker's reader gets end-of-file instead)."""
         try:
             self.proc.kill()
         except (OSError, AttributeError, ValueError):
@@ -87,10 +90,11 @@ class _Worker:
             self.proc.join(5.0)
         except (OSError, AssertionError, ValueError):
             pass
-        try:
-            self.conn.close()
-        except OSError:
-            pass
+        if close_conn:
+            try:
+                self.conn.close()
+            except OSError:
+                pass
 
 
 _MAX_FAILED_STARTS = 3
@@ -164,17 +168,22 @@ class LayerPool:
         """``w`` was stopped mid-layer (a cancel) or died: killed; a fresh one is started behind it."""
         with self._lock:
             self._busy.discard(w)
+            closed = self._closed
         w.kill()
-        threading.Thread(target=self.warm, daemon=True, name="winder-layer-pool-warm").start()
+        if not closed:
+            threading.Thread(target=self.warm, daemon=True, name="winder-layer-pool-warm").start()
 
     def close(self) -> None:
-        """Stop every worker (idempotent)."""
+        """Stop every worker (idempotent).  A busy worker's connection is left to the thread reading its
+        answer (it gets end-of-file, and :meth:`discard` or :meth:`release` closes it)."""
         with self._lock:
             self._closed = True
-            ws = self._idle + list(self._busy)
-            self._idle, self._busy = [], set()
-        for w in ws:
+            idle, busy = self._idle, list(self._busy)
+            self._idle = []
+        for w in idle:
             w.kill()
+        for w in busy:
+            w.kill(close_conn=False)
 
     def pids(self) -> list[int]:
         """The process ids of the workers alive (tests, diagnostics)."""
@@ -185,12 +194,21 @@ class LayerPool:
 class PoolChild:
     """A layer running in a pool worker, with the interface of :class:`engine.laminate._Child`."""
 
-    def __init__(self, pool: LayerPool, worker: _Worker, jp: str | None, p: Any, upto: str,
-                 paths: list[str], budget_state: tuple[int | None, bool] = (None, False)) -> None:
+    def __init__(self, pool: LayerPool, worker: _Worker, p: Any, paths: list[str], message: bytes) -> None:
+        """Send ``message`` (:meth:`message`) to ``worker``; raises OSError when the worker is gone."""
         self.pool, self.worker, self.layer, self.paths = pool, worker, p, paths
         self.pid, self.fd = worker.pid, worker.conn.fileno()
         self.done = False
-        worker.conn.send((jp, p, upto, paths, budget_state))
+        worker.conn.send_bytes(message)
+
+    @staticmethod
+    def message(jp: str | None, p: Any, upto: str, paths: list[str],
+                budget_state: tuple[int | None, bool] = (None, False)) -> bytes:
+        """The request for a worker, pickled as the connection would pickle it (raises what pickling raises:
+        a layer that will not pickle is the caller's to run, the worker stays healthy)."""
+        from multiprocessing.reduction import ForkingPickler
+
+        return bytes(ForkingPickler.dumps((jp, p, upto, paths, budget_state)))
 
     def ready(self) -> bool:
         """Whether it has answered (or died)."""

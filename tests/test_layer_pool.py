@@ -209,3 +209,62 @@ def test_pool_size_check_does_not_materialise_the_line(layup, pool, monkeypatch:
     monkeypatch.setattr(per, "raw_field", counted)
     _same_result(one, _in_thread(lambda: lam.run_laminate(job, pool=pool)))
     assert seen
+
+
+def test_a_layer_that_will_not_pickle_keeps_the_worker(layup, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Pickling the request fails (here: the budget state made unpicklable): the layer is wound in the caller,
+    the worker is not killed or replaced (the same processes afterwards), the program is the same."""
+    job, one = layup
+    p = LayerPool(2)
+    try:
+        p.warm()
+        deadline = time.monotonic() + 60
+        while len(p.pids()) < 2 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        before = sorted(p.pids())
+        assert len(before) == 2
+        monkeypatch.setattr(lam, "_budget_state", lambda: (None, lambda: None))   # a lambda does not pickle
+        _same_result(one, _in_thread(lambda: lam.run_laminate(job, pool=p)))
+        time.sleep(0.2)
+        assert sorted(p.pids()) == before
+    finally:
+        p.close()
+
+
+def test_closing_the_pool_under_a_waiting_run(layup, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Another thread closes the pool while a run waits for a worker's answer: the run gets end-of-file, winds
+    that layer itself (the same program), and its own thread closes the worker's connection afterwards;
+    no worker is left."""
+    job, one = layup
+    p = LayerPool(2)
+    sent = threading.Event()
+    go = threading.Event()
+    children: list = []
+    orig = lam._pool_pipeline
+
+    def hooked(pool_, jp, prep, upto, register):  # noqa: ANN001, ANN202
+        def reg(child):  # noqa: ANN001, ANN202
+            register(child)
+            children.append(child)
+            if not sent.is_set():
+                sent.set()
+                go.wait(30)
+        return orig(pool_, jp, prep, upto, reg)
+
+    monkeypatch.setattr(lam, "_pool_pipeline", hooked)
+    out: dict = {}
+    t = threading.Thread(target=lambda: out.setdefault("r", lam.run_laminate(job, pool=p)))
+    t.start()
+    try:
+        assert sent.wait(120)
+        pids = p.pids()
+        p.close()                                    # from this thread, while the run's thread waits
+        go.set()
+        t.join(300)
+        assert not t.is_alive() and "r" in out
+        _same_result(one, out["r"])
+        assert children and all(c.worker.conn.closed for c in children)
+        assert not any(_alive(pid) for pid in pids)
+    finally:
+        go.set()
+        p.close()
