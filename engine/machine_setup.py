@@ -579,7 +579,8 @@ def capsule_min_distance(dist: Any, a: np.ndarray, u: np.ndarray, length_mm: np.
     ``prune(i, t0, t1)``, optional (e.g. :func:`radial_prune`): True for the pieces ``t0 <= t <= t1`` of the
     segments ``i`` that are certainly at least ``need_mm`` away everywhere; they are not searched.  A
     piece it drops holds no value below ``need_mm``, so every answer below ``need_mm`` is the same number
-    with it; the others are still distances the segments reach, at least ``need_mm``."""
+    with it; the others are still distances the segments reach, at least ``need_mm``.  After a level where
+    it drops less than a tenth of the pieces (those left dip into the body) it is not asked again."""
     a = np.asarray(a, dtype=float)
     n = a.shape[0]
     need = np.broadcast_to(np.asarray(need_mm, dtype=float), (n,))
@@ -600,6 +601,8 @@ def capsule_min_distance(dist: Any, a: np.ndarray, u: np.ndarray, length_mm: np.
     while idx.size:
         if prune is not None:
             keep = ~prune(idx, tc - half, tc + half)
+            if keep.sum() > 0.9 * keep.size:
+                prune = None     # it no longer pays here (the pieces left dip into the body): not asked again
             idx, tc, half = idx[keep], tc[keep], half[keep]
             if not idx.size:
                 break
