@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import math
 import numbers
+import threading
+from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -301,6 +303,27 @@ class IsotensoidSegment(Segment):
         return t
 
     def eval(self, z: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """r, r', r'' at ``z`` (mm, -, 1/mm).  The dome is evaluated again and again at the same points
+        (every layer's surface, distance function and turnaround search samples the bare mandrel's dome on
+        the same grids): answers for the last few inputs are kept (:data:`_EVAL_CACHE`, keyed by the
+        dome's parameters and the input's bytes) and handed out as copies, the same numbers."""
+        za = np.asarray(z, dtype=float)
+        if not _EVAL_CACHE_MIN <= za.size <= _EVAL_CACHE_MAX:
+            return self._eval(za)
+        key = (self.zc, self.R, self.rho_p, self.direction, za.shape, za.tobytes())
+        with _EVAL_LOCK:
+            hit = _EVAL_CACHE.get(key)
+            if hit is not None:
+                _EVAL_CACHE.move_to_end(key)
+        if hit is None:
+            hit = self._eval(za)
+            with _EVAL_LOCK:
+                _EVAL_CACHE[key] = hit
+                while len(_EVAL_CACHE) > _EVAL_CACHE_SIZE:
+                    _EVAL_CACHE.popitem(last=False)
+        return hit[0].copy(), hit[1].copy(), hit[2].copy()
+
+    def _eval(self, z: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         zeta_c, dzeta_c, _ = self._series(self.rho_p)
         t = self._t_of_z(np.asarray(z, dtype=float))
         h = 0.5 * (1.0 - self.rho_p)
@@ -357,6 +380,13 @@ def _chebval(x: FloatArray, c: FloatArray) -> FloatArray:
 
 
 _ZETA_TABLES: dict[float, tuple[FloatArray, FloatArray]] = {}
+
+_EVAL_CACHE: OrderedDict[tuple[Any, ...], tuple[FloatArray, FloatArray, FloatArray]] = OrderedDict()
+"""The isotensoid dome's last answers (:meth:`IsotensoidSegment.eval`), least recently used first."""
+_EVAL_CACHE_SIZE = 64
+_EVAL_CACHE_MIN, _EVAL_CACHE_MAX = 1, 65_536
+"""Inputs with fewer or more points are evaluated afresh (a big program's whole line is not kept)."""
+_EVAL_LOCK = threading.Lock()
 
 
 def _zeta_table(rho_p: float) -> tuple[FloatArray, FloatArray]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -329,3 +330,36 @@ def test_points_may_close_at_the_ends() -> None:
     z = [2.083, 3.046, 5.421, 6.292, 8.837, 9.306, 11.835, 12.579, 13.892]
     r = [0.0, 9.751, 15.37, 7.679, 10.944, 5.087, 8.937, 11.318, 0.0]
     assert Mandrel.from_points(z, r).pole_radii == (0.0, 0.0)
+
+
+def test_isotensoid_answers_kept_are_the_same_numbers() -> None:
+    """IsotensoidSegment.eval keeps its last answers: a repeated input gets the numbers of a fresh
+    evaluation bit for bit, as new arrays (changing one does not change the next answer); a dome with
+    other parameters, or an input differing in one bit, is evaluated afresh; big inputs are not kept and
+    the cache stays bounded."""
+    import engine.mandrel as mm
+
+    ves = Mandrel.vessel(100.0, 200.0, "isotensoid", pole_radii=(30.0, 20.0))
+    dome = next(s for s in ves.segments if isinstance(s, mm.IsotensoidSegment))
+    rng = np.random.default_rng(4)
+    lo, hi = sorted((dome.zc, dome.zc + dome.direction * dome.dome_length(dome.R, dome.R * dome.rho_p)))
+    for n in (1, 7, 300, 5000):
+        z = rng.uniform(lo, hi, n)
+        ref = dome._eval(z.copy())
+        first = dome.eval(z)
+        first[0][:] = -1.0                                  # the caller's array: not the kept one
+        again = dome.eval(z.copy())
+        for a, b in zip(ref, again, strict=True):
+            assert a.tobytes() == b.tobytes()
+        z2 = z.copy()
+        z2[0] = np.nextafter(z2[0], np.inf)
+        assert dome.eval(z2)[0].tobytes() == dome._eval(z2)[0].tobytes()
+    other = replace(dome, rho_p=dome.rho_p * 1.01)
+    z = np.linspace(lo, hi, 200)
+    assert other.eval(z)[0].tobytes() == other._eval(z)[0].tobytes() != dome.eval(z)[0].tobytes()
+    size = len(mm._EVAL_CACHE)
+    dome.eval(np.linspace(lo, hi, mm._EVAL_CACHE_MAX + 1))
+    assert len(mm._EVAL_CACHE) == size
+    for k in range(mm._EVAL_CACHE_SIZE + 10):
+        dome.eval(np.array([lo + k * 1e-3]))
+    assert len(mm._EVAL_CACHE) == mm._EVAL_CACHE_SIZE
