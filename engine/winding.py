@@ -372,8 +372,13 @@ def solve_pass(
     ctx: dict[str, Any],
     state: Any = None,
     c_override: float | None = None,
+    unchecked: dict[str, Any] | None = None,
 ) -> PassLine:
-    """C(z), λ, twist and band length of the outgoing pass (see the module docstring)."""
+    """C(z), λ, twist and band length of the outgoing pass (see the module docstring).
+
+    ``unchecked`` (with ``c_override``): the geodesic pass without its bridging check (6) (``bridging``
+    left empty), its grid, C and λ put in the dict under ``"grid"`` for :func:`_bridging` later: the
+    pattern-closing root search solves many passes and keeps one."""
     b = float(band_width_mm)
     n_out = int(spec.points_per_pass)
     refine = max(1, math.ceil(_MIN_STEPS / (n_out - 1)))
@@ -403,7 +408,8 @@ def solve_pass(
     mode = spec.mode
     user_poles = spec.pole_c_mm is not None
     if c_override is not None or (mode == "geodesic" and angles):
-        return _geodesic_pass(mandrel, pole_c, angles, n_out, refine, ctx, notes, pole_fld, c_override)
+        return _geodesic_pass(mandrel, pole_c, angles, n_out, refine, ctx, notes, pole_fld, c_override,
+                              unchecked if c_override is not None else None)
     ends = [_end_condition(mandrel, i, pole_c[i], pole_fld, ctx, user_poles) for i in (0, 1)]
     if mode == "geodesic":  # C from the poles the line can turn at (an open end's default is no condition)
         live = [pole_c[i] if ends[i][2] is not None else None for i in (0, 1)]
@@ -578,6 +584,7 @@ def _geodesic_pass(
     notes: list[str],
     pole_fld: str,
     c_override: float | None,
+    unchecked: dict[str, Any] | None = None,
 ) -> PassLine:
     if c_override is not None:
         C0, z_ref, fld = c_override, (angles[0].z if angles else None), "winding.angles"
@@ -627,7 +634,11 @@ def _geodesic_pass(
         v, s, _ = wc.twist(grid, C, lam)
     except ValueError as exc:
         raise _err(f"the geodesic is not realisable: {exc}", fld, ctx, InfeasibleError) from None
-    bridging = _bridging(grid, C, lam)
+    if unchecked is not None:
+        unchecked["grid"] = (grid, C, lam)
+        bridging: list[tuple[float, float]] = []
+    else:
+        bridging = _bridging(grid, C, lam)
     pieces = [{"z_from": za, "z_to": zb, "lambda": 0.0}]
     return _finish(grid, C, lam, v, s, "geodesic", pieces, bridging, notes)
 
@@ -1026,11 +1037,14 @@ def _close_by_angle(
     q, m, target = choose_pattern(raw, p, spec.lead, spec.pattern_q, ctx, allow_below=True)
     c0 = float(pl.C[len(pl.C) // 2])
 
-    passes: dict[float, PassLine] = {}  # the root is one of the evaluated constants: its pass is kept
+    # the root is one of the evaluated constants: its pass is kept, and checked for bridging (6) alone
+    passes: dict[float, tuple[PassLine, Any]] = {}
 
     def f(c: float) -> float:
-        passes[c] = solve_pass(mandrel, b, spec, ctx, None, c_override=c)
-        return 2.0 * passes[c].v[-1] + dwell[0] + dwell[1] - target
+        raw: dict[str, Any] = {}
+        pl_c = solve_pass(mandrel, b, spec, ctx, None, c_override=c, unchecked=raw)
+        passes[c] = (pl_c, raw["grid"])
+        return 2.0 * pl_c.v[-1] + dwell[0] + dwell[1] - target
 
     lo_c, hi_c = 0.8 * c0, c0
     r_top = float(np.min(pl.r[1:-1])) if pl.left == wc.OPEN and pl.right == wc.OPEN else float(mandrel.r_max)
@@ -1043,7 +1057,11 @@ def _close_by_angle(
     except (ValueError, InputError):
         raise _err(f"the pattern (p = {p}, q = {q}) cannot be closed by a small change of the winding angle; "
                    "use close_by = 'dwell'", "winding.close_by", ctx, InfeasibleError) from None
-    new = passes[c_new] if c_new in passes else solve_pass(mandrel, b, spec, ctx, None, c_override=c_new)
+    if c_new in passes:
+        kept, raw_grid = passes[c_new]
+        new = replace(kept, bridging=_bridging(*raw_grid))
+    else:
+        new = solve_pass(mandrel, b, spec, ctx, None, c_override=c_new)
     i = len(new.z) // 2
     notes.append(f"pattern closed by the winding angle: C {c0:.6g} -> {c_new:.6g} mm "
                  f"(β at z = {new.z[i]:.6g} mm: {math.degrees(new.beta[i]):.4f}°)")

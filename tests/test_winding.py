@@ -467,3 +467,52 @@ def test_job_angle_error_names_field_and_line(tmp_path: Path) -> None:
     loc = ei.value.location
     assert loc.field == "winding.angles[0].z_mm" and "1500" in ei.value.message
     assert loc.line is not None and "z_mm = 1500.0" in text.splitlines()[loc.line - 1]
+
+
+@pytest.mark.parametrize("case", ["vessel", "bottle-bridging"])
+def test_close_by_angle_checks_bridging_of_the_kept_pass_only(case: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The pattern-closing root search solves a pass for every constant it tries and keeps one: only the kept
+    pass is checked for bridging (6).  The kept pass (every array, the bridging zones, the notes) equals the
+    pass solved afresh, checked, at its constant - on a vessel (no bridging) and on a bottle whose closed
+    geodesic bridges the shoulder (zones reported); one bridging check instead of one per tried constant."""
+    import dataclasses
+
+    import engine.winding as w
+
+    if case == "vessel":
+        m = Mandrel.vessel(100.0, 300.0, "isotensoid", (25.0, 40.0))
+        spec = WindingSpec(angles=[{"z_mm": 150.0, "angle_deg": 35.0}], mode="geodesic", close_by="angle",
+                           points_per_pass=300)
+    else:
+        m = Mandrel.bottle()
+        spec = WindingSpec(angles=[{"z_mm": 60.0, "angle_deg": 12.0}], mode="geodesic", close_by="angle",
+                           points_per_pass=300)
+    calls: list[int] = []
+    orig = w._bridging
+
+    def counted(*a, **k):  # noqa: ANN002, ANN003, ANN202
+        calls.append(1)
+        return orig(*a, **k)
+
+    kept: list = []
+    close = w._close_by_angle
+
+    def capture(mandrel, b, spec_, ctx, pl, dwell, p, notes):  # noqa: ANN001, ANN202
+        out = close(mandrel, b, spec_, ctx, pl, dwell, p, notes)
+        kept.append((out[0], b, ctx))
+        return out
+
+    monkeypatch.setattr(w, "_bridging", counted)
+    monkeypatch.setattr(w, "_close_by_angle", capture)
+    line = winding_line(m, 5.0, 0.3, spec)
+    assert len(calls) == 2                               # the first pass (c0) and the kept one
+    new, b, ctx = kept[0]
+    calls.clear()
+    ref = w.solve_pass(m, b, spec, ctx, None, c_override=float(new.C[0]))
+    assert len(calls) == 1
+    assert bool(ref.bridging) == (case != "vessel") and bool(line.bridging) == (case != "vessel")
+    assert new.bridging == ref.bridging and new.notes == ref.notes
+    for f in dataclasses.fields(ref):
+        a, r = getattr(new, f.name), getattr(ref, f.name)
+        if isinstance(r, np.ndarray):
+            assert a.tobytes() == r.tobytes(), f.name
