@@ -408,3 +408,28 @@ def test_robot_branch_switch_found_by_continuation():
     assert np.abs(end[0] - j[1]).max() < 1e-6 and worst[0] < 0.5        # reaches its own branch
     end2, _ = _continue_steps(m, track, pw, R, flipped, np.array([0]))
     assert np.abs(end2[0] - flipped[1]).max() > 1.0                      # not the flipped one
+
+
+def test_a_machine_template_is_read_once_until_its_file_changes(tmp_path: Path) -> None:
+    """load_machine keeps what it read: the same (immutable) template for the same unchanged file, its
+    arrays read-only; a file edited since (another size, another time) is read again; the template equals
+    one parsed afresh."""
+    import os
+
+    from engine.kinematics import MACHINES_DIR, parse_machine
+
+    a, b = load_machine("robot_cell"), load_machine("robot_cell")
+    assert a is b and not a.base.flags.writeable and not a.tool.flags.writeable
+    fresh = parse_machine(tomllib.loads((MACHINES_DIR / "robot_cell.toml").read_text(encoding="utf-8")),
+                          file=str(MACHINES_DIR / "robot_cell.toml"), name="robot_cell")
+    assert fresh.axis_names == a.axis_names and np.array_equal(fresh.base, a.base) and fresh.dh == a.dh
+    path = tmp_path / "mine.toml"
+    text = (MACHINES_DIR / "lathe2.toml").read_text(encoding="utf-8")
+    path.write_text(text, encoding="utf-8")
+    first = load_machine(path)
+    assert load_machine(path) is first
+    path.write_text(text.replace('title = "', 'title = "edited ', 1), encoding="utf-8")
+    st = path.stat()
+    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000))
+    second = load_machine(path)
+    assert second is not first and second.title.startswith("edited ") and not first.title.startswith("edited ")
