@@ -940,6 +940,7 @@ def run_laminate(
         _preload()
         _remove_stale_files()
     term = _TerminateAsInterrupt().__enter__() if parallel else None
+    _reap_exited()  # children of an earlier run that failed after they answered
     try:
         first_error: InputError | None = None
         for j, (i, layer) in enumerate(active):
@@ -993,8 +994,26 @@ def run_laminate(
         machine = laid[0].result.machine if laid else load_machine_for_job(job, jp)
         res = _join(res, machine)
         times["nc"] = times.get("nc", 0.0) + time.perf_counter() - t1
+    _reap_exited()
     times["total"] = time.perf_counter() - t0
     return replace(res, stage_times=times)
+
+
+_EXITING: list[int] = []
+"""Forked children that have answered and were still exiting then: reaped by :func:`_reap_exited` (their
+exit, freeing a few hundred MB, takes ~8 ms that the join need not wait for)."""
+
+
+def _reap_exited() -> None:
+    """Reap the children of :data:`_EXITING` (they have answered: each is gone or about to be)."""
+    import os
+
+    while _EXITING:
+        pid = _EXITING.pop()
+        try:
+            os.waitpid(pid, 0)
+        except ChildProcessError:  # reaped already
+            pass
 
 
 def default_workers() -> int:
@@ -1115,7 +1134,7 @@ class _Child:
             if not b:
                 break
             chunks.append(b)
-        self.reap(kill=False)
+        self.let_exit()
         try:
             if not chunks:
                 return None
@@ -1125,6 +1144,21 @@ class _Child:
             return None
         finally:
             self.remove_files()
+
+    def let_exit(self) -> None:
+        """It has answered (or died): reap it if it is gone, else leave it to finish its exit and be reaped
+        after the join (:func:`_reap_exited`) instead of waiting for it here."""
+        import os
+
+        if self.reaped:
+            return
+        try:
+            done, _ = os.waitpid(self.pid, os.WNOHANG)
+        except ChildProcessError:  # reaped already
+            done = self.pid
+        if not done:
+            _EXITING.append(self.pid)
+        self.reaped = True
 
     def reap(self, kill: bool = True) -> None:
         import os

@@ -488,3 +488,45 @@ def test_a_killed_parent_takes_its_children_with_it(tmp_path: Path) -> None:
         stale.write_bytes(b"x")
         lam._remove_stale_files()
         assert not stale.exists()
+
+
+def test_an_answered_child_is_not_waited_for_until_the_run_ends(layup, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Receiving a child's answer does not wait for its exit (freeing its memory): a child that has answered
+    but still runs is left to finish and reaped after the join; a run leaves no child behind."""
+    import time
+
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # a child that answers at once and exits only later
+        try:
+            os.close(r)
+            os.write(w, b"")
+            os.close(w)
+            time.sleep(1.0)
+        finally:
+            os._exit(0)
+    os.close(w)
+    child = lam._Child(pid, r, None, [])  # type: ignore[arg-type]
+    assert child.receive() is None         # an empty answer: the layer would be wound here
+    assert pid in lam._EXITING              # not waited for: it was still running
+    os.kill(pid, 0)                         # (alive, not a zombie reaped yet)
+    lam._reap_exited()
+    assert lam._EXITING == []
+    with pytest.raises(ChildProcessError):
+        os.waitpid(pid, os.WNOHANG)
+    os.close(r)
+    job, _one = layup
+    forked: list[int] = []
+    orig = lam._fork_pipeline
+
+    def logged(jp, p, upto, register):  # noqa: ANN001, ANN202
+        c = orig(jp, p, upto, register)
+        forked.append(c.pid)
+        return c
+
+    monkeypatch.setattr(lam, "_fork_pipeline", logged)
+    lam.run_laminate(job, workers=2)
+    assert forked and lam._EXITING == []
+    for p in forked:                        # every child reaped: not even a zombie is left
+        with pytest.raises(ChildProcessError):
+            os.waitpid(p, os.WNOHANG)
