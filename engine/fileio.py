@@ -2,7 +2,9 @@
 
 Atomic output: the data goes to a temporary file beside the target, then is renamed onto it.  A
 crash or a full disk never leaves a half-written file where the user's file was, and the previous
-file stays intact.  The temporary file is named ``.NAME.winder-PID-XXXX.SUFFIX``; one left behind by a
+file stays intact.  A symlink stays a symlink (the file it points to is replaced); a target that is
+not a regular file (a terminal, a pipe, ``/dev/stdout``) is written into once the content is complete
+(a rename would have put a regular file in its place: as root, over ``/dev/stdout`` itself).  The temporary file is named ``.NAME.winder-PID-XXXX.SUFFIX``; one left behind by a
 killed process (its PID no longer runs) is removed by the next write into the same folder.
 
 Every failure is an :class:`~engine.errors.InputError` naming the file: the target is a folder, its
@@ -88,10 +90,34 @@ def check_output_path(path: str | Path, what: str = "output") -> Path:
         raise _os_error(exc, p) from None
 
 
+def _stream_target(p: Path) -> bool:
+    """Whether ``p`` (followed through symlinks) exists and is not a regular file or a folder: a terminal,
+    a pipe or FIFO, ``/dev/stdout`` or ``/dev/null``.  Such an output is written into, not replaced (a
+    rename would put a regular file where the device or its symlink was)."""
+    import stat
+
+    try:
+        mode = os.stat(p).st_mode
+    except OSError:
+        return False
+    return not stat.S_ISREG(mode) and not stat.S_ISDIR(mode)
+
+
+def _replace_target(p: Path) -> Path:
+    """The file an atomic write renames onto: ``p`` itself, or, when ``p`` is a symlink, the file it points to
+    (followed to the end, existing or not), so that the link stays a link."""
+    return Path(os.path.realpath(p)) if p.is_symlink() else p
+
+
 def _check_output_path(p: Path, what: str) -> Path:
     why = f"cannot write the {what} file"
+    if _stream_target(p):
+        if not os.access(p, os.W_OK):
+            raise InputError(f"{why}: no permission to write to it", file=p)
+        return p
     if p.is_dir():
         raise InputError(f"{why}: the path is a folder; give a file name", file=p)
+    given, p = p, _replace_target(p)
     parent = p.parent if str(p.parent) else Path(".")
     if not parent.exists():
         raise InputError(f"{why}: the folder {str(parent)!r} does not exist", file=p)
@@ -101,7 +127,31 @@ def _check_output_path(p: Path, what: str) -> Path:
         raise InputError(f"{why}: no permission to write in the folder {str(parent)!r}", file=p)
     if p.exists() and not os.access(p, os.W_OK) and not os.access(parent, os.W_OK):
         raise InputError(f"{why}: no permission to replace it", file=p)
-    return p
+    return given
+
+
+def _write_through(target: Path, writer: Callable[[str], object], suffix: str) -> Path:
+    """:func:`atomic_write_with` into a device or pipe: the content is made in a temporary file first (a
+    writer that fails sends nothing), then copied into ``target``."""
+    import shutil
+
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f"winder-{os.getpid()}-", suffix=suffix or target.suffix)
+    except OSError as exc:
+        raise _os_error(exc, target) from None
+    os.close(fd)
+    try:
+        writer(tmp)
+        with open(tmp, "rb") as src, open(target, "wb") as dst:
+            shutil.copyfileobj(src, dst)
+    except OSError as exc:
+        raise _os_error(exc, target) from None
+    finally:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+    return target
 
 
 def _os_error(exc: OSError, path: Path) -> InputError:
@@ -143,15 +193,21 @@ def atomic_write_with(path: str | Path, writer: Callable[[str], object], suffix:
     format from the extension; by default the target's suffix is used).  An :class:`OSError`
     (folder, permission, full disk) becomes an :class:`InputError` naming ``path``; the previous
     file stays as it was and the temporary file is removed.
+
+    A symlink stays a symlink: the file it points to is replaced.  A target that is not a regular file
+    (a terminal, a pipe, ``/dev/stdout``) is written into once the temporary file is complete.
     """
-    path = check_output_path(path)
+    given = check_output_path(path)
+    if _stream_target(given):
+        return _write_through(given, writer, suffix)
+    path = _replace_target(given)
     directory = path.parent if str(path.parent) else Path(".")
     remove_stale_temporaries(directory)
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}{_TMP_TAG}{os.getpid()}-",
                                    suffix=suffix or path.suffix, dir=directory)
     except OSError as exc:
-        raise _os_error(exc, path) from None
+        raise _os_error(exc, given) from None
     os.close(fd)
     try:
         writer(tmp)
@@ -171,9 +227,9 @@ def atomic_write_with(path: str | Path, writer: Callable[[str], object], suffix:
         except OSError:
             pass
         if isinstance(exc, OSError):
-            raise _os_error(exc, path) from None
+            raise _os_error(exc, given) from None
         raise
-    return path
+    return given
 
 
 # ------------------------------------------------------------------------------------------------

@@ -244,6 +244,62 @@ def test_output_without_permission(tmp_path) -> None:
         d.chmod(0o755)
 
 
+def test_an_output_through_a_symlink_keeps_the_link(tmp_path) -> None:
+    """Writing to a symlink replaces the file it points to, atomically, and leaves the link a link (a
+    dangling link gets its file); the temporary files are made beside the real file."""
+    real_dir = tmp_path / "share"
+    real_dir.mkdir()
+    real = real_dir / "prog.ngc"
+    real.write_text("old\n")
+    link = tmp_path / "current.ngc"
+    link.symlink_to(real)
+    assert atomic_write_text(link, "new\n") == link
+    assert link.is_symlink() and os.readlink(link) == str(real) and real.read_text() == "new\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["current.ngc", "share"]
+    assert sorted(p.name for p in real_dir.iterdir()) == ["prog.ngc"]
+    dangling = tmp_path / "next.ngc"
+    dangling.symlink_to(real_dir / "later.ngc")
+    atomic_write_text(dangling, "later\n")
+    assert dangling.is_symlink() and (real_dir / "later.ngc").read_text() == "later\n"
+
+
+def test_an_output_into_a_pipe_or_device_is_written_into_it(tmp_path) -> None:
+    """A FIFO (as ``/dev/stdout`` on a pipe) or a character device behind a symlink is written into, not
+    replaced by a regular file: a reader gets the whole content, the FIFO and the link stay what they were;
+    ``winder run -o FIFO`` sends the NC program through it."""
+    import stat
+    import threading
+
+    fifo = tmp_path / "out.fifo"
+    os.mkfifo(fifo)
+    got: list[bytes] = []
+
+    def read() -> None:
+        with open(fifo, "rb") as fh:
+            got.append(fh.read())
+
+    t = threading.Thread(target=read, daemon=True)
+    t.start()
+    atomic_write_text(fifo, "through the pipe\n")
+    t.join(30)
+    assert got == [b"through the pipe\n"] and stat.S_ISFIFO(os.stat(fifo).st_mode)
+    null = tmp_path / "null"
+    null.symlink_to("/dev/null")
+    atomic_write_text(null, "gone\n")
+    assert null.is_symlink() and stat.S_ISCHR(os.stat("/dev/null").st_mode)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["null", "out.fifo"]
+    job = tmp_path / "job.toml"
+    job.write_text(PIPE, encoding="utf-8")
+    got.clear()
+    t = threading.Thread(target=read, daemon=True)
+    t.start()
+    rc = main(["run", str(job), "-o", str(fifo), "--quiet"])
+    t.join(120)
+    assert rc == 0 and got
+    assert main(["run", str(job), "-o", str(tmp_path / "file.ngc"), "--quiet"]) == 0
+    assert got[0] == (tmp_path / "file.ngc").read_bytes() and got[0].endswith(b"M2\n")
+
+
 def test_disk_full_keeps_the_previous_file_and_no_temporary(tmp_path) -> None:
     target = tmp_path / "prog.ngc"
     target.write_text("the previous program\n")
