@@ -4,8 +4,9 @@ Atomic output: the data goes to a temporary file beside the target, then is rena
 crash or a full disk never leaves a half-written file where the user's file was, and the previous
 file stays intact.  A symlink stays a symlink (the file it points to is replaced); a target that is
 not a regular file (a terminal, a pipe, ``/dev/stdout``) is written into once the content is complete
-(a rename would have put a regular file in its place: as root, over ``/dev/stdout`` itself).  The temporary file is named ``.NAME.winder-PID-XXXX.SUFFIX``; one left behind by a
-killed process (its PID no longer runs) is removed by the next write into the same folder.
+(a rename would have put a regular file in its place: as root, over ``/dev/stdout`` itself).  The
+temporary file is named ``.NAME.winder-PID-XXXX.SUFFIX``; one left behind by a killed process (its PID
+no longer runs) is removed by the next write into the same folder.
 
 Every failure is an :class:`~engine.errors.InputError` naming the file: the target is a folder, its
 folder is missing, no permission, the disk is full.
