@@ -13,6 +13,7 @@ from gui_helpers import close_window, shown_window
 
 import engine.laminate as lam
 from engine.job import load_job
+from tests.test_layer_pool import record_sent
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "resources" / "examples"
 
@@ -44,16 +45,7 @@ def test_gui_run_uses_the_pool_and_exports_the_one_process_program(qtbot, tmp_pa
                                                                   monkeypatch: pytest.MonkeyPatch) -> None:
     path = EXAMPLES / "pressure_vessel.toml"
     one = lam.run_laminate(load_job(path), str(path), workers=1)
-    sent: list[int] = []
-    orig = lam._pool_pipeline
-
-    def logged(pool, jp, p, upto, register):  # noqa: ANN001, ANN202
-        ok = orig(pool, jp, p, upto, register)
-        if ok:
-            sent.append(p.i)
-        return ok
-
-    monkeypatch.setattr(lam, "_pool_pipeline", logged)
+    sent = record_sent(monkeypatch)
     w = shown_window(qtbot, path)
     try:
         w.auto_run = False

@@ -63,8 +63,9 @@ def _alive(pid: int) -> bool:
         return False
 
 
-def test_same_program_from_the_pool_while_threads_run(layup, pool, monkeypatch: pytest.MonkeyPatch) -> None:
-    job, one = layup
+def record_sent(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """The indices of the layers :func:`engine.laminate._pool_pipeline` hands to a pool worker, in order
+    (filled while the patched function runs)."""
     sent: list[int] = []
     orig = lam._pool_pipeline
 
@@ -75,6 +76,12 @@ def test_same_program_from_the_pool_while_threads_run(layup, pool, monkeypatch: 
         return ok
 
     monkeypatch.setattr(lam, "_pool_pipeline", logged)
+    return sent
+
+
+def test_same_program_from_the_pool_while_threads_run(layup, pool, monkeypatch: pytest.MonkeyPatch) -> None:
+    job, one = layup
+    sent = record_sent(monkeypatch)
     assert threading.active_count() >= 1
     many = _in_thread(lambda: lam.run_laminate(job, pool=pool))
     _same_result(one, many)
