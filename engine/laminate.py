@@ -935,7 +935,7 @@ def run_laminate(
         workers = max(2, pool.workers)  # a layer the pool cannot take runs in this process
     parallel = workers > 1 and (pool is not None or _can_fork())
     slots: list[LayerResult | _Prepared] = []  # parallel: in order, a layer's result or its preparation
-    sched = _Scheduler(jp, layer_upto, workers, pool) if parallel else None
+    sched = _Scheduler(jp, layer_upto, workers, pool, join=upto == "nc") if parallel else None
     if parallel:
         _preload()
         _remove_stale_files()
@@ -992,7 +992,7 @@ def run_laminate(
         t1 = time.perf_counter()
         laid = [lr for lr in results if lr.result is not None and lr.result.machine is not None]
         machine = laid[0].result.machine if laid else load_machine_for_job(job, jp)
-        res = _join(res, machine)
+        res = _join(res, machine, sched.prebuilt if sched is not None else None)
         times["nc"] = times.get("nc", 0.0) + time.perf_counter() - t1
     _reap_exited()
     times["total"] = time.perf_counter() - t0
@@ -1202,8 +1202,10 @@ class _Scheduler:
     (a hoop layer costs less than its fork) or when it is the last one and no child runs.  The answers are
     taken in layer order, so the first failing layer's error is the one raised, as in one process."""
 
-    def __init__(self, jp: str | None, upto: str, workers: int, pool: Any = None) -> None:
+    def __init__(self, jp: str | None, upto: str, workers: int, pool: Any = None, join: bool = False) -> None:
         self.jp, self.upto, self.workers, self.slots_free = jp, upto, workers, max(0, workers - 1)
+        self.join = join  # the layers will be joined into one program (run_laminate(upto="nc"))
+        self.prebuilt: dict[int, tuple[Any, Any]] = {}  # distance functions for the join, built while waiting
         self.pool = pool  # an engine.layer_pool.LayerPool: its workers instead of forked children
         self.queue: list[_Prepared] = []
         self.children: dict[int, _Child] = {}  # by layer index
@@ -1288,6 +1290,8 @@ class _Scheduler:
             j = order[p.i]
             return SubState(state, j / n, (j + 1) / n) if state is not None else None
 
+        # what the join will need and the layers' answers do not change: built while this process waits
+        idle = _join_prework(slots, self.prebuilt) if self.join else []
         try:
             self.queue.sort(key=_pipeline_cost, reverse=True)
             while self.queue or self._running():
@@ -1303,6 +1307,10 @@ class _Scheduler:
                 if self.queue:
                     p = self.queue.pop(0)
                     self._spawn(p, sub(p))
+                    continue
+                if idle and not any(c.ready() for i, c in self.children.items() if i not in self.out):
+                    check_cancel(state)
+                    idle.pop(0)()
                     continue
                 self._wait(state)
             for i, c in self.children.items():
@@ -1326,6 +1334,19 @@ class _Scheduler:
                 raise _located(got, self.jp, p.i, p.layer) from None
             filled.append(_laid(job, p, got))
         return filled
+
+
+def _join_prework(slots: list[Any], fns: dict[int, tuple[Any, Any]]) -> list[Callable[[], None]]:
+    """The distance functions of the surfaces the layers that lay fibre are wound on (the join's
+    transition checks measure against them, :func:`transition_clearance`), as steps that add them to ``fns``;
+    none when fewer than two layers lay fibre (no transition)."""
+    import functools
+
+    surfaces = [s.surface for s in slots if isinstance(s, _Prepared)
+                or (isinstance(s, LayerResult) and s.result is not None)]
+    if len(surfaces) < 2:
+        return []
+    return [functools.partial(prebuild_distance, surface, fns) for surface in surfaces]
 
 
 def _fork_pipeline(jp: str | None, p: _Prepared, upto: str, register: Callable[[_Child], None]) -> _Child:
@@ -1797,8 +1818,9 @@ def _sorted(x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
     return x[o], y[o]
 
 
-def _join(res: LaminateResult, machine: Any) -> LaminateResult:
-    """Join the layers' blocks with transition moves into one program and render it."""
+def _join(res: LaminateResult, machine: Any, fns: dict[int, tuple[Any, Any]] | None = None) -> LaminateResult:
+    """Join the layers' blocks with transition moves into one program and render it (``fns``: the laminate
+    surfaces' distance functions already built, see :func:`transition_clearance`)."""
     from engine.blocks import Blocks
     from engine.machine_setup import controller_for
     from engine.post import get_post
@@ -1883,7 +1905,7 @@ def _join(res: LaminateResult, machine: Any) -> LaminateResult:
     text = post.render(blocks, machine, profile)
     over: list[float] = []
     problems = _joined_problems(machine, blocks, text, new_layers, transitions, placement, res.mandrel,
-                                job.machine.setup, depths=over)
+                                job.machine.setup, depths=over, fns=fns)
     return replace(res, layers=tuple(new_layers), machine=machine, blocks=blocks, nc_text=text,
                    post_name=post.name, extension=post.extension, transitions=tuple(transitions),
                    transition_fibre_over_mm=tuple(over),
@@ -1960,7 +1982,8 @@ def _last_laid_point(machine: Any, q_end: FloatArray, layer: LayerResult) -> Flo
 
 def transition_clearance(machine: Any, blocks: Any, layers: list[LayerResult],
                          transitions: list[tuple[int, int, float]], bare: Any, setup: Any,
-                         depths: list[float] | None = None) -> list[Any]:
+                         depths: list[float] | None = None, fns: dict[int, tuple[Any, Any]] | None = None
+                         ) -> list[Any]:
     """The eye along every transition move against the laminate laid so far (the surface the next layer is
     wound on), the shafts, the chuck and the tailstock (of the bare mandrel), and the free fibre - from the
     last laid point of the layer before, which stays where it was laid, to the eye - against the shafts,
@@ -1975,13 +1998,16 @@ def transition_clearance(machine: Any, blocks: Any, layers: list[LayerResult],
     on the cylinder: the tail crosses the dome) - not a collision, but fibre laid outside the pattern: with
     ``depths`` a list, the deepest such pass of each transition (mm, 0 when the fibre stays free; by branch
     and bound along the line, :func:`engine.machine_setup.capsule_min_distance`, within 0.05 mm) is
-    appended to it."""
+    appended to it.
+
+    ``fns`` (optional): the surfaces' distance functions, ``{id(surface): (surface, mandrel_distance_fn(surface))}``,
+    as :func:`prebuild_distance` makes them (the laminate run builds them while it waits for its layers);
+    the missing ones are built here and added to it."""
     from engine.kinematics import forward_kinematics, violations_from_mask
     from engine.machine_setup import (
         _rect_distance,
         _segment_min_rho,
         capsule_min_distance,
-        mandrel_distance_fn,
         radial_prune,
         support_obstacles,
     )
@@ -1995,14 +2021,13 @@ def transition_clearance(machine: Any, blocks: Any, layers: list[LayerResult],
     f_gap = float(setup.clearance_mm)
     f_sup = {name: np.full(nb, np.inf) for name in d_sup}
     u = (np.arange(TRANSITION_SUBSTEPS) + 1.0) / TRANSITION_SUBSTEPS     # inside and at the end of each block
-    fns: dict[int, Any] = {}
+    built = fns if fns is not None else {}
 
     def distance_to(surface: Any) -> Any:
-        """The sampled distance function of a laminate surface, built once here (a surface is the next
-        layer's in one transition and the last laid layer's in the next); called with its bound each time."""
-        if id(surface) not in fns:
-            fns[id(surface)] = (surface, mandrel_distance_fn(surface))
-        return fns[id(surface)][1]
+        """The sampled distance function of a laminate surface, built once (a surface is the next layer's
+        in one transition and the last laid layer's in the next); called with its bound each time."""
+        prebuild_distance(surface, built)
+        return built[id(surface)][1]
     for j, (b0, n, _t) in enumerate(transitions):
         if j + 1 >= len(laid) or n < 1:
             if depths is not None:
@@ -2050,9 +2075,20 @@ def transition_clearance(machine: Any, blocks: Any, layers: list[LayerResult],
     return out
 
 
+def prebuild_distance(surface: Any, fns: dict[int, tuple[Any, Any]]) -> None:
+    """Add ``surface``'s sampled distance function (:func:`engine.machine_setup.mandrel_distance_fn`) to
+    ``fns`` under ``id(surface)``, with the surface itself (so the id stays its own), unless it is there."""
+    from engine.machine_setup import mandrel_distance_fn
+
+    got = fns.get(id(surface))
+    if got is None or got[0] is not surface:
+        fns[id(surface)] = (surface, mandrel_distance_fn(surface))
+
+
 def _joined_problems(machine: Any, blocks: Any, text: str, layers: list[LayerResult],
                      transitions: list[tuple[int, int, float]], placement: Any, bare: Any = None,
-                     setup: Any = None, depths: list[float] | None = None) -> list[str]:
+                     setup: Any = None, depths: list[float] | None = None,
+                     fns: dict[int, tuple[Any, Any]] | None = None) -> list[str]:
     """What the joined program breaks beyond the layers' own checks: every block of it (the layers' speed
     ramps, the transitions, the common placement) against every position, speed and speed-jump limit,
     the eye's clearance along the transitions (with ``bare`` and ``setup``), grouped and located by NC line,
@@ -2064,7 +2100,7 @@ def _joined_problems(machine: Any, blocks: Any, text: str, layers: list[LayerRes
            if v.kind != "position"}
     viol = [v for v in check_blocks(machine, blocks) if v.kind == "position" or (v.kind, v.axis) not in own]
     if bare is not None and setup is not None:
-        viol += transition_clearance(machine, blocks, layers, transitions, bare, setup, depths=depths)
+        viol += transition_clearance(machine, blocks, layers, transitions, bare, setup, depths=depths, fns=fns)
     out: list[str] = []
     if placement is not None and not placement.fits:
         out.append(placement.message())

@@ -718,3 +718,43 @@ def test_transition_depth_search_is_per_segment() -> None:
     depths: list[float] = []
     transition_clearance(m, bad, layers, trans, res.mandrel, setup, depths=depths)
     assert depths[0] > 50.0 and 30.0 < depths[1] <= 36.0
+
+
+def test_transition_clearance_takes_prebuilt_distances(monkeypatch: pytest.MonkeyPatch) -> None:
+    """With the surfaces' distance functions built beforehand (prebuild_distance, as the parallel run does
+    while it waits), transition_clearance builds none and gives the same violations and depths; an entry
+    whose surface is another object under the same id is built again, not used."""
+    from dataclasses import replace as dc_replace
+
+    import engine.machine_setup as ms
+    from engine.laminate import prebuild_distance, transition_clearance
+
+    res, layers, trans = _pipe_lathe4()
+    m, setup = res.machine, res.job.machine.setup
+    q = np.array(res.blocks.q)
+    b0, n, _t = trans[0]
+    mid = b0 + n // 2
+    qi = m.to_internal(q[mid:][None, :][0])
+    qi[:, m.axis_index("mandrel")] -= math.pi / 2        # the fibre drawn through the laminate: depths > 0
+    q[mid:] = m.to_controller(qi)
+    bad = dc_replace(res.blocks, q=q, delta=np.diff(q, axis=0))
+    depths_ref: list[float] = []
+    ref = transition_clearance(m, bad, layers, trans, res.mandrel, setup, depths=depths_ref)
+    fns: dict[int, tuple] = {}
+    for lr in layers:
+        prebuild_distance(lr.surface, fns)
+    first = dict(fns)
+    prebuild_distance(layers[0].surface, fns)            # there already: kept
+    assert fns == first
+
+    def refuse(*a, **k):  # noqa: ANN002, ANN003, ANN202
+        raise AssertionError("built again")
+
+    monkeypatch.setattr(ms, "mandrel_distance_fn", refuse)
+    depths: list[float] = []
+    got = transition_clearance(m, bad, layers, trans, res.mandrel, setup, depths=depths, fns=fns)
+    assert depths == depths_ref and depths[0] > 5.0
+    assert [str(v) for v in got] == [str(v) for v in ref]
+    stale = {id(layers[0].surface): (object(), None)}
+    with pytest.raises(AssertionError, match="built again"):
+        prebuild_distance(layers[0].surface, stale)

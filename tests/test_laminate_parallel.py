@@ -530,3 +530,49 @@ def test_an_answered_child_is_not_waited_for_until_the_run_ends(layup, monkeypat
     for p in forked:                        # every child reaped: not even a zombie is left
         with pytest.raises(ChildProcessError):
             os.waitpid(p, os.WNOHANG)
+
+
+def test_the_joins_distances_are_built_while_the_layers_run(layup, monkeypatch: pytest.MonkeyPatch) -> None:
+    """While this process only waits for its children, it builds the sampled distance functions of the
+    surfaces the join's transition checks measure against (they depend on the prepared layers alone): the
+    join gets one for every surface a layer that lays fibre is wound on and builds none itself, and the
+    program and report are those of one process."""
+    import engine.machine_setup as ms
+
+    job, one = layup
+    during_join: list[int] = []
+    given: list[dict] = []
+    joining: list[bool] = []
+    orig_fn, orig_join = ms.mandrel_distance_fn, lam._join
+
+    def counting(surface, *a, **k):  # noqa: ANN001, ANN002, ANN003, ANN202
+        if joining:
+            during_join.append(id(surface))
+        return orig_fn(surface, *a, **k)
+
+    def join(res, machine, fns=None):  # noqa: ANN001, ANN202
+        given.append(dict(fns or {}))
+        joining.append(True)
+        return orig_join(res, machine, fns)
+
+    monkeypatch.setattr(ms, "mandrel_distance_fn", counting)
+    monkeypatch.setattr(lam, "_join", join)
+    res = lam.run_laminate(job, workers=2)
+    _same_result(one, res)
+    laid = [lr for lr in res.layers if lr.result is not None]
+    assert set(given[0]) == {id(lr.surface) for lr in laid}
+    assert all(given[0][id(lr.surface)][0] is lr.surface for lr in laid)
+    assert during_join == [], "the join built a distance function itself"
+
+
+def test_join_prework_only_where_a_transition_is_checked() -> None:
+    """No prework without a transition (one layer that lays fibre); skip layers are not measured against."""
+    job = parse_job(LAYUP)
+    surface = object()
+    laid = lam.LayerResult(index=0, name="a", kind="hoop", key="k", surface=surface, grown=surface,
+                           result=object())
+    skip = lam.LayerResult(index=1, name="s", kind="skip", key="k2", surface=object(), grown=surface)
+    assert lam._join_prework([laid, skip], {}) == []
+    fns: dict[int, tuple] = {}
+    steps = lam._join_prework([laid, skip, laid], fns)
+    assert len(steps) == 2 and job is not None
