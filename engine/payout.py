@@ -1518,6 +1518,8 @@ class _Tube:
         self.theta_t = np.arctan2(self.ct, self.at)  # sup of V − v over l >= 0 at the second point
         self._last: tuple[FloatArray, FloatArray, FloatArray] | None = None  # (y, A, μ_hi) of the last solution
         self._cap: FloatArray | None = None
+        # products of :meth:`_l_of_mu` that do not depend on μ, for :meth:`g` (the same products: the same bits)
+        self._ra, self._b2, self._r2 = self.rf * self.af, self.bf * self.bf, self.rf * self.rf
 
     # exact per-point maps --------------------------------------------------------------------
     def _l_of_mu(self, mu: FloatArray, r: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
@@ -1536,7 +1538,58 @@ class _Tube:
         return np.where(np.isinf(l), np.inf, l - np.hypot(r + a * l, c * l))  # inf - inf: under _quiet_fp
 
     def g(self, mu: FloatArray, idx: NDArray[np.int64] | slice = slice(None)) -> FloatArray:
-        """Smallest μ_{i+1} allowed by no sag and no reverse rotation given μ_i (nondecreasing in μ_i)."""
+        """Smallest μ_{i+1} allowed by no sag and no reverse rotation given μ_i (nondecreasing in μ_i).
+
+        The arithmetic of :meth:`g_reference` operation for operation (so bit for bit), with the μ-free
+        products made once, temporaries reused, and the branches of ``np.where`` that no entry takes not
+        computed (the forward propagation calls this ~3 000 times per example law; ~10 % less time)."""
+        rf, af, cf, rt, at, ct = self.rf[idx], self.af[idx], self.cf[idx], self.rt[idx], self.at[idx], self.ct[idx]
+        if self.k:  # l(μ), as _l_of_mu
+            b2, r2 = self._b2[idx], self._r2[idx]
+            B = mu + self._ra[idx]
+            m2 = mu * mu
+            m2 -= r2
+            disc = B * B
+            disc -= b2 * m2
+            np.maximum(disc, 0.0, out=disc)
+            np.sqrt(disc, out=disc)
+            neg = B <= 0
+            l = B + disc
+            l /= b2
+            if neg.any():
+                l = np.where(neg, m2 / (B - disc), l)
+        else:
+            l = mu
+        l_sag = l - self.ds[idx]
+        x = af * l
+        x += rf
+        phi = self.vf[idx] + np.arctan2(cf * l, x)
+        phi -= self.vt[idx]
+        sp, cp = np.sin(phi), np.cos(phi)
+        den = ct * cp
+        den -= at * sp
+        ok = phi < self.theta_t[idx]
+        ok &= den > 0
+        if ok.all():
+            l_rot = rt * sp
+            l_rot /= den
+        else:
+            l_rot = np.where(ok, rt * sp / np.where(ok, den, 1.0), np.inf)
+        back = phi <= 0
+        if back.any():
+            l_rot = np.where(back, 0.0, l_rot)
+        need = np.maximum(l_sag, l_rot)
+        np.maximum(need, 0.0, out=need)
+        if not self.k:
+            return need
+        h = at * need  # μ(need), as _mu_of_l
+        h += rt
+        out = need - np.hypot(h, ct * need)
+        inf = np.isinf(need)
+        return np.where(inf, np.inf, out) if inf.any() else out
+
+    def g_reference(self, mu: FloatArray, idx: NDArray[np.int64] | slice = slice(None)) -> FloatArray:
+        """:meth:`g` written plainly (the tested reference)."""
         rf, af, cf, rt, at, ct = self.rf[idx], self.af[idx], self.cf[idx], self.rt[idx], self.at[idx], self.ct[idx]
         l = self._l_of_mu(mu, rf, af, self.bf[idx])
         l_sag = l - self.ds[idx]

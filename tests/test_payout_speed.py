@@ -228,3 +228,39 @@ def test_closed_form_inverse_outside_the_quiet_stages_warns_nothing() -> None:
         warnings.simplefilter("error")
         l = flat.l_of_mu(mu, 1)
     assert l.shape == mu.shape
+
+
+@pytest.mark.parametrize("name", ["pipe", "pressure_vessel"])
+@pytest.mark.parametrize("k", [0, 1])
+def test_tube_g_is_its_reference_bit_for_bit(name: str, k: int) -> None:
+    """_Tube.g (μ-free products made once, unused np.where branches skipped) against its plain reference
+    g_reference, bit for bit, with every branch taken: μ on and between the envelopes, far below (l(μ) with
+    B <= 0), eye azimuths behind the next point (φ <= 0) and beyond its θ (no l keeps the eye from turning
+    back: inf) on random points; on index subsets; with and without impregnation (k = 0: μ = l)."""
+    job, mandrel, line = _coarse_example(name)
+    geo, env, _ = payout._prepare(line, mandrel, job.payout, job.payout.parameter, 300, None, None)
+    tube = payout._Tube(payout._Problem(geo, env, k))
+    lo, hi = tube.lo[:-1], tube.hi[:-1]
+    rng = np.random.default_rng(11)
+    span = np.where(np.isfinite(hi - lo), hi - lo, 100.0)
+    cases = [lo, np.where(np.isfinite(hi), hi, lo + 50.0), lo + rng.uniform(0, 1, lo.size) * span,
+             lo - rng.uniform(0, 5e3, lo.size)]
+    some = rng.uniform(size=lo.size) < 0.2
+    theta, vt = tube.theta_t.copy(), tube.vt.copy()
+    hit = {"neg_B": False, "back": False, "inf": False}
+    with np.errstate(divide="ignore", invalid="ignore"):  # as the stages run it (payout._quiet_fp)
+        for variant in ("as is", "theta", "behind"):
+            tube.theta_t = np.where(some, -1.0, theta) if variant == "theta" else theta
+            tube.vt = np.where(some, vt + 3.0, vt) if variant == "behind" else vt
+            for mu in cases:
+                for idx in (slice(None), np.flatnonzero(rng.uniform(size=lo.size) < 0.3)):
+                    m = mu if isinstance(idx, slice) else mu[idx]
+                    got, ref = tube.g(m, idx), tube.g_reference(m, idx)
+                    assert got.dtype == ref.dtype and np.array_equal(got, ref, equal_nan=True)
+                if tube.k:
+                    hit["neg_B"] |= bool((mu + tube.rf * tube.af <= 0).any())
+                g = tube.g(mu)
+                hit["inf"] |= bool(np.isinf(g).any())
+                hit["back"] |= variant == "behind" and bool((g[some] == tube.g_reference(mu)[some]).all())
+    assert hit["inf"] and hit["back"], hit
+    assert hit["neg_B"] or not tube.k, hit
