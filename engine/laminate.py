@@ -90,11 +90,33 @@ class Material:
 MATERIALS_FILE = Path(__file__).resolve().parents[1] / "resources" / "materials" / "fibres.toml"
 
 
+_MATERIALS: dict[tuple[str, int, int], dict[str, Material]] = {}
+"""Materials files read in this process, by (resolved path, modification time in ns, size): every layer's
+figures look their material up (a copy of the dict is handed out; a Material is frozen)."""
+
+
 def load_materials(path: str | Path | None = None) -> dict[str, Material]:
-    """Every material of the materials file, by name."""
-    from engine.resources import read_toml
+    """Every material of the materials file, by name (read again when the file changes)."""
+    import os
 
     p = Path(path) if path is not None else MATERIALS_FILE
+    try:
+        st = os.stat(p)
+        key: tuple[str, int, int] | None = (str(p.resolve()), st.st_mtime_ns, st.st_size)
+    except OSError:  # missing: read_toml says so
+        key = None
+    if key is not None and key in _MATERIALS:
+        return dict(_MATERIALS[key])
+    out = _read_materials(p)
+    if key is not None:
+        _MATERIALS.clear()
+        _MATERIALS[key] = out
+    return dict(out)
+
+
+def _read_materials(p: Path) -> dict[str, Material]:
+    from engine.resources import read_toml
+
     data = read_toml(p, "materials file")
     out: dict[str, Material] = {}
     for name, d in data.get("material", {}).items():
@@ -1280,6 +1302,10 @@ class _Scheduler:
         except Exception as exc:  # noqa: BLE001 - raised again in layer order
             return _Failed(exc)
 
+    def _lay(self, job: Job, p: _Prepared) -> None:
+        """The result of layer ``p``, wound in this process, with its figures (:func:`_laid`)."""
+        self.laid[p.i] = _laid(job, p, self.out[p.i])
+
     def finish(self, job: Job, slots: list[Any], state: State | None, n: int,
                active: list[Any]) -> list[LayerResult]:
         """Every prepared layer's result, in order; the first failing layer's error (in layer order) is
@@ -1290,8 +1316,11 @@ class _Scheduler:
             j = order[p.i]
             return SubState(state, j / n, (j + 1) / n) if state is not None else None
 
+        import functools
+
         # what the join will need and the layers' answers do not change: built while this process waits
         idle = _join_prework(slots, self.prebuilt) if self.join else []
+        self.laid: dict[int, LayerResult] = {}
         try:
             self.queue.sort(key=_pipeline_cost, reverse=True)
             while self.queue or self._running():
@@ -1303,6 +1332,9 @@ class _Scheduler:
                                    len(self.queue) == 1 and not self._running()):
                     p = self.queue.pop()
                     self.out[p.i] = self._here(p, sub(p))
+                    got = self.out[p.i]
+                    if got is not None and not isinstance(got, (BaseException, _Failed)):
+                        idle.insert(0, functools.partial(self._lay, job, p))  # its figures, while children run
                     continue
                 if self.queue:
                     p = self.queue.pop(0)
@@ -1322,6 +1354,9 @@ class _Scheduler:
         for p in slots:  # in layer order: a re-run, an error, as one process would meet them
             if isinstance(p, LayerResult):
                 filled.append(p)
+                continue
+            if p.i in self.laid:  # wound here, its figures made while waiting
+                filled.append(self.laid[p.i])
                 continue
             got = self.out[p.i]
             if got is None:  # its child died, or failed other than on its input: run it here

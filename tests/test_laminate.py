@@ -376,6 +376,39 @@ def test_fibre_mass_from_the_tows_linear_density() -> None:
     assert hoop["fibre_mass_kg"] == pytest.approx(f, rel=1e-12) and hoop["resin_mass_kg"] == pytest.approx(r, rel=1e-12)
 
 
+def test_materials_file_read_once_and_again_when_it_changes(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """load_materials keeps the file it read (every layer's figures look their material up): the same
+    materials without reading it again, a copy each time (changing it changes nothing kept), read again
+    when the file changes; a missing file is still the InputError naming it."""
+    import os
+
+    import engine.resources as rs
+    from engine.errors import InputError
+    from engine.laminate import MATERIALS_FILE, load_materials
+
+    src = MATERIALS_FILE.read_text(encoding="utf-8")
+    f = tmp_path / "fibres.toml"
+    f.write_text(src, encoding="utf-8")
+    reads: list[str] = []
+    orig = rs.read_toml
+
+    def counting(path, what="file"):  # noqa: ANN001, ANN202
+        reads.append(str(path))
+        return orig(path, what)
+
+    monkeypatch.setattr(rs, "read_toml", counting)
+    a = load_materials(f)
+    a.pop("t700")
+    b = load_materials(f)
+    assert len(reads) == 1 and "t700" in b and b == load_materials(f)
+    f.write_text(src.replace("[material.t700]", "[material.t700x]"), encoding="utf-8")
+    os.utime(f, ns=(os.stat(f).st_atime_ns, os.stat(f).st_mtime_ns + 10**9))
+    c = load_materials(f)
+    assert len(reads) == 2 and "t700x" in c and "t700" not in c
+    with pytest.raises(InputError, match="missing.toml"):
+        load_materials(tmp_path / "missing.toml")
+
+
 def test_job_model_defaults_one_helical_layer() -> None:
     job = Job.model_validate({"mandrel": {"kind": "pipe", "radius_mm": 10.0, "length_mm": 10.0}})
     assert job.is_single_line and [lay.kind for lay in job.layers] == ["helical"]

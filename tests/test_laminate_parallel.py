@@ -576,3 +576,27 @@ def test_join_prework_only_where_a_transition_is_checked() -> None:
     fns: dict[int, tuple] = {}
     steps = lam._join_prework([laid, skip, laid], fns)
     assert len(steps) == 2 and job is not None
+
+
+def test_figures_of_layers_wound_here_are_made_while_the_children_run(layup, monkeypatch: pytest.MonkeyPatch
+                                                                     ) -> None:
+    """The hoop layers this process winds get their figures (_laid) while it waits for the children, not
+    after the last answer; the result and report are those of one process."""
+    job, one = layup
+    when: dict[int, bool] = {}  # layer -> whether a child was still running then
+    running: list[lam._Scheduler] = []
+    orig_laid, orig_init = lam._laid, lam._Scheduler.__init__
+
+    def init(self, *a, **k):  # noqa: ANN001, ANN002, ANN003, ANN202
+        orig_init(self, *a, **k)
+        running.append(self)
+
+    def laid(job_, p, res):  # noqa: ANN001, ANN202
+        when.setdefault(p.i, running[-1]._running() > 0)
+        return orig_laid(job_, p, res)
+
+    monkeypatch.setattr(lam._Scheduler, "__init__", init)
+    monkeypatch.setattr(lam, "_laid", laid)
+    res = lam.run_laminate(job, workers=2)
+    _same_result(one, res)
+    assert when[1] and when[4], when      # the hoops (wound here) while the polar or helical child ran
