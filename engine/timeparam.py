@@ -69,7 +69,7 @@ import math
 import os
 import threading
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -864,6 +864,129 @@ def _reachable(cap: np.ndarray, h: np.ndarray, ch: dict[str, np.ndarray], limits
     return np.minimum(out, cap)
 
 
+def _interval_caps(d1: np.ndarray, adX: np.ndarray, V: np.ndarray, arrival: bool,
+                   wk: Callable[[str, tuple[int, ...]], np.ndarray]) -> tuple[np.ndarray, np.ndarray | None]:
+    """Node caps of the path speed (mm/s) from the axis speeds, and the caps of the intervals behind them.
+
+    ``arrival``: ``min_k V_k/|X'_k|`` at the node (the paper's check at the arrival node; no interval caps).
+    Else ``|X'_k|`` is bounded over each interval by its Bernstein coefficients: the interval's cap is
+    ``min_k V_k/bound_k`` (as ``x = ṡ²``: the second array, one per interval), and a node's is the smaller
+    of its two intervals' (and its own): it holds the axis speeds inside the intervals whatever a law does
+    between the nodes, up to the change of |X'| over an interval below the node's own cap
+    (:func:`_chord_caps` recovers that)."""
+    n, p = adX.shape
+    if arrival:
+        b1n = adX
+        xb = None
+    else:
+        bb = np.matmul(d1, _P2B.T, out=wk("prepare_bb", d1.shape))
+        np.abs(bb, out=bb)
+        b1 = np.maximum(bb[..., 0], bb[..., 1])                   # (N-1, p); max over the 5 (exact in any order)
+        for k in range(2, 5):
+            np.maximum(b1, bb[..., k], out=b1)
+        b1n = np.zeros((n, p))
+        b1n[:-1] = b1
+        b1n[1:] = np.maximum(b1n[1:], b1)
+        b1n = np.maximum(b1n, adX)
+        with np.errstate(divide="ignore"):
+            xb = np.min(np.where(b1 > 0, V / np.where(b1 > 0, b1, 1.0), np.inf), axis=1) ** 2
+    with np.errstate(divide="ignore"):
+        return np.min(np.where(b1n > 0, V / np.where(b1n > 0, b1n, 1.0), np.inf), axis=1), xb
+
+
+_P2B8 = np.array([[math.comb(m, l) / math.comb(8, l) if l <= m else 0.0 for l in range(9)] for m in range(9)])
+"""Power to Bernstein coefficients, degree 8 (|X'|² of the quintic Hermite interpolant)."""
+_CHORD_SWEEPS = 12
+_CHORD_HUGE = 1e30   # a node where no axis moves: no cap of its own (the chords of its intervals set one)
+
+
+def _chord_caps(d1: np.ndarray, adX: np.ndarray, V: np.ndarray, cap_old: np.ndarray, xb: np.ndarray,
+                levels: int) -> np.ndarray:
+    """Node caps of the path speed (mm/s) that hold every axis speed inside every interval for any law
+    with ṡ² linear in s between nodes at or below them, at least ``cap_old`` (:func:`_interval_caps`).
+
+    *The bound.*  Inside interval ``i`` (τ in [0, 1]) a law with ``x = ṡ²`` at most ``c_i``, ``c_{i+1}`` at
+    its ends has ``x(τ) <= (1 - τ)c_i + τc_{i+1}``, and axis ``k`` moves at ``|X'_k(τ)|·√x(τ)``.  So the
+    speeds hold if ``((1 - τ)c_i + τc_{i+1})·X'_k(τ)² <= V_k²`` for all τ: a polynomial of degree 9 in τ,
+    linear in ``(c_i, c_{i+1})``, at most the largest of its Bernstein coefficients ``α_kj·c_i + β_kj·c_{i+1}``
+    (``α_kj = (9 - j)/9·q_kj``, ``β_kj = j/9·q_k,j-1``, q the Bernstein coefficients of ``X'_k²``): the
+    *chord* test.  Both ends at most the interval's cap ``xb`` (:func:`_interval_caps`) is the other proof.
+
+    *The caps.*  From the caps at the nodes themselves (``x <= V_k²/X'_k²`` there, as TOPP-RA's), every
+    interval whose chord breaks the test has both end caps scaled down until it holds, a node taking the
+    smaller scale of its two intervals; one sweep usually settles them, a second confirms (not settled
+    within :data:`_CHORD_SWEEPS`: the old caps).
+
+    *Where the old caps stay.*  A node whose new cap is not at least one level step (``1/levels``) above
+    the old keeps the old one exactly: the DP's levels would move by less than a step there, and the law
+    could come out a little better or worse by their placement alone (the paper's path keeps its law bit
+    for bit).  Each interval is then certified by one of the two tests; where one that mixes old and new
+    caps is not, its ends take their old caps (both old: the interval cap certifies it), until all are.
+    So no cap is below the old one, and every interval is proven.
+
+    The old caps alone bound a node by the worst speed of both adjacent intervals: where an axis speed
+    changes by ~10 % from node to node the law then stays ~10 % below the node's own cap, 1-2 % of the
+    traversal time on such paths (benchmarks/bench_timelaw_variety.py).
+    """
+    n1, p, _ = d1.shape
+    xo = np.minimum(cap_old * cap_old, _CHORD_HUGE)          # the old caps as x = ṡ²
+    with np.errstate(divide="ignore"):
+        node = np.min(np.where(adX > 0, (V * V)[None, :] / np.where(adX > 0, adX * adX, 1.0), np.inf), axis=1)
+    step = (1.0 + 1.0 / max(levels, 1)) ** 2
+    if not (np.minimum(node, _CHORD_HUGE) > xo * step).any():
+        return cap_old                                        # no cap can gain a level step (caps only fall)
+    q = np.zeros((n1, p, 9))                                  # X'² in powers of τ
+    for i in range(5):
+        q[..., 2 * i] += d1[..., i] * d1[..., i]
+        for j in range(i + 1, 5):
+            q[..., i + j] += 2.0 * (d1[..., i] * d1[..., j])
+    qb = np.matmul(q, _P2B8.T)
+    inv = 1.0 / (V * V)
+    w = np.arange(10) / 9.0
+    alpha = np.zeros((n1, p, 10))
+    beta = np.zeros((n1, p, 10))
+    np.multiply(qb, (1.0 - w[:9]) * inv[:, None], out=alpha[..., :9])
+    np.multiply(qb, w[1:] * inv[:, None], out=beta[..., 1:])
+    alpha = alpha.reshape(n1, p * 10)
+    beta = beta.reshape(n1, p * 10)
+    xbh = np.minimum(xb, _CHORD_HUGE)
+
+    def uncertified(c: np.ndarray) -> np.ndarray:
+        """The intervals that neither the chord test nor the interval cap certifies for end caps ``c``."""
+        f = alpha * c[:-1, None]
+        f += beta * c[1:, None]
+        chord = f.max(axis=1) <= 1.0 - 1e-12
+        return ~(chord | ((c[:-1] <= xbh) & (c[1:] <= xbh)))
+
+    c = np.minimum(node, _CHORD_HUGE)
+    for _ in range(_CHORD_SWEEPS):
+        f = alpha * c[:-1, None]
+        f += beta * c[1:, None]
+        fm = f.max(axis=1)
+        bad = fm > 1.0 - 1e-12
+        if not bad.any():
+            break
+        scale = np.where(bad, (1.0 - 1e-9) / np.where(bad, fm, 1.0), 1.0)
+        ns = np.ones(c.size)
+        ns[:-1] = scale
+        np.minimum(ns[1:], scale, out=ns[1:])
+        c *= ns
+    else:
+        return cap_old
+    gain = c > xo * step
+    c = np.where(gain, c, xo)
+    for _ in range(n1 + 1):                                     # mixed intervals: ends back to their old caps
+        bad = uncertified(c)
+        if not bad.any():
+            break
+        back = np.zeros(c.size, dtype=bool)
+        back[:-1] |= bad
+        back[1:] |= bad
+        gain &= ~back
+        c = np.where(gain, c, xo)
+    return np.where(gain, np.where(c >= _CHORD_HUGE, np.inf, np.sqrt(c)), cap_old)
+
+
 def _prepare(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, chains: bool = True, work: bool = False
              ) -> _Problem:
     s, X, dX, ddX = _validate(path_s, X, dX, ddX, limits)
@@ -878,21 +1001,12 @@ def _prepare(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, chains:
         def _wk(name: str, shape: tuple[int, ...]) -> np.ndarray:
             return np.empty(shape)
 
-    # axis speed caps: Bernstein bound of |X'| on both adjacent intervals
-    bb = np.matmul(d1, _P2B.T, out=_wk("prepare_bb", d1.shape))
-    np.abs(bb, out=bb)
-    b1 = np.maximum(bb[..., 0], bb[..., 1])                   # (N-1, p); max over the 5 (exact in any order)
-    for k in range(2, 5):
-        np.maximum(b1, bb[..., k], out=b1)
-    if limits.accel_check == "arrival":
-        b1n = np.abs(dX)
-    else:
-        b1n = np.zeros((n, p))
-        b1n[:-1] = b1
-        b1n[1:] = np.maximum(b1n[1:], b1)
-        b1n = np.maximum(b1n, np.abs(dX))
-    with np.errstate(divide="ignore"):
-        cap_v = np.min(np.where(b1n > 0, V / np.where(b1n > 0, b1n, 1.0), np.inf), axis=1)
+    # axis speed caps: at the nodes (the paper's check at the arrival node), or caps whose chords keep the
+    # axis speeds inside every interval (_chord_caps; where that does not settle, the Bernstein bound of |X'|
+    # over both adjacent intervals, _interval_caps)
+    cap_v, xb = _interval_caps(d1, np.abs(dX), V, limits.accel_check == "arrival", _wk)
+    if xb is not None:
+        cap_v = _chord_caps(d1, np.abs(dX), V, cap_v, xb, int(limits.levels))
 
     cap_tech = np.full(n, float(limits.sdot_max))
     point_nodes: list[tuple[TechPoint, np.ndarray]] = []

@@ -149,7 +149,13 @@ def test_setup_gives_the_former_bits(name, path, lim, compiled, monkeypatch) -> 
         prob = tp._prepare(s, X, dX, ddX, lim, chains=False, work=work)
         assert _same(prob.rows, rows)
         assert _same(prob.hull_rows, hull_rows)
-        assert _same(prob.cap_v, cap_v)
+        # the node-wise caps are the former ones; the speed caps in use are at least those (_chord_caps)
+        old_caps, _xb = tp._interval_caps(d1, np.abs(dX), np.asarray(lim.v_max, float), lim.accel_check == "arrival",
+                                          lambda name, shape: np.empty(shape))
+        assert _same(old_caps, cap_v)
+        assert (prob.cap_v >= cap_v).all()
+        if lim.accel_check == "arrival":
+            assert _same(prob.cap_v, cap_v)
         assert (np.signbit(prob.hull_rows) == np.signbit(hull_rows)).all()       # signed zeros too
         assert (prob.hull_rows == 0).sum() > (prob.rows == 0).sum() or lim.accel_check == "arrival"
 
