@@ -52,6 +52,19 @@ def random_path(rng: np.random.Generator, n: int, axes: int, length_mm: float
     return s, X, D1, D2
 
 
+def random_case(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, TimeLimits]:
+    """The next case of ``rng``: (s, X, X', X'', limits) of a random path (:func:`random_path`: 2-7 axes,
+    200-5 000 mm, 900, 3 000 or 10 000 nodes) with random speed and acceleration limits, with or without a
+    path speed limit."""
+    axes = int(rng.integers(2, 8))
+    length = float(rng.uniform(200.0, 5000.0))
+    n = int(rng.choice([900, 3000, 10000]))
+    s, X, D1, D2 = random_path(rng, n, axes, length)
+    lim = TimeLimits(v_max=tuple(rng.uniform(50.0, 500.0, axes)), a_max=tuple(rng.uniform(200.0, 3000.0, axes)),
+                     sdot_max=float(rng.choice([np.inf, rng.uniform(100.0, 1000.0)])))
+    return s, X, D1, D2, lim
+
+
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seed", type=int, default=1)
@@ -70,12 +83,8 @@ def main() -> int:
     worst_t = worst_c = 0.0
     capped = 0
     for case in range(args.cases):
-        axes = int(rng.integers(2, 8))
-        length = float(rng.uniform(200.0, 5000.0))
-        n = int(rng.choice([900, 3000, 10000]))
-        s, X, D1, D2 = random_path(rng, n, axes, length)
-        lim = TimeLimits(v_max=tuple(rng.uniform(50.0, 500.0, axes)), a_max=tuple(rng.uniform(200.0, 3000.0, axes)),
-                         sdot_max=float(rng.choice([np.inf, rng.uniform(100.0, 1000.0)])))
+        s, X, D1, D2, lim = random_case(rng)
+        axes, n, length = X.shape[1], s.size, float(s[-1])
         cpu: dict[str, list[float]] = {"toppra": [], "tube": []}
         laws = {}
         for _ in range(args.repeat):

@@ -589,6 +589,22 @@ def _pipe_lathe4():
     return res, list(res.layers), list(res.transitions)
 
 
+def _pipe_lathe4_turned():
+    """:func:`_pipe_lathe4` and its program with the mandrel turned a quarter turn back from the middle of the
+    first transition on (the fibre from the last laid point is then drawn through the laminate: depth > 0)."""
+    from dataclasses import replace as dc_replace
+
+    res, layers, trans = _pipe_lathe4()
+    m = res.machine
+    q = np.array(res.blocks.q)
+    b0, n, _t = trans[0]
+    mid = b0 + n // 2
+    qi = m.to_internal(q[mid:][None, :][0])
+    qi[:, m.axis_index("mandrel")] -= math.pi / 2
+    q[mid:] = m.to_controller(qi)
+    return res, layers, trans, dc_replace(res.blocks, q=q, delta=np.diff(q, axis=0))
+
+
 def test_transition_free_fibre_against_the_supports() -> None:
     """The free fibre of a transition runs from the last laid point (it stays where it was laid) to the
     eye: the real program keeps it clear of the shafts, chuck and tailstock; an eye driven beyond the chuck
@@ -693,20 +709,11 @@ def test_transition_clearance_builds_each_surfaces_distance_once(monkeypatch: py
     """transition_clearance builds the sampled distance of a laminate surface once (it is the next layer's
     surface in one transition and the last laid layer's in the next) and passes its bound on every call:
     the same violations and depths as with a distance built afresh for every use (the code before)."""
-    from dataclasses import replace as dc_replace
-
     import engine.machine_setup as ms
     from engine.laminate import transition_clearance
 
-    res, layers, trans = _pipe_lathe4()
+    res, layers, trans, bad = _pipe_lathe4_turned()
     m, setup = res.machine, res.job.machine.setup
-    q = np.array(res.blocks.q)
-    b0, n, _t = trans[0]
-    mid = b0 + n // 2
-    qi = m.to_internal(q[mid:][None, :][0])
-    qi[:, m.axis_index("mandrel")] -= math.pi / 2        # the fibre drawn through the laminate: depths > 0
-    q[mid:] = m.to_controller(qi)
-    bad = dc_replace(res.blocks, q=q, delta=np.diff(q, axis=0))
     built: list[int] = []
     orig = ms.mandrel_distance_fn
 
@@ -757,20 +764,11 @@ def test_transition_clearance_takes_prebuilt_distances(monkeypatch: pytest.Monke
     """With the surfaces' distance functions built beforehand (prebuild_distance, as the parallel run does
     while it waits), transition_clearance builds none and gives the same violations and depths; an entry
     whose surface is another object under the same id is built again, not used."""
-    from dataclasses import replace as dc_replace
-
     import engine.machine_setup as ms
     from engine.laminate import prebuild_distance, transition_clearance
 
-    res, layers, trans = _pipe_lathe4()
+    res, layers, trans, bad = _pipe_lathe4_turned()
     m, setup = res.machine, res.job.machine.setup
-    q = np.array(res.blocks.q)
-    b0, n, _t = trans[0]
-    mid = b0 + n // 2
-    qi = m.to_internal(q[mid:][None, :][0])
-    qi[:, m.axis_index("mandrel")] -= math.pi / 2        # the fibre drawn through the laminate: depths > 0
-    q[mid:] = m.to_controller(qi)
-    bad = dc_replace(res.blocks, q=q, delta=np.diff(q, axis=0))
     depths_ref: list[float] = []
     ref = transition_clearance(m, bad, layers, trans, res.mandrel, setup, depths=depths_ref)
     fns: dict[int, tuple] = {}

@@ -12,24 +12,19 @@ import numpy as np
 import pytest
 
 import engine.timeparam as tp
-from engine.timeparam import TimeLimits, evaluate_limits, parametrize, prepare
+from engine.timeparam import evaluate_limits, parametrize, prepare
 from engine.timeparam_example import example_limits, example_path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-from bench_timelaw_variety import random_path  # noqa: E402
+from bench_timelaw_variety import random_case  # noqa: E402
 
 
 def _case(seed: int, case: int) -> tuple:
     """Case ``case`` of benchmarks/bench_timelaw_variety.py with ``--seed seed``: (s, X, X', X'', limits)."""
     rng = np.random.default_rng(seed)
     for _ in range(case + 1):
-        axes = int(rng.integers(2, 8))
-        length = float(rng.uniform(200.0, 5000.0))
-        n = int(rng.choice([900, 3000, 10000]))
-        s, X, D1, D2 = random_path(rng, n, axes, length)
-        lim = TimeLimits(v_max=tuple(rng.uniform(50.0, 500.0, axes)), a_max=tuple(rng.uniform(200.0, 3000.0, axes)),
-                         sdot_max=float(rng.choice([np.inf, rng.uniform(100.0, 1000.0)])))
-    return s, X, D1, D2, lim
+        out = random_case(rng)
+    return out
 
 
 def _former(monkeypatch: pytest.MonkeyPatch) -> None:
