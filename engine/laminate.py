@@ -1228,6 +1228,7 @@ class _Scheduler:
         self.jp, self.upto, self.workers, self.slots_free = jp, upto, workers, max(0, workers - 1)
         self.join = join  # the layers will be joined into one program (run_laminate(upto="nc"))
         self.prebuilt: dict[int, tuple[Any, Any]] = {}  # distance functions for the join, built while waiting
+        self.laid: dict[int, LayerResult] = {}  # layers wound here, with their figures (made while waiting)
         self.pool = pool  # an engine.layer_pool.LayerPool: its workers instead of forked children
         self.queue: list[_Prepared] = []
         self.children: dict[int, _Child] = {}  # by layer index
@@ -1320,7 +1321,6 @@ class _Scheduler:
 
         # what the join will need and the layers' answers do not change: built while this process waits
         idle = _join_prework(slots, self.prebuilt) if self.join else []
-        self.laid: dict[int, LayerResult] = {}
         try:
             self.queue.sort(key=_pipeline_cost, reverse=True)
             while self.queue or self._running():

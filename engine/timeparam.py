@@ -874,24 +874,24 @@ def _interval_caps(d1: np.ndarray, adX: np.ndarray, V: np.ndarray, arrival: bool
     of its two intervals' (and its own): it holds the axis speeds inside the intervals whatever a law does
     between the nodes, up to the change of |X'| over an interval below the node's own cap
     (:func:`_chord_caps` recovers that)."""
-    n, p = adX.shape
-    if arrival:
-        b1n = adX
-        xb = None
-    else:
-        bb = np.matmul(d1, _P2B.T, out=wk("prepare_bb", d1.shape))
-        np.abs(bb, out=bb)
-        b1 = np.maximum(bb[..., 0], bb[..., 1])                   # (N-1, p); max over the 5 (exact in any order)
-        for k in range(2, 5):
-            np.maximum(b1, bb[..., k], out=b1)
-        b1n = np.zeros((n, p))
-        b1n[:-1] = b1
-        b1n[1:] = np.maximum(b1n[1:], b1)
-        b1n = np.maximum(b1n, adX)
+    def caps(b: np.ndarray) -> np.ndarray:  # min_k V_k/b_k (inf where no axis moves)
         with np.errstate(divide="ignore"):
-            xb = np.min(np.where(b1 > 0, V / np.where(b1 > 0, b1, 1.0), np.inf), axis=1) ** 2
-    with np.errstate(divide="ignore"):
-        return np.min(np.where(b1n > 0, V / np.where(b1n > 0, b1n, 1.0), np.inf), axis=1), xb
+            return np.min(np.where(b > 0, V / np.where(b > 0, b, 1.0), np.inf), axis=1)
+
+    cap = caps(adX)
+    if arrival:
+        return cap, None
+    bb = np.matmul(d1, _P2B.T, out=wk("prepare_bb", d1.shape))
+    np.abs(bb, out=bb)
+    b1 = np.maximum(bb[..., 0], bb[..., 1])                   # (N-1, p); max over the 5 (exact in any order)
+    for k in range(2, 5):
+        np.maximum(b1, bb[..., k], out=b1)
+    # V/max(b) = min(V/b) exactly (division is monotone and rounded once): a node's cap is the smaller of its
+    # own and its two intervals'
+    ib = caps(b1)
+    np.minimum(cap[:-1], ib, out=cap[:-1])
+    np.minimum(cap[1:], ib, out=cap[1:])
+    return cap, ib ** 2
 
 
 _P2B8 = np.array([[math.comb(m, l) / math.comb(8, l) if l <= m else 0.0 for l in range(9)] for m in range(9)])
@@ -951,18 +951,19 @@ def _chord_caps(d1: np.ndarray, adX: np.ndarray, V: np.ndarray, cap_old: np.ndar
     beta = beta.reshape(n1, p * 10)
     xbh = np.minimum(xb, _CHORD_HUGE)
 
-    def uncertified(c: np.ndarray) -> np.ndarray:
-        """The intervals that neither the chord test nor the interval cap certifies for end caps ``c``."""
+    def chord(c: np.ndarray) -> np.ndarray:
+        """Per interval, the largest Bernstein coefficient of the chord test for end caps ``c`` (<= 1: proven)."""
         f = alpha * c[:-1, None]
         f += beta * c[1:, None]
-        chord = f.max(axis=1) <= 1.0 - 1e-12
-        return ~(chord | ((c[:-1] <= xbh) & (c[1:] <= xbh)))
+        return f.max(axis=1)
+
+    def uncertified(c: np.ndarray) -> np.ndarray:
+        """The intervals that neither the chord test nor the interval cap certifies for end caps ``c``."""
+        return ~((chord(c) <= 1.0 - 1e-12) | ((c[:-1] <= xbh) & (c[1:] <= xbh)))
 
     c = np.minimum(node, _CHORD_HUGE)
     for _ in range(_CHORD_SWEEPS):
-        f = alpha * c[:-1, None]
-        f += beta * c[1:, None]
-        fm = f.max(axis=1)
+        fm = chord(c)
         bad = fm > 1.0 - 1e-12
         if not bad.any():
             break
