@@ -52,7 +52,7 @@ from typing import Any
 import numpy as np
 
 from engine.errors import InfeasibleError, InputError
-from engine.resources import find_named, list_named, read_toml
+from engine.resources import file_stamp, find_named, list_named, read_toml
 from engine.state import State, check_cancel
 
 MACHINES_DIR = Path(__file__).resolve().parents[1] / "resources" / "machines"
@@ -458,12 +458,8 @@ def load_machine(name_or_path: str | Path) -> MachineTemplate:
         Unknown name, unreadable file, bad TOML or an invalid field (the message names file and field).
     """
     p = find_named(MACHINES_DIR, name_or_path, "machine", "machine")
-    try:
-        st = p.stat()
-        stamp: tuple[int, int] | None = (st.st_mtime_ns, st.st_size)
-    except OSError:
-        stamp = None        # read_toml says what is wrong with it
-    key = str(p.resolve()) if stamp is not None else ""
+    fs = file_stamp(p)  # None: read_toml says what is wrong with it
+    key, stamp = fs if fs is not None else ("", None)
     with _MACHINE_LOCK:
         hit = _MACHINES.get(key) if stamp is not None else None
     if hit is not None and hit[0] == stamp:

@@ -90,27 +90,24 @@ class Material:
 MATERIALS_FILE = Path(__file__).resolve().parents[1] / "resources" / "materials" / "fibres.toml"
 
 
-_MATERIALS: dict[tuple[str, int, int], dict[str, Material]] = {}
-"""Materials files read in this process, by (resolved path, modification time in ns, size): every layer's
-figures look their material up (a copy of the dict is handed out; a Material is frozen)."""
+_MATERIALS: dict[str, tuple[tuple[int, int], dict[str, Material]]] = {}
+"""Materials files read in this process, by resolved path, with the file's modification time and size (a
+changed file is read again; engine.resources.file_stamp): every layer's figures look their material up (a
+copy of the dict is handed out; a Material is frozen)."""
 
 
 def load_materials(path: str | Path | None = None) -> dict[str, Material]:
     """Every material of the materials file, by name (read again when the file changes)."""
-    import os
+    from engine.resources import file_stamp
 
     p = Path(path) if path is not None else MATERIALS_FILE
-    try:
-        st = os.stat(p)
-        key: tuple[str, int, int] | None = (str(p.resolve()), st.st_mtime_ns, st.st_size)
-    except OSError:  # missing: read_toml says so
-        key = None
-    if key is not None and key in _MATERIALS:
-        return dict(_MATERIALS[key])
+    fs = file_stamp(p)  # None (missing): read_toml says so
+    hit = _MATERIALS.get(fs[0]) if fs is not None else None
+    if hit is not None and fs is not None and hit[0] == fs[1]:
+        return dict(hit[1])
     out = _read_materials(p)
-    if key is not None:
-        _MATERIALS.clear()
-        _MATERIALS[key] = out
+    if fs is not None:
+        _MATERIALS[fs[0]] = (fs[1], out)
     return dict(out)
 
 

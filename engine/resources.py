@@ -56,6 +56,17 @@ def read_toml(path: str | Path, what: str = "file") -> dict[str, Any]:
     return loads_toml(read_text_limited(p, what=what), file=p)
 
 
+def file_stamp(path: Path) -> tuple[str, tuple[int, int]] | None:
+    """``(resolved path, (modification time in ns, size))`` of a data file, to keep what was read from it
+    until it changes (machine templates, the materials file); None where it cannot be stat'ed (reading it
+    then says what is wrong)."""
+    try:
+        st = path.stat()
+        return str(path.resolve()), (st.st_mtime_ns, st.st_size)
+    except OSError:
+        return None
+
+
 def list_named(directory: Path) -> list[str]:
     """Stems of the ``*.toml`` files in ``directory``, sorted (shipped machines, controllers, ...)."""
     return sorted(p.stem for p in Path(directory).glob("*.toml"))
