@@ -162,6 +162,10 @@ class TimeLimits:
         :func:`_group_length`), solve on groups of consecutive intervals with constant s̈ in each group
         (every node's constraints kept exactly) and interpolate ṡ² to the nodes; ``False`` = always on
         the given nodes (docs/timeparam.md, "Node density").
+    sweep:
+        Tube method: after the tube, sweep the same constraints once more (:func:`_sweep`: the largest
+        admissible speed node by node, as TOPP-RA does) and keep that law where it is faster; ``False`` =
+        the tube's law as it is (docs/timeparam.md, "The final sweep").
     """
 
     v_max: tuple[float, ...]
@@ -179,6 +183,7 @@ class TimeLimits:
     accel_check: str = "interval"
     tube_cluster: float = 8.0
     coarse: bool = True
+    sweep: bool = True
 
 
 @dataclass(frozen=True)
@@ -259,6 +264,8 @@ class TimeLaw:
     energy_mm: float = float("nan")
     node_group: int = 1
     """Consecutive intervals per DP interval (1 = the DP ran on the given nodes; see ``TimeLimits.coarse``)."""
+    sweep_gain_s: float = 0.0
+    """Time (s) the final sweep saved on the tube's law (0: the tube's law is kept; ``TimeLimits.sweep``)."""
 
     @property
     def sddot(self) -> np.ndarray:
@@ -277,6 +284,8 @@ class TimeLaw:
             "max_sddot_ratio": self.max_sddot_ratio,
             "energy": self.energy,
             "energy_mm": self.energy_mm,
+            "node_group": self.node_group,
+            "sweep_gain_s": self.sweep_gain_s,
             "iterations": [it.as_dict() for it in self.iterations],
             "s": self.s,
             "sdot": self.sdot,
@@ -308,7 +317,7 @@ def limits_from_mapping(d: Mapping[str, Any], file: str | None = None) -> TimeLi
     """Build :class:`TimeLimits` from a TOML-like mapping (keys as in the CLI's LIMITS.toml)."""
     known = {"v_max", "a_max", "sdot_max", "sddot_max", "levels", "penalty", "tube_share",
              "stop_percent", "sdot_start", "sdot_end", "points", "max_iterations", "accel_check",
-             "tube_cluster"}
+             "tube_cluster", "sweep"}
     for k in d:
         if k not in known:
             raise InputError(f"unknown key (known: {', '.join(sorted(known))})", file=file, field=k)
@@ -336,6 +345,9 @@ def limits_from_mapping(d: Mapping[str, Any], file: str | None = None) -> TimeLi
     check = d.get("accel_check", "interval")
     if check not in ("interval", "arrival"):
         raise InputError(f"must be 'interval' or 'arrival', got {check!r}", file=file, field="accel_check")
+    sweep = d.get("sweep", True)
+    if not isinstance(sweep, bool):
+        raise InputError(f"must be true or false, got {sweep!r}", file=file, field="sweep")
     points = []
     raw_points = d.get("points", [])
     if not isinstance(raw_points, list):
@@ -373,7 +385,7 @@ def limits_from_mapping(d: Mapping[str, Any], file: str | None = None) -> TimeLi
         sdot_start=_num(d, "sdot_start", 0.0, file, nonneg=True),
         sdot_end=_num(d, "sdot_end", 0.0, file, nonneg=True),
         points=tuple(points), max_iterations=int(maxit), accel_check=str(check),
-        tube_cluster=_num(d, "tube_cluster", 8.0, file, nonneg=True),
+        tube_cluster=_num(d, "tube_cluster", 8.0, file, nonneg=True), sweep=sweep,
     )
 
 
@@ -1292,6 +1304,200 @@ def _with_chains(prob: _Problem, work: bool = False) -> _Problem:
     return dc_replace(prob, xn=xn[1:], cap_dp=cap_dp, slopes=None, work=[], **ch)
 
 
+_SWEEP_MARGIN = 1e-9
+"""The final sweep keeps every constraint row at ``<= 1 - _SWEEP_MARGIN`` (a 5e-10 share of the time)."""
+
+
+def _sweep_back(rq: Any, rk: Any, lq: Any, lk: Any, L: int, xn: Any, xjb: Any, xjt: Any, capx: Any,
+                xend: float, clo: Any, chi: Any) -> int:
+    """The backward pass of :func:`_sweep` on flat sequences (numpy arrays when compiled by numba, Python
+    lists otherwise: the same IEEE operations in the same order, so the same bits).
+
+    ``[clo_i, chi_i]`` is the ṡ² at node i from which the end can be reached: the projection of interval
+    i's polygon (its chains ``rq, rk, lq, lk`` of ``L`` points each, abscissa ``x_j/xn + 3i``) restricted
+    to ``[clo_{i+1}, chi_{i+1}]`` onto its start axis, at most ``capx_i``, kept inside by a margin that
+    covers the chains' round-off (1e-9 relative plus 8 ulps of the abscissa).  Writes ``clo``, ``chi``;
+    returns -1, or the interval where no speed is left.
+    """
+    n = len(capx)
+    clo[n - 1] = xend
+    chi[n - 1] = xend
+    for i in range(n - 2, -1, -1):
+        a = max(clo[i + 1], xjb[i])
+        b = min(chi[i + 1], xjt[i])
+        if a > b:
+            return i
+        off = 3.0 * i
+        qa = a / xn[i] + off
+        qb = b / xn[i] + off
+        i0 = i * L
+        i1 = i0 + L - 1
+        rmax = -math.inf
+        lmin = math.inf
+        for side in range(2):                  # the right chain (max x_k), the left chain (min x_k)
+            qs = rq if side == 0 else lq
+            ks = rk if side == 0 else lk
+            # the chain at qa and qb (linear between its points, constant beyond them) and its points between
+            lo_v = ks[i0]
+            hi_v = ks[i1]
+            best = -math.inf if side == 0 else math.inf
+            t = i0
+            while t < i1 and qs[t + 1] < qa:
+                t += 1
+            if qa > qs[i0] and t < i1:
+                d = qs[t + 1] - qs[t]
+                lo_v = ks[t + 1] if d <= 0.0 else ks[t] + (ks[t + 1] - ks[t]) * (qa - qs[t]) / d
+            while t < i1 and qs[t + 1] < qb:
+                t += 1
+                v = ks[t]
+                if qs[t] > qa:
+                    best = max(best, v) if side == 0 else min(best, v)
+            if qb <= qs[i0]:
+                hi_v = ks[i0]
+            elif t < i1:
+                d = qs[t + 1] - qs[t]
+                hi_v = ks[t + 1] if d <= 0.0 else ks[t] + (ks[t + 1] - ks[t]) * (qb - qs[t]) / d
+            if side == 0:
+                rmax = max(best, lo_v, hi_v)
+            else:
+                lmin = min(best, lo_v, hi_v)
+        eq = 8.0 * xn[i] * (off + 3.0) * 2.220446049250313e-16
+        chi[i] = min(rmax - (1e-9 * abs(rmax) + eq), capx[i])
+        clo[i] = max(lmin + (1e-9 * abs(lmin) + eq), 0.0)
+        if clo[i] > chi[i]:
+            return i
+    return -1
+
+
+def _sweep_fwd(rows: np.ndarray, two_h: np.ndarray, capx: np.ndarray, chi: np.ndarray, x0: float, xend: float,
+               one: float, x: np.ndarray) -> int:
+    """The forward pass of :func:`_sweep` (numpy per node; compiled by numba element by element, the same
+    bits).
+
+    From ``x0``, ``x_{i+1}`` is the largest value every row ``g·x_i + c·(x_{i+1} - x_i)/(2h) <= one`` of
+    interval i allows, ``min`` over the rows with ``c > 0`` of ``a·x_i + b`` (``q = 2h/c``, ``a = 1 - q·g``,
+    ``b = q·one``), at most ``chi_{i+1}`` and ``capx_{i+1}``, at least ``max(0, max`` over the rows with
+    ``c < 0)``; rows with ``c = 0`` need ``g·x_i <= one``.  Writes ``x``; returns -1, or the interval
+    where no speed is left.  (The compiled pass also checks every row ``<= 1`` at the chosen speeds and
+    returns the interval where one is not; here :func:`_sweep` checks them all at once.)"""
+    n = capx.size
+    g = rows[..., 0]
+    c = rows[..., 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = two_h[:, None] / c
+        a = 1.0 - q * g
+        b = q * one
+    pos, neg = c > 0, c < 0
+    au, bu = np.where(pos, a, 0.0), np.where(pos, b, np.inf)
+    al, bl = np.where(neg, a, 0.0), np.where(neg, b, -np.inf)
+    g0 = np.max(np.where(c == 0, g, 0.0), axis=1).tolist()
+    # Python floats per node (the same IEEE products and sums as numpy's, a few times faster on ~20 rows)
+    AU, BU, AL, BL = au.tolist(), bu.tolist(), al.tolist(), bl.tolist()
+    ch, cx = chi.tolist(), capx.tolist()
+    xs = [0.0] * n
+    xs[0] = x0
+    fail = -1
+    for i in range(n - 1):
+        xk = xs[i]
+        if g0[i] * xk > one:
+            fail = i
+            break
+        up = min([a * xk + b for a, b in zip(AU[i], BU[i])])
+        lo = max(0.0, max([a * xk + b for a, b in zip(AL[i], BL[i])]))
+        if i + 1 == n - 1:
+            xj = xend
+        else:
+            xj = min(up, ch[i + 1], cx[i + 1])
+            if xj < lo:
+                xj = lo
+        if xj > up or xj < lo:
+            fail = i
+            break
+        xs[i + 1] = xj
+    x[:] = xs
+    return fail
+
+
+def _sweep(prob: _Problem) -> np.ndarray | None:
+    """ṡ at every node of the greatest admissible law the sweep finds on ``prob``'s polygons and rows
+    (``prob`` with chains), or ``None`` where it does not settle.
+
+    TOPP-RA's scheme (backward: the speeds from which the end stays reachable, :func:`_sweep_back`;
+    forward: from the start, the largest next speed that stays in them, :func:`_sweep_fwd`) on the same
+    constraints as the DP: the rows of every interval (limits inside the interval, Bernstein certificates)
+    and the node caps.  The forward pass takes its bounds from the rows with a margin of
+    :data:`_SWEEP_MARGIN` (the round-off of the limits' evaluation on sub-grids stays well inside it), and
+    the law is checked on the rows themselves (``<= 1``), so a returned law keeps every limit the DP's laws
+    keep.
+    Where the chains' round-off leaves an interval without a next speed, the sweep is repeated on chains
+    built with the box of the reachable speeds, then given up (``None``).
+    """
+    n = prob.s.size
+    if n < 3 or prob.rq.size == 0:
+        return None
+    rows = np.ascontiguousarray(prob.rows, float)
+    two_h = 2.0 * prob.h
+    one = 1.0 - _SWEEP_MARGIN
+    capx = prob.cap_dp * prob.cap_dp
+    x0, xend = prob.limits.sdot_start ** 2, prob.limits.sdot_end ** 2
+    chains = (prob.rq, prob.rk, prob.lq, prob.lk, prob.xn, prob.xjb, prob.xjt)
+    jit = None
+    if _NUMBA:
+        from engine import timeparam_jit
+
+        jit = timeparam_jit.sweep_kernels()
+    for attempt in range(2):
+        if attempt:
+            xn = (1.5 * prob.cap_dp) ** 2 + 1.0
+            if np.all(xn[1:] >= prob.xn):
+                return None             # the same box: the same chains
+            ch = _chains(prob.hull_rows, prob.h, xn[:-1], xn[1:], prob.ipos, prob.ineg, True,
+                         _compiled_hull_for(n))
+            chains = (ch["rq"], ch["rk"], ch["lq"], ch["lk"], xn[1:], ch["xjb"], ch["xjt"])
+        L = chains[0].size // (n - 1)
+        x = np.empty(n)
+        if jit is not None:
+            clo, chi = np.empty(n), np.empty(n)
+            f = np.ascontiguousarray
+            fail = jit[0](*(f(v, float) for v in chains[:4]), L, *(f(v, float) for v in chains[4:]), f(capx, float),
+                          xend, clo, chi)
+            if fail < 0:
+                fail = jit[1](rows, two_h, capx, chi, x0, xend, one, x)     # (the rows <= 1 checked there)
+        else:
+            cl, ch_ = [0.0] * n, [0.0] * n
+            fail = _sweep_back(*(v.tolist() for v in chains[:4]), L, *(v.tolist() for v in chains[4:]),
+                               capx.tolist(), xend, cl, ch_)
+            if fail < 0:
+                fail = _sweep_fwd(rows, two_h, capx, np.asarray(ch_), x0, xend, one, x)
+            if fail < 0:                                        # every row <= 1 (as the compiled pass)
+                u = (x[1:] - x[:-1]) / two_h
+                bad = ~np.all(rows[..., 0] * x[:-1, None] + rows[..., 1] * u[:, None] <= 1.0, axis=1)
+                fail = int(np.argmax(bad)) if bad.any() else -1
+        if fail < 0:
+            return np.minimum(np.sqrt(x), prob.cap_dp)   # (a rounded square root above a cap: 1 ulp)
+    return None
+
+
+def _keep_faster(prob: _Problem, sdot: np.ndarray) -> tuple[np.ndarray, float, dict[str, float] | None]:
+    """The faster of the tube's law ``sdot`` and the sweep's (:func:`_sweep`) on ``prob`` (with chains): the
+    law, the time (s) the sweep saved (0.0 when the tube's law is kept) and the sweep's limit ratios
+    (:func:`evaluate_limits`; ``None`` when the tube's law is kept).
+
+    The sweep's law is kept only when it is faster and its limits hold on the evaluation sub-grid of every
+    interval (ratios <= 1)."""
+    alt = _sweep(prob)
+    if alt is None:
+        return sdot, 0.0, None
+    t_old = float(_times(prob.s, sdot)[-1])
+    t_new = float(_times(prob.s, alt)[-1])
+    if not t_new < t_old:
+        return sdot, 0.0, None
+    ratios = evaluate_limits(prob, alt)
+    if max(ratios["accel"], ratios["speed"], ratios["sddot"], ratios["sdot"], ratios["points"]) > 1.0:
+        return sdot, 0.0, None
+    return alt, t_old - t_new, ratios
+
+
 def _refine_to_nodes(s: np.ndarray, idx: np.ndarray, sdot_c: np.ndarray) -> np.ndarray:
     """ṡ at every node from the coarse law: ṡ² linear in s inside each group (constant s̈)."""
     x = np.interp(s, s[idx], sdot_c * sdot_c)
@@ -2054,6 +2260,8 @@ def parametrize(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, meth
     prob = _prepare(path_s, X, dX, ddX, limits, chains=method == "dp", work=True)
     iterations: list[IterationLog] = []
     group = 1
+    gain = 0.0
+    ratios = None
     if method == "tube":
         ell = _group_length(prob)
         if ell is not None:
@@ -2061,9 +2269,14 @@ def parametrize(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, meth
             sdot_c, iterations = _tube(coarse, state)
             sdot = _refine_to_nodes(prob.s, idx, sdot_c)
             group = max(1, round((prob.s.size - 1) / max(idx.size - 1, 1)))
+            if limits.sweep:
+                prob = _with_chains(prob, work=True)
         else:
             prob = _with_chains(prob, work=True)
             sdot, iterations = _tube(prob, state)
+        if limits.sweep:
+            check_cancel(state)
+            sdot, gain, ratios = _keep_faster(prob, sdot)
     elif method == "dp":
         lo, hi = _bounds_check(prob)
         if state is not None:
@@ -2076,14 +2289,15 @@ def parametrize(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits, meth
         sdot = _toppra(prob, np.asarray(X, float).reshape(prob.s.size, -1))
     compute = time.perf_counter() - t0
     t = _times(prob.s, sdot)
-    ratios = evaluate_limits(prob, sdot)
+    if ratios is None:
+        ratios = evaluate_limits(prob, sdot)
     if state is not None:
         state.progress(1.0, "done")
     return TimeLaw(method=method, s=prob.s, sdot=sdot, t=t, total_time_s=float(t[-1]), iterations=iterations,
                    max_accel_ratio=ratios["accel"], max_speed_ratio=ratios["speed"],
                    max_sddot_ratio=ratios["sddot"], energy=curvature_energy(t, sdot), compute_s=compute,
                    levels=limits.levels if method != "toppra" else 0,
-                   energy_mm=curvature_energy(t, sdot, speed_unit=1.0), node_group=group)
+                   energy_mm=curvature_energy(t, sdot, speed_unit=1.0), node_group=group, sweep_gain_s=gain)
 
 
 def prepare(path_s: Any, X: Any, dX: Any, ddX: Any, limits: TimeLimits) -> _Problem:

@@ -880,6 +880,68 @@ def group_rows(allr: np.ndarray, order: np.ndarray, keep: np.ndarray, at_start: 
     return rows
 
 
+_SWEEP: list[Any] = []
+
+
+def sweep_kernels() -> tuple[Any, Any] | None:
+    """:func:`engine.timeparam._sweep_back` and :func:`engine.timeparam._sweep_fwd` compiled (the same
+    bits), or ``None`` without numba (loaded)."""
+    if not _SWEEP:
+        if kernel(0) is None:
+            return None
+        try:
+            import numba
+
+            from engine.timeparam import _sweep_back
+
+            @numba.njit(cache=True, nogil=True, error_model="numpy")
+            def _fwd(rows, two_h, capx, chi, x0, xend, one, x):  # pragma: no cover - compiled
+                # engine.timeparam._sweep_fwd element by element (the same products, sums and extrema),
+                # then every row <= 1 at the chosen speeds (engine.timeparam._sweep's check, in place)
+                n = capx.size
+                R = rows.shape[1]
+                x[0] = x0
+                for i in range(n - 1):
+                    xk = x[i]
+                    th = two_h[i]
+                    up = np.inf
+                    lo = -np.inf
+                    for r in range(R):
+                        g = rows[i, r, 0]
+                        c = rows[i, r, 1]
+                        if c == 0.0:
+                            if g * xk > one:
+                                return i
+                            continue
+                        q = th / c
+                        v = (1.0 - q * g) * xk + q * one
+                        if c > 0.0:
+                            if v < up:
+                                up = v
+                        elif v > lo:
+                            lo = v
+                    lo = max(0.0, lo)
+                    if i + 1 == n - 1:
+                        xj = xend
+                    else:
+                        xj = min(up, chi[i + 1], capx[i + 1])
+                        if xj < lo:
+                            xj = lo
+                    if xj > up or xj < lo:
+                        return i
+                    u = (xj - xk) / th
+                    for r in range(R):
+                        if rows[i, r, 0] * xk + rows[i, r, 1] * u > 1.0:
+                            return i
+                    x[i + 1] = xj
+                return -1
+
+            _SWEEP.append((numba.njit(cache=True, nogil=True, error_model="numpy")(_sweep_back), _fwd))
+        except Exception:  # noqa: BLE001 - see kernel()
+            _SWEEP.append(None)
+    return _SWEEP[0]
+
+
 _HULL_SYM: list[Any] = []
 
 
@@ -1450,11 +1512,11 @@ def warm() -> bool:
     s = np.linspace(0.0, 10.0, 21)
     X = s[:, None] * 1.0
     one = np.ones_like(X)
-    parametrize(s, X, one, 0.0 * one, TimeLimits(v_max=(1e3,), a_max=(100.0,), levels=20))   # windows, pass
+    parametrize(s, X, one, 0.0 * one, TimeLimits(v_max=(1e3,), a_max=(100.0,), levels=20))   # windows, pass, sweep
     hulls(np.array([[[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]]]))
     return True
 
 
 __all__ = ["IMPORT_THRESHOLD", "SCRATCH_MAX_ELEMENTS", "chains", "constraint_rows", "dp_pass", "forward_pass",
            "group_rows", "hulls", "hull_sym_order", "hull_sym_prep", "hull_sym_rows", "kernel", "limit_ratios",
-           "scratch", "warm", "windows"]
+           "scratch", "sweep_kernels", "warm", "windows"]

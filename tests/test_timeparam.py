@@ -291,8 +291,13 @@ def test_arrival_check_overshoots_inside_intervals(example) -> None:
 
 
 def test_tube_is_near_the_time_optimum(tube_law, toppra_law) -> None:
-    assert toppra_law.total_time_s <= tube_law.total_time_s * (1 + 1e-6)
-    assert tube_law.total_time_s <= 1.005 * toppra_law.total_time_s
+    """The tube's own law is within 0.5 % of TOPP-RA's time; the final sweep brings the law to TOPP-RA's
+    time (to 1e-4: both solve the same continuous problem, TOPP-RA with its limits at the nodes only, ours
+    inside every interval)."""
+    assert tube_law.iterations[-1].total_time_s <= 1.005 * toppra_law.total_time_s
+    assert tube_law.sweep_gain_s > 0
+    assert abs(tube_law.total_time_s / toppra_law.total_time_s - 1.0) <= 1e-4
+    assert max(tube_law.max_accel_ratio, tube_law.max_speed_ratio, tube_law.max_sddot_ratio) <= 1.0
 
 
 def test_iteration_log_follows_the_paper_rules(tube_law, example) -> None:
@@ -312,8 +317,10 @@ def test_iteration_log_follows_the_paper_rules(tube_law, example) -> None:
         assert b.stop == stop_rule
         assert np.all(b.lower <= b.sdot + 1e-9) and np.all(b.sdot <= b.upper + 1e-9)
     assert its[-1].stop and not any(it.stop for it in its[:-1])
-    assert np.array_equal(its[-1].sdot, tube_law.sdot)
-    assert tube_law.total_time_s == pytest.approx(its[-1].total_time_s)
+    # the law is the last iteration's, or the final sweep's where that is faster (by sweep_gain_s)
+    if tube_law.sweep_gain_s == 0:
+        assert np.array_equal(its[-1].sdot, tube_law.sdot)
+    assert tube_law.total_time_s == pytest.approx(its[-1].total_time_s - tube_law.sweep_gain_s, rel=1e-12)
 
 
 def _runs(mask):
@@ -497,10 +504,14 @@ def test_tube_keeps_the_previous_law_if_a_tube_grid_is_infeasible(example, monke
         return real(*args, **kw)
 
     monkeypatch.setattr(tp, "_dp", flaky)
-    law = parametrize(s, X, dX, ddX, lim)
+    law = parametrize(s, X, dX, ddX, replace(lim, sweep=False))
     its = law.iterations
     assert len(its) == 3 and its[-1].stop and "previous" in its[-1].note
     assert np.array_equal(law.sdot, its[1].sdot) and law.max_accel_ratio <= 1 + 1e-9
+    calls.clear()                                  # with the final sweep: the same log, a law at least as good
+    swept = parametrize(s, X, dX, ddX, lim)
+    assert [it.total_time_s for it in swept.iterations] == [it.total_time_s for it in its]
+    assert swept.total_time_s <= law.total_time_s and swept.max_accel_ratio <= 1.0
 
 
 @pytest.mark.parametrize("method", ["tube", "toppra"])

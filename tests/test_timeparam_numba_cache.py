@@ -17,7 +17,7 @@ assert J.warm()
 J.hulls(np.array([[[1.0, 0.0], [0.0, 1.0], [0.5, 0.5], [-1.0, 0.0], [0.0, -1.0], [-0.5, -0.5]]]),
         (np.array([0, 1, 2]), np.array([3, 4, 5])))
 out = {}
-for name in ("_KERNEL", "_WINDOWS", "_FUSED", "_CHAINS", "_HULL_SYM", "_HULL"):
+for name in ("_KERNEL", "_WINDOWS", "_FUSED", "_CHAINS", "_HULL_SYM", "_HULL", "_SWEEP"):
     for k, d in enumerate(getattr(J, name)):
         for f in (d if isinstance(d, tuple) else (d,)):
             if f is not None and hasattr(f, "stats"):
@@ -38,7 +38,8 @@ def test_kernels_come_from_the_cache_in_a_new_process() -> None:
         assert proc.returncode == 0, proc.stderr
         runs.append(json.loads(proc.stdout.strip().splitlines()[-1]))
     second = runs[1]
-    used = {"_HULL[0]._hulls", "_HULL_SYM[0]._graham", "_HULL_SYM[0]._prep", "_CHAINS[0]._chains_k"}
+    used = {"_HULL[0]._hulls", "_HULL_SYM[0]._graham", "_HULL_SYM[0]._prep", "_CHAINS[0]._chains_k",
+            "_SWEEP[0]._sweep_back", "_SWEEP[0]._fwd"}
     assert used <= set(second)
     assert all(second[k][0] > 0 for k in used), second          # loaded from the cache
     missed = {k: v for k, v in second.items() if v[1] > 0}

@@ -2,7 +2,8 @@
 
 Recorded with engine/timeparam.py at commit 95be922 (before the optimisation): every later change to
 the DP, the hull/chains or the tube must reproduce them -- total time to 1e-9 relative, the same
-iteration count and the same W/O touch counts in every iteration.
+iteration count and the same W/O touch counts in every iteration.  The final sweep (issue 16,
+``TimeLimits.sweep``) comes after the tube: pinned with it off, and checked to be at least as good with it on.
 """
 
 from __future__ import annotations
@@ -37,7 +38,7 @@ def example():
 @pytest.mark.parametrize("M", sorted(PINNED))
 def test_tube_answer_is_pinned(example, M: int) -> None:
     s, X, dX, ddX, lim = example
-    law = parametrize(s, X, dX, ddX, replace(lim, levels=M, coarse=False), method="tube")
+    law = parametrize(s, X, dX, ddX, replace(lim, levels=M, coarse=False, sweep=False), method="tube")
     times, touches = PINNED[M]
     assert len(law.iterations) == len(times)
     assert law.total_time_s == pytest.approx(times[-1], rel=1e-9, abs=0)
@@ -45,3 +46,19 @@ def test_tube_answer_is_pinned(example, M: int) -> None:
         assert it.total_time_s == pytest.approx(t, rel=1e-9, abs=0)
         assert (it.w_touches, it.o_touches) == (w, o)
     assert law.iterations[-1].stop and law.max_accel_ratio <= 1.0 + 1e-9
+    assert law.sweep_gain_s == 0.0
+
+
+@pytest.mark.parametrize("M", sorted(PINNED))
+def test_final_sweep_keeps_the_pinned_tube_and_is_at_least_as_good(example, M: int) -> None:
+    """With the final sweep (the default) the tube's iterations are the pinned ones, bit for bit; the law is
+    at least as fast as the pinned tube's and keeps every limit inside the intervals."""
+    s, X, dX, ddX, lim = example
+    law = parametrize(s, X, dX, ddX, replace(lim, levels=M, coarse=False), method="tube")
+    times, touches = PINNED[M]
+    assert [it.total_time_s for it in law.iterations] == pytest.approx(times, rel=1e-9, abs=0)
+    assert [(it.w_touches, it.o_touches) for it in law.iterations] == touches
+    assert law.total_time_s <= times[-1]
+    assert law.total_time_s == pytest.approx(times[-1] - law.sweep_gain_s, rel=1e-12)
+    assert law.sweep_gain_s > 0.001 * times[-1]          # the tube's law is 0.2-0.8 % above the optimum here
+    assert max(law.max_accel_ratio, law.max_speed_ratio, law.max_sddot_ratio) <= 1.0

@@ -314,7 +314,7 @@ def timelaw_task(spec: TimeLawSpec, *, state: Any) -> TimeLawResult:
     state.progress(0.4, "time law: single DP")
     dp = parametrize(s, X, dX, ddX, lim, method="dp", state=SubState(state, 0.4, 0.55))
     check_cancel(state)
-    state.progress(0.55, "time law: TOPP-RA bound")
+    state.progress(0.55, "time law: TOPP-RA reference")
     top = parametrize(s, X, dX, ddX, lim, method="toppra", state=SubState(state, 0.55, 1.0))
     state.progress(1.0, "")
     return TimeLawResult("paper example (7 axes, N = 893)", tube, dp, top)

@@ -15,7 +15,7 @@ STALE_RESULTS = QT_TR_NOOP("Out of date: the job changed since this run. Run aga
 EXPORT_NO_PROGRAM = QT_TR_NOOP("there is no NC program yet: run the pipeline (F5)")
 EXPORT_STALE = QT_TR_NOOP("the NC program is out of date: the job changed since the last run (run again, F5)")
 EXPORT_RUNNING = QT_TR_NOOP("the pipeline is still running on the current job")
-COMPUTING_TIMELAW = QT_TR_NOOP("Computing the time law (tube iterations, single DP, TOPP-RA bound) in the background…")
+COMPUTING_TIMELAW = QT_TR_NOOP("Computing the time law (tube iterations, single DP, TOPP-RA) in the background…")
 NOTHING_CHANGED = QT_TR_NOOP("Nothing was changed: the current job is still loaded.")
 
 CUT_MODE = {"down-cut": QT_TR_NOOP("down-cut (climb milling: the tool turns with the feed)"),

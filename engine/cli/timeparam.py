@@ -96,6 +96,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         for it in law.iterations:
             print(it.text())
+        if law.sweep_gain_s > 0:
+            print(f"final sweep: {law.sweep_gain_s:.4f} s faster than the tube's law (its limits held)")
         print(f"method {law.method}  M = {law.levels}  total time {law.total_time_s:.4f} s  "
               f"computed in {law.compute_s:.3f} s")
         print(f"worst ratios inside intervals: axis acceleration {law.max_accel_ratio:.5f}, "

@@ -44,7 +44,7 @@ class TimeLawPanel(SectionPanel):
         super().__init__(tr("Time law"), TIMELAW_FIELDS)
         box = QGroupBox(tr("Tube iterations"))
         v = QVBoxLayout(box)
-        note = QLabel(tr("Runs the DP tube algorithm, a single DP and the TOPP-RA bound on the law chosen above "
+        note = QLabel(tr("Runs the DP tube algorithm, a single DP and the TOPP-RA reference on the law chosen above "
                       "the plot: the paper's 7-axis example (Tables 4–5 limits), or one of the job's own laws "
                       "(after a run with method tube/dp/toppra). The method above sets the NC program's block "
                       "times: a time law over the job's axis path (tube, the default) or (17)/(18) ('blocks')."))
