@@ -93,7 +93,12 @@ def test_job_law_iterations_and_comparison(ran, qtbot) -> None:
     # independent check: TOPP-RA is the time-optimal bound; the tube law can only be slower (0.5 % grid slack)
     assert r.toppra.total_time_s <= law.total_time_s * 1.005
     assert law.total_time_s <= r.dp.total_time_s * (1 + 1e-9)   # the tube refines the single DP
-    assert f"{law.total_time_s:.3f} s" in w.timelaw_panel.summary.text()
+    text = w.timelaw_panel.summary.text()
+    assert f"{law.total_time_s:.3f} s" in text
+    # the final sweep's saving, and TOPP-RA's limits between its nodes, are said when they apply
+    assert ("the final sweep saved" in text) == (law.sweep_gain_s > 0)
+    broken = max(r.toppra.max_accel_ratio, r.toppra.max_speed_ratio) > 1.0 + 1e-6
+    assert ("breaks the limits between its nodes" in text) == broken
 
 
 def test_switch_to_paper_example_and_another_job_law(ran, qtbot) -> None:

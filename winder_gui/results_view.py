@@ -245,7 +245,7 @@ class ResultsPresenter(QObject):
                    "s; TOPP-RA reference {v5:.3f} s")
                 .format(source=r.source, method=r.law.method, total_time_s=r.law.total_time_s,
                         v3=len(r.law.iterations), v4=r.dp.total_time_s, v5=r.toppra.total_time_s)
-                + _sweep_note(r.law))
+                + _sweep_note(r.law) + _toppra_note(r.toppra))
             self.status.emit("Time law comparison computed", False)
         else:
             self.timelaw = r
@@ -255,7 +255,7 @@ class ResultsPresenter(QObject):
                    "TOPP-RA reference {v4:.3f} s")
                 .format(source=r.source, total_time_s=r.tube.total_time_s, v2=len(r.tube.iterations),
                         v3=r.dp.total_time_s, v4=r.toppra.total_time_s)
-                + _sweep_note(r.tube))
+                + _sweep_note(r.tube) + _toppra_note(r.toppra))
             self.status.emit("Time law computed", False)
         self.queue(lambda: self.timelaw_shown.emit(r))
 
@@ -264,6 +264,16 @@ def _sweep_note(law: Any) -> str:
     """"; the final sweep saved X s" when the tube's law was bettered by the final sweep, else ""."""
     gain = float(getattr(law, "sweep_gain_s", 0.0))
     return tr("; the final sweep saved {gain:.4f} s").format(gain=gain) if gain > 0 else ""
+
+
+def _toppra_note(law: Any) -> str:
+    """"; TOPP-RA's law breaks the limits between its nodes (...)" where its worst ratios inside the intervals
+    exceed 1 (it checks them at the nodes only), else ""."""
+    acc, spd = float(law.max_accel_ratio), float(law.max_speed_ratio)
+    if max(acc, spd) <= 1.0 + 1e-6:
+        return ""
+    return tr("; TOPP-RA's law breaks the limits between its nodes (axis acceleration ×{acc:.3g}, axis speed "
+              "×{spd:.3g})").format(acc=acc, spd=spd)
 
 
 def _supports(res: Any) -> list[tuple[str, float, float, float]]:
