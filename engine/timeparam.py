@@ -444,6 +444,8 @@ class _Problem:
     slopes: tuple | None = None   # the compiled pass's constants: chain slopes, 2h, K/4h², uniform h
     chain_slopes: tuple | None = None     # (rs, ls) from the compiled chains: np.diff(rk)/np.diff(rq), left alike
     work: list = field(default_factory=list, repr=False)   # the compiled pass's (N, M) arrays, kept between passes
+    fine_hull: tuple | None = field(default=None, repr=False)   # (allr, order, m) of the intervals' box rows, made
+    #                                                              by _coarse_problem, reused by _with_chains
 
 
 MAX_PATH_VALUE = 1e9
@@ -779,7 +781,7 @@ def _hulls(allr: np.ndarray, ipos: np.ndarray, ineg: np.ndarray, compiled: bool,
 
 def _chains(rows: np.ndarray, h: np.ndarray, xn_prev: np.ndarray, xn_cur: np.ndarray,
             ipos: np.ndarray, ineg: np.ndarray, compiled: bool = False, hull_compiled: bool | None = None,
-            work: bool = False) -> dict[str, np.ndarray]:
+            work: bool = False, hull: tuple | None = None) -> dict[str, np.ndarray]:
     """The feasible polygon of every interval in the ``(x_k, x_j) = (ṡ²_{i-1}, ṡ²_i)`` plane.
 
     ``rows`` (B, R, 2) are normalised constraints ``n·(x_k, u) <= 1`` with ``u = (x_j - x_k)/(2h)``,
@@ -789,18 +791,23 @@ def _chains(rows: np.ndarray, h: np.ndarray, xn_prev: np.ndarray, xn_cur: np.nda
     ``x_k = L(x_j)`` of each polygon, flattened for one global ``np.interp`` (abscissa
     ``x_j / xn_cur + 3·i``), and the x_j range of each polygon; from the compiled code also the chains'
     segment slopes ``rs``, ``ls``.  ``work``: the chains may be the thread's work arrays (valid until
-    the next such call; for parametrize's problems, used within the call only).
+    the next such call; for parametrize's problems, used within the call only).  ``hull``: ``(allr, order,
+    m)``, the box rows of these very rows and boxes and their hull (:func:`_coarse_problem` makes them), used
+    instead of making them again.
     """
     B = rows.shape[0]
-    wrows = None
-    if compiled and _NUMBA:                 # the rows and the hull in the thread's work arrays (used here only)
-        from engine import timeparam_jit
+    if hull is not None:
+        allr, order, m = hull
+    else:
+        wrows = None
+        if compiled and _NUMBA:             # the rows and the hull in the thread's work arrays (used here only)
+            from engine import timeparam_jit
 
-        if timeparam_jit.kernel(0) is not None:
-            wrows = timeparam_jit.scratch("box_rows", (B, rows.shape[1] + 4, 2))
-    allr, ip2, in2 = _box_rows(rows, h, xn_prev, xn_cur, ipos, ineg, out=wrows)
-    chain = True if hull_compiled is None else hull_compiled
-    order, m = _hulls(allr, ip2, in2, compiled, scratch=wrows is not None, chain=chain)
+            if timeparam_jit.kernel(0) is not None:
+                wrows = timeparam_jit.scratch("box_rows", (B, rows.shape[1] + 4, 2))
+        allr, ip2, in2 = _box_rows(rows, h, xn_prev, xn_cur, ipos, ineg, out=wrows)
+        chain = True if hull_compiled is None else hull_compiled
+        order, m = _hulls(allr, ip2, in2, compiled, scratch=wrows is not None, chain=chain)
     if compiled and _NUMBA:
         from engine import timeparam_jit
 
@@ -1124,14 +1131,14 @@ def _rows_numpy(P: np.ndarray, Q: np.ndarray, A: np.ndarray, limits: TimeLimits,
 
 def _polygons(cap: np.ndarray, h: np.ndarray, hull_rows: np.ndarray, ipos: np.ndarray, ineg: np.ndarray,
               limits: TimeLimits, chains: bool, compiled: bool = False, hull_compiled: bool | None = None,
-              work: bool = False) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+              work: bool = False, hull: tuple | None = None) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
     """Box sizes ``xn``, the reachable caps ``cap_dp`` and the polygon chains of every interval
     (``hull_compiled``: see :func:`_compiled_hull_for`; ``work``: see :func:`_chains`), with the chains'
     segment slopes as ``chain_slopes`` where the compiled code made them."""
     cap_box = np.minimum(cap, 1e9)
     xn = (1.5 * cap_box) ** 2 + 1.0
     if chains:
-        ch = _chains(hull_rows, h, xn[:-1], xn[1:], ipos, ineg, compiled, hull_compiled, work)
+        ch = _chains(hull_rows, h, xn[:-1], xn[1:], ipos, ineg, compiled, hull_compiled, work, hull)
         cap_dp = _reachable(cap_box, h, ch, limits)
         # The box is a relaxation of the node caps.  Where no axis limits the speed (axes at rest or
         # moving linearly, large V, no sdot_max) it is orders of magnitude larger than the speeds any
@@ -1231,7 +1238,10 @@ def _coarse_problem(prob: _Problem, ell: np.ndarray, work: bool = False) -> tupl
     hr = prob.hull_rows if prob.hull_rows is not None else prob.rows
     xn_f = (1.5 * np.minimum(prob.cap, 1e9)) ** 2 + 1.0
     allr, ip_f, in_f = _box_rows(hr, prob.h, xn_f[:-1], xn_f[1:], prob.ipos, prob.ineg)
-    order, mv = _hulls(allr, ip_f, in_f, True, scratch=work, chain=_compiled_hull_for(n))   # (used here only)
+    order, mv = _hulls(allr, ip_f, in_f, True, scratch=work, chain=_compiled_hull_for(n))
+    # the same box rows and hull as _with_chains(prob) would make (the final sweep's chains): kept for it
+    if prob.limits.sweep:
+        prob.fine_hull = (allr, order.copy() if work else order, mv.copy() if work else mv)
     R = max(int(mv.max()), 1)
     order = order[:, :R]
     keep = np.arange(R)[None, :] < mv[:, None]
@@ -1300,8 +1310,9 @@ def _with_chains(prob: _Problem, work: bool = False) -> _Problem:
     from dataclasses import replace as dc_replace
 
     xn, cap_dp, ch = _polygons(prob.cap, prob.h, prob.hull_rows, prob.ipos, prob.ineg, prob.limits, True,
-                               compiled=True, hull_compiled=_compiled_hull_for(prob.s.size), work=work)
-    return dc_replace(prob, xn=xn[1:], cap_dp=cap_dp, slopes=None, work=[], **ch)
+                               compiled=True, hull_compiled=_compiled_hull_for(prob.s.size), work=work,
+                               hull=prob.fine_hull)
+    return dc_replace(prob, xn=xn[1:], cap_dp=cap_dp, slopes=None, work=[], fine_hull=None, **ch)
 
 
 _SWEEP_MARGIN = 1e-9

@@ -137,3 +137,37 @@ def test_sweep_switch_in_the_limits_file() -> None:
     with pytest.raises(InputError) as exc:
         limits_from_mapping({**base, "sweep": "no"}, file="lim.toml")
     assert exc.value.location.field == "sweep" and "true or false" in str(exc.value)
+
+
+def test_the_node_groups_hull_is_reused_for_the_sweeps_chains() -> None:
+    """On a dense path the node groups are built from the hull of every interval's rows; the sweep's chains on
+    the given nodes reuse that hull: the same chains, bit for bit, as made from scratch, and one hull less."""
+    from dataclasses import replace as dc_replace
+
+    s, X, D1, D2, lim = _paper(3000)
+    prob = tp._prepare(s, X, D1, D2, lim, chains=False)
+    ell = tp._group_length(prob)
+    assert ell is not None
+    tp._coarse_problem(prob, ell)
+    assert prob.fine_hull is not None
+    calls = []
+    real = tp._hulls
+
+    def counting(*a, **k):
+        calls.append(1)
+        return real(*a, **k)
+
+    try:
+        tp._hulls = counting
+        reused = tp._with_chains(prob)
+        n_reused = len(calls)
+        fresh = tp._with_chains(dc_replace(prob, fine_hull=None))
+    finally:
+        tp._hulls = real
+    assert n_reused == 0 and len(calls) == 1
+    for k in ("rq", "rk", "lq", "lk", "xjb", "xjt", "xn", "cap_dp"):
+        assert np.array_equal(getattr(reused, k), getattr(fresh, k)), k
+    assert reused.fine_hull is None
+    no_sweep = tp._prepare(s, X, D1, D2, replace(lim, sweep=False), chains=False)
+    tp._coarse_problem(no_sweep, ell)
+    assert no_sweep.fine_hull is None                  # nothing kept when no sweep will use it
