@@ -327,6 +327,10 @@ class TimeLawSpec(_Model):
     more than any time saved)."""
     tube_share: Annotated[float, Field(gt=0, lt=1)] = 0.1
     stop_percent: Annotated[float, Field(gt=0, le=100)] = 0.5
+    sweep: bool = True
+    """After the tube, sweep the same limits once more and keep that law where it is faster (the time-optimal
+    law for the nodes: up to a few % shorter programs, every limit held; ``false``: the tube's own law, which
+    the DP's penalty keeps smoother).  See docs/timeparam.md, "The final sweep"."""
     sdot_max: Annotated[float, Field(ge=1e-3, le=1e9)] | None = None
     """Technological path speed limit (mm/s)."""
     sddot_max: Annotated[float, Field(ge=1e-3, le=1e12)] | None = None

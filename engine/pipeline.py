@@ -957,7 +957,7 @@ def _time_law_blocks(res: PipelineResult, blocks: Any, state: State | None,
         sdot_max=float(spec.sdot_max) if spec.sdot_max is not None else float("inf"),
         sddot_max=float(spec.sddot_max) if spec.sddot_max is not None else float("inf"),
         levels=int(spec.levels), penalty=float(spec.penalty), tube_share=float(spec.tube_share),
-        stop_percent=float(spec.stop_percent), sdot_start=0.0, sdot_end=0.0)
+        stop_percent=float(spec.stop_percent), sdot_start=0.0, sdot_end=0.0, sweep=bool(spec.sweep))
     if pieces is None:
         pieces = _circuit_plan(res, s, X)
     check_cancel(state)

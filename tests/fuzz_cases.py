@@ -52,7 +52,7 @@ JOB_FIELDS = {
     "payout": ["law", "clearance_mm", "eye_radius_mm", "free_length_max_mm", "grid_points", "u_min",
                "free_length_mm", "offset_mm", "impregnation_k", "workspace_r_mm", "workspace_z_mm"],
     "machine": ["template"],
-    "timelaw": ["method", "levels", "penalty", "tube_share", "stop_percent", "sdot_max", "sddot_max"],
+    "timelaw": ["method", "levels", "penalty", "tube_share", "stop_percent", "sweep", "sdot_max", "sddot_max"],
     "post": ["post", "controller", "tolerance_mm", "min_block_time_s"],
 }
 STRINGS = ['"vessel"', '"pipe"', '"points"', '"file"', '"cone"', '"bottle"', '"lathe9"', '""', '"../../etc/passwd"',

@@ -122,3 +122,21 @@ def test_switch_to_paper_example_and_another_job_law(ran, qtbot) -> None:
     np.testing.assert_array_equal(w.timelaw_plot.curve_data(f"iteration {g.r}")[0],
                                   g.s + res.timelaw_paths[k].iteration_s_offset)
     assert r.toppra.total_time_s <= r.law.total_time_s * 1.005
+
+
+def test_final_sweep_field_sets_the_job(qtbot) -> None:
+    """The time law panel's "Final sweep" choice is the job's ``[timelaw] sweep`` (shown, edited, undone)."""
+    w = MainWindow(PIPE)
+    w.confirm_discard = False
+    qtbot.addWidget(w)
+    w.show()
+    assert w.wait_idle()
+    ed = w.timelaw_panel.editor("timelaw.sweep")
+    assert w.job.timelaw.sweep is True and ed.currentText() == "True"
+    w.timelaw_panel.set_value("timelaw.sweep", "False")
+    assert w.wait_idle()
+    assert w.job.timelaw.sweep is False and w.timelaw_panel.errors() == ""
+    w.undo_stack.undo()
+    assert w.wait_idle()
+    assert w.job.timelaw.sweep is True and w.timelaw_panel.editor("timelaw.sweep").currentText() == "True"
+    w.close()

@@ -293,7 +293,7 @@ class TimeLawResult:
 def timelaw_task(spec: TimeLawSpec, *, state: Any) -> TimeLawResult:
     """Run :func:`engine.timeparam.parametrize` (tube, dp, toppra) on the paper's 7-axis example.
 
-    The job's ``[timelaw]`` settings (levels, penalty, tube share, stop percent, speed limits) replace
+    The job's ``[timelaw]`` settings (levels, penalty, tube share, stop percent, final sweep, speed limits) replace
     the example's.
     """
     from engine.timeparam import parametrize
@@ -302,7 +302,7 @@ def timelaw_task(spec: TimeLawSpec, *, state: Any) -> TimeLawResult:
     s, X, dX, ddX = example_path()
     lim = example_limits()
     changes: dict[str, Any] = {"levels": spec.levels, "penalty": spec.penalty, "tube_share": spec.tube_share,
-                               "stop_percent": spec.stop_percent}
+                               "stop_percent": spec.stop_percent, "sweep": spec.sweep}
     if spec.sdot_max is not None:
         changes["sdot_max"] = spec.sdot_max
     if spec.sddot_max is not None:

@@ -387,6 +387,9 @@ TIMELAW_FIELDS: tuple[Field, ...] = (
     Field("timelaw", "penalty", QT_TR_NOOP("Penalty weight [–]")),
     Field("timelaw", "tube_share", QT_TR_NOOP("Tube share [–]")),
     Field("timelaw", "stop_percent", QT_TR_NOOP("Stop when gain below [%]")),
+    Field("timelaw", "sweep", QT_TR_NOOP("Final sweep"), kind="choice", choices=("True", "False"),
+          tip=QT_TR_NOOP("True: after the tube, the fastest law within the limits where it is faster (up to a few "
+                         "% shorter programs); False: the tube's own, smoother law")),
     Field("timelaw", "sdot_max", QT_TR_NOOP("Path speed limit ṡ max [mm/s]"), optional=True),
     Field("timelaw", "sddot_max", QT_TR_NOOP("Path acceleration limit [mm/s²]"), optional=True),
 )
