@@ -1382,8 +1382,8 @@ def _sweep_back(rq: Any, rk: Any, lq: Any, lk: Any, L: int, xn: Any, xjb: Any, x
 
 def _sweep_fwd(rows: np.ndarray, two_h: np.ndarray, capx: np.ndarray, chi: np.ndarray, x0: float, xend: float,
                one: float, x: np.ndarray) -> int:
-    """The forward pass of :func:`_sweep` (numpy per node; compiled by numba element by element, the same
-    bits).
+    """The forward pass of :func:`_sweep` (the rows' bounds made by numpy, then Python floats per node;
+    compiled by numba element by element: the same bits).
 
     From ``x0``, ``x_{i+1}`` is the largest value every row ``g·x_i + c·(x_{i+1} - x_i)/(2h) <= one`` of
     interval i allows, ``min`` over the rows with ``c > 0`` of ``a·x_i + b`` (``q = 2h/c``, ``a = 1 - q·g``,
