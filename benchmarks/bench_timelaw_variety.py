@@ -67,6 +67,14 @@ def random_case(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.nd
     return s, X, D1, D2, lim
 
 
+def nth_case(seed: int, case: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, TimeLimits]:
+    """Case ``case`` (from 0) of this benchmark run with ``--seed seed``: (s, X, X', X'', limits)."""
+    rng = np.random.default_rng(seed)
+    for _ in range(case + 1):
+        out = random_case(rng)
+    return out
+
+
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seed", type=int, default=1)

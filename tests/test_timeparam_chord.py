@@ -16,15 +16,7 @@ from engine.timeparam import evaluate_limits, parametrize, prepare
 from engine.timeparam_example import example_limits, example_path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-from bench_timelaw_variety import random_case  # noqa: E402
-
-
-def _case(seed: int, case: int) -> tuple:
-    """Case ``case`` of benchmarks/bench_timelaw_variety.py with ``--seed seed``: (s, X, X', X'', limits)."""
-    rng = np.random.default_rng(seed)
-    for _ in range(case + 1):
-        out = random_case(rng)
-    return out
+from bench_timelaw_variety import nth_case as _case  # noqa: E402
 
 
 def _former(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -20,14 +20,7 @@ from engine.timeparam import TimeLimits, evaluate_limits, limits_from_mapping, p
 from engine.timeparam_example import N_PAPER, S_N_PAPER, example_limits, example_path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-from bench_timelaw_variety import random_case  # noqa: E402
-
-
-def _case(seed: int, case: int) -> tuple:
-    rng = np.random.default_rng(seed)
-    for _ in range(case + 1):
-        out = random_case(rng)
-    return out
+from bench_timelaw_variety import nth_case as _case  # noqa: E402
 
 
 def _paper(n: int) -> tuple:
