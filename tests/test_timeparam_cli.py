@@ -93,3 +93,27 @@ def test_cli_npz_out_on_a_dense_path(tmp_path, capsys) -> None:
         n_it = z["iter_r"].size
         assert 1 < z["iter_s"].size < 3000 and z["iter_sdot"].shape == (n_it, z["iter_s"].size)
         assert z["iter_s"][0] == s[0] and z["iter_s"][-1] == s[-1]
+
+
+def test_cli_final_sweep_and_no_sweep(short_case, tmp_path, capsys) -> None:
+    """The tube's law is swept at the end (a line says how much it saved; the JSON has ``sweep_gain_s``);
+    ``--no-sweep`` and ``sweep = false`` in the limits file keep the tube's own law: its last iteration."""
+    npz, lim = short_case
+    assert main(["timeparam", str(npz), "--limits", str(lim)]) == 0
+    text = capsys.readouterr().out
+    assert "final sweep:" in text and "faster than the tube's law" in text
+    assert main(["timeparam", str(npz), "--limits", str(lim), "--json"]) == 0
+    swept = json.loads(capsys.readouterr().out)
+    assert swept["sweep_gain_s"] > 0
+    assert swept["total_time_s"] == pytest.approx(swept["iterations"][-1]["total_time_s"] - swept["sweep_gain_s"],
+                                                  rel=1e-12)
+    lim_off = tmp_path / "limits_off.toml"
+    lim_off.write_text("sweep = false\n" + lim.read_text(encoding="utf-8"), encoding="utf-8")   # before the tables
+    for args in (["--limits", str(lim), "--no-sweep"], ["--limits", str(lim_off)]):
+        assert main(["timeparam", str(npz), *args, "--json"]) == 0
+        plain = json.loads(capsys.readouterr().out)
+        assert plain["sweep_gain_s"] == 0.0
+        assert plain["total_time_s"] == pytest.approx(plain["iterations"][-1]["total_time_s"], rel=1e-12)
+        assert plain["total_time_s"] > swept["total_time_s"] and plain["max_accel_ratio"] <= 1.0 + 1e-9
+        assert [it["total_time_s"] for it in plain["iterations"]] == [it["total_time_s"] for it in
+                                                                       swept["iterations"]]

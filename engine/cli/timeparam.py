@@ -37,6 +37,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--limits", help="LIMITS.toml (with --example: defaults to the paper's limits)")
     parser.add_argument("--method", choices=METHODS, default="tube", help="tube (default), dp or toppra")
     parser.add_argument("--levels", type=int, help="override M, the number of speed levels")
+    parser.add_argument("--no-sweep", action="store_true",
+                        help="tube: keep the tube's own law (no final sweep; same as sweep = false in LIMITS.toml)")
     parser.add_argument("--example", action="store_true",
                         help="the paper's setting (p = 7, N = 893, s_N = 2846.9 mm) on the project's path")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
@@ -64,6 +66,8 @@ def run(args: argparse.Namespace) -> int:
         if not MIN_USER_LEVELS <= args.levels <= _MAX_LEVELS:
             raise InputError(f"must be in {MIN_USER_LEVELS}..{_MAX_LEVELS}, got {args.levels}", field="--levels")
         limits = replace(limits, levels=args.levels)
+    if args.no_sweep:
+        limits = replace(limits, sweep=False)
     from engine import budget
 
     if args.method != "toppra":
