@@ -262,7 +262,7 @@ class ResultsPresenter(QObject):
 
 def _sweep_note(law: Any) -> str:
     """"; the final sweep saved X s" when the tube's law was bettered by the final sweep, else ""."""
-    gain = float(getattr(law, "sweep_gain_s", 0.0))
+    gain = law.sweep_gain_s
     return tr("; the final sweep saved {gain:.4f} s").format(gain=gain) if gain > 0 else ""
 
 
