@@ -14,16 +14,18 @@ SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 APT_PKGS := libgl1 libegl1 libglu1-mesa libgl1-mesa-dri libosmesa6 libxkbcommon0 libxkbcommon-x11-0 \
   libfontconfig1 libdbus-1-3 libxrender1 libxi6 libxcb-cursor0 libxcb-icccm4 libxcb-image0 \
   libxcb-keysyms1 libxcb-randr0 libxcb-render-util0 libxcb-shape0 libxcb-xinerama0 libxcb-xfixes0 \
-  libxcb-xkb1 xvfb xauth x11-utils linuxcnc-uspace python3-venv
+  libxcb-xkb1 xvfb xauth x11-utils linuxcnc-uspace python3-venv gcc python3-dev
 
 EXAMPLE := resources/examples/pressure_vessel.toml
+# the time law's kernels compiled ahead of time (engine/timeparam_aot.py): rebuilt when their source changes
+AOT := engine/_timeparam_kernels$(shell $(PYTHON) -c 'import sysconfig; print(sysconfig.get_config_var("EXT_SUFFIX"))')
 
 .PHONY: run test sysdeps venv lint bench clean installer installer-test
 
-run: sysdeps venv
+run: sysdeps venv $(AOT)
 	$(VENV)/bin/winder $(EXAMPLE)
 
-test: sysdeps venv
+test: sysdeps venv $(AOT)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/lint-imports
 	QT_QPA_PLATFORM=offscreen $(VPY) -m pytest -m "not gl" -p no:cacheprovider
@@ -44,27 +46,31 @@ $(STAMP): pyproject.toml
 	@[ -x $(VPY) ] || $(PYTHON) -m venv $(VENV)
 	$(VPY) -m pip install -q --upgrade pip
 	$(VPY) -m pip install -q -e ".[test,bench]"
-	@# compile the time law's numba kernels into their on-disk cache now: the first big run would pay ~7 s
+	@# compile the time law's numba kernels into their on-disk cache now (the GUI's threads use them: they
+	@# release the GIL; a one-shot run uses the ahead-of-time module below): the first run would pay ~7 s
 	$(VPY) -c "from engine.timeparam_jit import warm; warm()"
 	touch $(STAMP)
+
+$(AOT): engine/timeparam_jit.py engine/timeparam_aot.py $(STAMP)
+	$(VPY) -m engine.timeparam_aot --quiet
 
 lint: venv
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/lint-imports
 
-bench: venv
+bench: venv $(AOT)
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; QT_QPA_PLATFORM=offscreen $(VPY) $$b || exit 1; done
 
 # Frozen one-folder build: dist/winder/ + dist/winder-<version>-linux-x86_64.tar.gz (see installer/README.md).
-installer: sysdeps venv
+installer: sysdeps venv $(AOT)
 	$(VPY) -m pip install -q -e ".[installer]"
 	$(VPY) installer/build.py
 
 # Rebuild only if the sources changed since the last build, then compare the build with the source install.
-installer-test: sysdeps venv
+installer-test: sysdeps venv $(AOT)
 	$(VPY) -m pip install -q -e ".[installer]"
 	$(VPY) installer/build.py --if-stale
 	$(VPY) installer/smoke_test.py
 
 clean:
-	rm -rf build dist .pytest_cache .ruff_cache
+	rm -rf build dist .pytest_cache .ruff_cache $(AOT)

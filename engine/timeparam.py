@@ -80,6 +80,7 @@ import numpy as np
 from engine.errors import InfeasibleError, InputError
 from engine.resources import read_toml
 from engine.state import State, check_cancel
+from engine.timeparam_jit import _sweep_back  # (compiled there too; the numpy pass runs it on lists)
 
 __all__ = [
     "IterationLog",
@@ -1319,67 +1320,6 @@ _SWEEP_MARGIN = 1e-9
 """The final sweep keeps every constraint row at ``<= 1 - _SWEEP_MARGIN`` (a 5e-10 share of the time)."""
 
 
-def _sweep_back(rq: Any, rk: Any, lq: Any, lk: Any, L: int, xn: Any, xjb: Any, xjt: Any, capx: Any,
-                xend: float, clo: Any, chi: Any) -> int:
-    """The backward pass of :func:`_sweep` on flat sequences (numpy arrays when compiled by numba, Python
-    lists otherwise: the same IEEE operations in the same order, so the same bits).
-
-    ``[clo_i, chi_i]`` is the ṡ² at node i from which the end can be reached: the projection of interval
-    i's polygon (its chains ``rq, rk, lq, lk`` of ``L`` points each, abscissa ``x_j/xn + 3i``) restricted
-    to ``[clo_{i+1}, chi_{i+1}]`` onto its start axis, at most ``capx_i``, kept inside by a margin that
-    covers the chains' round-off (1e-9 relative plus 8 ulps of the abscissa).  Writes ``clo``, ``chi``;
-    returns -1, or the interval where no speed is left.
-    """
-    n = len(capx)
-    clo[n - 1] = xend
-    chi[n - 1] = xend
-    for i in range(n - 2, -1, -1):
-        a = max(clo[i + 1], xjb[i])
-        b = min(chi[i + 1], xjt[i])
-        if a > b:
-            return i
-        off = 3.0 * i
-        qa = a / xn[i] + off
-        qb = b / xn[i] + off
-        i0 = i * L
-        i1 = i0 + L - 1
-        rmax = -math.inf
-        lmin = math.inf
-        for side in range(2):                  # the right chain (max x_k), the left chain (min x_k)
-            qs = rq if side == 0 else lq
-            ks = rk if side == 0 else lk
-            # the chain at qa and qb (linear between its points, constant beyond them) and its points between
-            lo_v = ks[i0]
-            hi_v = ks[i1]
-            best = -math.inf if side == 0 else math.inf
-            t = i0
-            while t < i1 and qs[t + 1] < qa:
-                t += 1
-            if qa > qs[i0] and t < i1:
-                d = qs[t + 1] - qs[t]
-                lo_v = ks[t + 1] if d <= 0.0 else ks[t] + (ks[t + 1] - ks[t]) * (qa - qs[t]) / d
-            while t < i1 and qs[t + 1] < qb:
-                t += 1
-                v = ks[t]
-                if qs[t] > qa:
-                    best = max(best, v) if side == 0 else min(best, v)
-            if qb <= qs[i0]:
-                hi_v = ks[i0]
-            elif t < i1:
-                d = qs[t + 1] - qs[t]
-                hi_v = ks[t + 1] if d <= 0.0 else ks[t] + (ks[t + 1] - ks[t]) * (qb - qs[t]) / d
-            if side == 0:
-                rmax = max(best, lo_v, hi_v)
-            else:
-                lmin = min(best, lo_v, hi_v)
-        eq = 8.0 * xn[i] * (off + 3.0) * 2.220446049250313e-16
-        chi[i] = min(rmax - (1e-9 * abs(rmax) + eq), capx[i])
-        clo[i] = max(lmin + (1e-9 * abs(lmin) + eq), 0.0)
-        if clo[i] > chi[i]:
-            return i
-    return -1
-
-
 def _sweep_fwd(rows: np.ndarray, two_h: np.ndarray, capx: np.ndarray, chi: np.ndarray, x0: float, xend: float,
                one: float, x: np.ndarray) -> int:
     """The forward pass of :func:`_sweep` (the rows' bounds made by numpy, then Python floats per node;
@@ -1433,13 +1373,13 @@ def _sweep(prob: _Problem) -> np.ndarray | None:
     """ṡ at every node of the greatest admissible law the sweep finds on ``prob``'s polygons and rows
     (``prob`` with chains), or ``None`` where it does not settle.
 
-    TOPP-RA's scheme (backward: the speeds from which the end stays reachable, :func:`_sweep_back`;
-    forward: from the start, the largest next speed that stays in them, :func:`_sweep_fwd`) on the same
-    constraints as the DP: the rows of every interval (limits inside the interval, Bernstein certificates)
-    and the node caps.  The forward pass takes its bounds from the rows with a margin of
-    :data:`_SWEEP_MARGIN` (the round-off of the limits' evaluation on sub-grids stays well inside it), and
-    the law is checked on the rows themselves (``<= 1``), so a returned law keeps every limit the DP's laws
-    keep.
+    TOPP-RA's scheme (backward: the speeds from which the end stays reachable,
+    :func:`engine.timeparam_jit._sweep_back`; forward: from the start, the largest next speed that stays in
+    them, :func:`_sweep_fwd`) on the same constraints as the DP: the rows of every interval (limits inside
+    the interval, Bernstein certificates) and the node caps.  The forward pass takes its bounds from the rows
+    with a margin of :data:`_SWEEP_MARGIN` (the round-off of the limits' evaluation on sub-grids stays well
+    inside it), and the law is checked on the rows themselves (``<= 1``), so a returned law keeps every
+    limit the DP's laws keep.
     Where the chains' round-off leaves an interval without a next speed, the sweep is repeated on chains
     built with the box of the reachable speeds, then given up (``None``).
     """

@@ -6,29 +6,41 @@ in the low 12 bits of the float cost), so every finite ``J`` and its argmin are 
 the numpy pass; a state no law reaches is not finite in both, possibly with other bits
 (``tests/test_timeparam_speed.py`` compares both).
 
-numba is imported lazily and only when it pays: the kernels are not used (the caller then runs the
-numpy code) when numba is not installed or cannot compile/cache here (the frozen build leaves numba
-out, see installer/README.md), when ``WINDER_NUMBA=0`` is set, or when numba is not loaded yet and
-the problem is too small to repay importing it (~0.5 s once per process; :data:`IMPORT_THRESHOLD`).
+Which compiled kernels run (:func:`kernel`, :func:`_compiled`), all giving the same bits:
+
+* numba's just-in-time kernels where they are loaded in this process (:func:`warm`; the GUI loads them in
+  the background: they release the GIL, so its worker threads leave the window responsive);
+* else the same kernels compiled ahead of time (:mod:`engine.timeparam_aot`, built at install time): no
+  numba at run time, well under a millisecond to load, so a one-shot ``winder run`` and the frozen build
+  (which leaves numba out, see installer/README.md) get them from their first law;
+* else numba's, imported when it pays: not when numba is missing or cannot compile/cache here, nor when it
+  is not loaded yet and the problem is too small to repay importing it (~0.5 s once per process;
+  :data:`IMPORT_THRESHOLD`);
+* else none: the callers run the numpy code.  ``WINDER_NUMBA=0`` switches every compiled kernel off,
+  ``WINDER_AOT=0`` the ahead-of-time ones.
+
 The same module has the compiled DP windows and the convex hulls of the node groups.
-Compiled code is cached on disk (``cache=True``: ``__pycache__`` next to this file, or numba's
+numba's compiled code is cached on disk (``cache=True``: ``__pycache__`` next to this file, or numba's
 per-user cache directory when that is not writable).
 """
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 import threading
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-# Problems with at least this many nodes import numba if it is not loaded yet
-# (:func:`engine.timeparam.parametrize` calls :func:`kernel` with its node count): importing numba
+# Without the ahead-of-time kernels, problems with at least this many nodes import numba if it is not
+# loaded yet (:func:`engine.timeparam.parametrize` calls :func:`kernel` with its node count): importing numba
 # and loading the cached kernels costs ~0.5 s once per process; a numpy tube pass on 3 000 nodes
 # (M = 100) costs ~50 ms, a compiled one ~10 ms, and a program's laws run 10-20 passes.  Smaller
-# problems (every shipped example: 332..1750 nodes) use numba only when it is loaded already.
+# problems (every shipped example: 332..1750 nodes) use numba only when it is loaded already.  (The node
+# count also chooses the hull method, engine.timeparam._compiled_hull_for, whichever kernels run.)
 IMPORT_THRESHOLD = 3000
 
 SCRATCH_MAX_ELEMENTS = 1 << 20
@@ -215,22 +227,16 @@ def windows(lev: np.ndarray, xall: np.ndarray, xn: np.ndarray, ch: tuple[np.ndar
             t_lo: np.ndarray, t_hi: np.ndarray, nb: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """The DP windows ``(klo, cnt, bad)`` of :func:`engine.timeparam._dp` (levels uniform in ṡ), the
     same integers as its numpy code; ``None`` without numba."""
-    if not _WINDOWS:
-        if kernel(0) is None:
-            return None
-        try:
-            _WINDOWS.append(_build_windows())
-        except Exception:  # noqa: BLE001 - see kernel()
-            _WINDOWS.append(None)
-    if _WINDOWS[0] is None:
+    k = _compiled(_WINDOWS, "windows", _build_windows)
+    if k is None:
         return None
     n1, M = lev.shape[0] - 1, lev.shape[1]
     klo = np.empty((n1, M), np.int64)
     cnt = np.empty((n1, M), np.int64)
     bad = np.empty((n1, M), np.bool_)
     rq, rk, lq, lk = ch
-    _WINDOWS[0](lev, xall, xn, rq, rk, lq, lk, int(L), xjb, xjt, degenerate, plo, sp_p, t_lo, t_hi, int(nb),
-                klo, cnt, bad)
+    k(lev, xall, xn, rq, rk, lq, lk, int(L), xjb, xjt, degenerate, plo, sp_p, t_lo, t_hi, int(nb),
+      klo, cnt, bad)
     return klo, cnt, bad
 
 
@@ -504,14 +510,8 @@ def dp_pass(levels: tuple[np.ndarray, ...], xn: np.ndarray, ch: tuple[np.ndarray
 
     Returns ``(candidates, unreachable node or -1, final speed reached, jidx, sdot)`` (``jidx``, ``sdot``
     valid only when the pass succeeded: node -1 and final reached), or ``None`` without numba."""
-    if not _FUSED:
-        if kernel(0) is None:
-            return None
-        try:
-            _FUSED.append(_build_fused())
-        except Exception:  # noqa: BLE001 - see kernel()
-            _FUSED.append(None)
-    if _FUSED[0] is None or lomask != 4095 or himask != -4096:    # (the kernel's constants: 12 low bits)
+    k = _compiled(_FUSED, "dp_pass", _build_fused)
+    if k is None or lomask != 4095 or himask != -4096:    # (the kernel's constants: 12 low bits)
         return None
     plo_, span, phi, frac = levels
     n, M = plo_.size, frac.size
@@ -528,10 +528,10 @@ def dp_pass(levels: tuple[np.ndarray, ...], xn: np.ndarray, ch: tuple[np.ndarray
     jidx = np.empty(n, np.int64)
     sdot = np.empty(n)
     rq, rk, lq, lk, rs, ls = ch
-    total, bad_node, final_ok = _FUSED[0](plo_, span, phi, frac, lev, xn, rq, rk, lq, lk, rs, ls, int(L),
-                                          xjb, xjt, degenerate, plo, sp_p, t_lo, t_hi, int(nb), two_h, kq_h,
-                                          bool(uniform_h), int(chunk), bool(use_k), np.int64(lomask),
-                                          np.int64(himask), Jraw, jidx, sdot)
+    total, bad_node, final_ok = k(plo_, span, phi, frac, lev, xn, rq, rk, lq, lk, rs, ls, int(L),
+                                  xjb, xjt, degenerate, plo, sp_p, t_lo, t_hi, int(nb), two_h, kq_h,
+                                  bool(uniform_h), int(chunk), bool(use_k), np.int64(lomask),
+                                  np.int64(himask), Jraw, jidx, sdot)
     return int(total), int(bad_node), bool(final_ok), jidx, sdot
 
 
@@ -617,14 +617,8 @@ def chains(allr: np.ndarray, order: np.ndarray, m: np.ndarray, h: np.ndarray, xn
     the same for the left chain: the quotients numpy's ``interp`` computes), or ``None`` (without numba,
     or where the numpy code handles parallel normals or NaN vertices).  ``work``: the chain arrays are the
     thread's :func:`scratch` arrays (valid until the next such call)."""
-    if not _CHAINS:
-        if kernel(0) is None:
-            return None
-        try:
-            _CHAINS.append(_build_chains())
-        except Exception:  # noqa: BLE001 - see kernel()
-            _CHAINS.append(None)
-    if _CHAINS[0] is None:
+    k = _compiled(_CHAINS, "chains", _build_chains)
+    if k is None:
         return None
     B = order.shape[0]
     V = int(m.max())
@@ -636,10 +630,10 @@ def chains(allr: np.ndarray, order: np.ndarray, m: np.ndarray, h: np.ndarray, xn
         out = {k: np.empty(B * L) for k in ("rq", "rk", "lq", "lk")}
         out.update({k: np.empty(max(B * L - 1, 0)) for k in ("rs", "ls")})
     out.update({k: np.empty(B) for k in ("xjb", "xjt", "uhi", "ulo", "xkt")})
-    ok = _CHAINS[0](np.ascontiguousarray(allr, float), np.ascontiguousarray(order, np.int64),
-                    np.ascontiguousarray(m, np.int64), V, np.ascontiguousarray(h, float),
-                    np.ascontiguousarray(xn_cur, float), out["rq"], out["rk"], out["lq"], out["lk"], out["xjb"],
-                    out["xjt"], out["uhi"], out["ulo"], out["xkt"], out["rs"], out["ls"])
+    ok = k(np.ascontiguousarray(allr, float), np.ascontiguousarray(order, np.int64),
+           np.ascontiguousarray(m, np.int64), V, np.ascontiguousarray(h, float),
+           np.ascontiguousarray(xn_cur, float), out["rq"], out["rk"], out["lq"], out["lk"], out["xjb"],
+           out["xjt"], out["uhi"], out["ulo"], out["xkt"], out["rs"], out["ls"])
     return out if ok else None
 
 
@@ -719,18 +713,12 @@ def limit_ratios(d1: np.ndarray, d2: np.ndarray, h: np.ndarray, x0: np.ndarray, 
                  A: np.ndarray, V: np.ndarray) -> tuple[float, float] | None:
     """The worst acceleration and speed ratios of :func:`engine.timeparam._limit_ratios` (bit for bit its
     numpy code's), or ``None`` without numba (loaded)."""
-    if not _LIMITS:
-        if kernel(0) is None:
-            return None
-        try:
-            _LIMITS.append(_build_limits())
-        except Exception:  # noqa: BLE001 - see kernel()
-            _LIMITS.append(None)
-    if _LIMITS[0] is None or d1.shape[0] == 0:
+    k = _compiled(_LIMITS, "limits", _build_limits)
+    if k is None or d1.shape[0] == 0:
         return None
     c = np.ascontiguousarray
-    acc, spd = _LIMITS[0](c(d1, float), c(d2, float), c(h, float), c(x0, float), c(u, float), c(tau, float),
-                          c(A, float), c(V, float))
+    acc, spd = k(c(d1, float), c(d2, float), c(h, float), c(x0, float), c(u, float), c(tau, float),
+                 c(A, float), c(V, float))
     return float(acc), float(spd)
 
 
@@ -796,17 +784,11 @@ def constraint_rows(P: np.ndarray, Q: np.ndarray, A: np.ndarray, inv_sdd: float 
     (bit for bit) from the Bernstein coefficients ``P``, ``Q`` (N-1, p, 5 or 1) of the acceleration
     constraints, the limits ``A`` (p,) and ``1/s̈_T`` (``None``: no s̈_T rows).  False (nothing written)
     without numba (loaded)."""
-    if not _ROWS:
-        if kernel(0) is None:
-            return False
-        try:
-            _ROWS.append(_build_rows())
-        except Exception:  # noqa: BLE001 - see kernel()
-            _ROWS.append(None)
-    if _ROWS[0] is None:
+    k = _compiled(_ROWS, "rows", _build_rows)
+    if k is None:
         return False
     c = np.ascontiguousarray
-    _ROWS[0](c(P, float), c(Q, float), c(A, float), 0.0 if inv_sdd is None else float(inv_sdd), rows, hull_rows)
+    k(c(P, float), c(Q, float), c(A, float), 0.0 if inv_sdd is None else float(inv_sdd), rows, hull_rows)
     return True
 
 
@@ -862,84 +844,145 @@ def group_rows(allr: np.ndarray, order: np.ndarray, keep: np.ndarray, at_start: 
     code's): ``rows`` (B, 2·mx·R + 2·mx, 2) from the intervals' rows ``allr``, their hull vertex ids
     ``order`` (N-1, R), ``keep`` and ``at_start`` masks, the groups' intervals ``fi`` (B, mx), offsets
     ``off`` (mm), ``valid`` slots and cap rows ``crow`` (B, mx, 2); ``None`` without numba (loaded)."""
-    if not _GROUPS:
-        if kernel(0) is None:
-            return None
-        try:
-            _GROUPS.append(_build_groups())
-        except Exception:  # noqa: BLE001 - see kernel()
-            _GROUPS.append(None)
-    if _GROUPS[0] is None:
+    k = _compiled(_GROUPS, "groups", _build_groups)
+    if k is None:
         return None
     B, mx = fi.shape
     R = order.shape[1]
     rows = np.empty((B, 2 * mx * R + 2 * mx, 2))
     c = np.ascontiguousarray
-    _GROUPS[0](c(allr, float), c(order, np.int64), c(keep, np.bool_), c(at_start, np.bool_), c(fi, np.int64),
-               c(off, float), c(valid, np.bool_), c(crow, float), rows)
+    k(c(allr, float), c(order, np.int64), c(keep, np.bool_), c(at_start, np.bool_), c(fi, np.int64),
+      c(off, float), c(valid, np.bool_), c(crow, float), rows)
     return rows
 
 
 _SWEEP: list[Any] = []
 
 
+def _sweep_back(rq: Any, rk: Any, lq: Any, lk: Any, L: int, xn: Any, xjb: Any, xjt: Any, capx: Any,
+                xend: float, clo: Any, chi: Any) -> int:
+    """The backward pass of :func:`engine.timeparam._sweep` on flat sequences (numpy arrays when compiled by
+    numba, Python lists otherwise: the same IEEE operations in the same order, so the same bits).
+
+    ``[clo_i, chi_i]`` is the ṡ² at node i from which the end can be reached: the projection of interval
+    i's polygon (its chains ``rq, rk, lq, lk`` of ``L`` points each, abscissa ``x_j/xn + 3i``) restricted
+    to ``[clo_{i+1}, chi_{i+1}]`` onto its start axis, at most ``capx_i``, kept inside by a margin that
+    covers the chains' round-off (1e-9 relative plus 8 ulps of the abscissa).  Writes ``clo``, ``chi``;
+    returns -1, or the interval where no speed is left.
+    """
+    n = len(capx)
+    clo[n - 1] = xend
+    chi[n - 1] = xend
+    for i in range(n - 2, -1, -1):
+        a = max(clo[i + 1], xjb[i])
+        b = min(chi[i + 1], xjt[i])
+        if a > b:
+            return i
+        off = 3.0 * i
+        qa = a / xn[i] + off
+        qb = b / xn[i] + off
+        i0 = i * L
+        i1 = i0 + L - 1
+        rmax = -math.inf
+        lmin = math.inf
+        for side in range(2):                  # the right chain (max x_k), the left chain (min x_k)
+            qs = rq if side == 0 else lq
+            ks = rk if side == 0 else lk
+            # the chain at qa and qb (linear between its points, constant beyond them) and its points between
+            lo_v = ks[i0]
+            hi_v = ks[i1]
+            best = -math.inf if side == 0 else math.inf
+            t = i0
+            while t < i1 and qs[t + 1] < qa:
+                t += 1
+            if qa > qs[i0] and t < i1:
+                d = qs[t + 1] - qs[t]
+                lo_v = ks[t + 1] if d <= 0.0 else ks[t] + (ks[t + 1] - ks[t]) * (qa - qs[t]) / d
+            while t < i1 and qs[t + 1] < qb:
+                t += 1
+                v = ks[t]
+                if qs[t] > qa:
+                    best = max(best, v) if side == 0 else min(best, v)
+            if qb <= qs[i0]:
+                hi_v = ks[i0]
+            elif t < i1:
+                d = qs[t + 1] - qs[t]
+                hi_v = ks[t + 1] if d <= 0.0 else ks[t] + (ks[t + 1] - ks[t]) * (qb - qs[t]) / d
+            if side == 0:
+                rmax = max(best, lo_v, hi_v)
+            else:
+                lmin = min(best, lo_v, hi_v)
+        eq = 8.0 * xn[i] * (off + 3.0) * 2.220446049250313e-16
+        chi[i] = min(rmax - (1e-9 * abs(rmax) + eq), capx[i])
+        clo[i] = max(lmin + (1e-9 * abs(lmin) + eq), 0.0)
+        if clo[i] > chi[i]:
+            return i
+    return -1
+
+
+def _build_sweep() -> tuple[Any, Any]:
+    """numba's :func:`_sweep_back` and :func:`engine.timeparam._sweep_fwd` (see :func:`sweep_kernels`)."""
+    import numba
+
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
+    def _fwd(rows, two_h, capx, chi, x0, xend, one, x):  # pragma: no cover - compiled
+        # engine.timeparam._sweep_fwd element by element (the same products, sums and extrema),
+        # then every row <= 1 at the chosen speeds (engine.timeparam._sweep's check, in place)
+        n = capx.size
+        R = rows.shape[1]
+        x[0] = x0
+        for i in range(n - 1):
+            xk = x[i]
+            th = two_h[i]
+            up = np.inf
+            lo = -np.inf
+            for r in range(R):
+                g = rows[i, r, 0]
+                c = rows[i, r, 1]
+                if c == 0.0:
+                    if g * xk > one:
+                        return i
+                    continue
+                q = th / c
+                v = (1.0 - q * g) * xk + q * one
+                if c > 0.0:
+                    if v < up:
+                        up = v
+                elif v > lo:
+                    lo = v
+            lo = max(0.0, lo)
+            if i + 1 == n - 1:
+                xj = xend
+            else:
+                xj = min(up, chi[i + 1], capx[i + 1])
+                if xj < lo:
+                    xj = lo
+            if xj > up or xj < lo:
+                return i
+            u = (xj - xk) / th
+            for r in range(R):
+                if rows[i, r, 0] * xk + rows[i, r, 1] * u > 1.0:
+                    return i
+            x[i + 1] = xj
+        return -1
+
+    return numba.njit(cache=True, nogil=True, error_model="numpy")(_sweep_back), _fwd
+
+
 def sweep_kernels() -> tuple[Any, Any] | None:
     """:func:`engine.timeparam._sweep_back` and :func:`engine.timeparam._sweep_fwd` compiled (the same
-    bits), or ``None`` without numba (loaded)."""
-    if not _SWEEP:
-        if kernel(0) is None:
-            return None
-        try:
-            import numba
-
-            from engine.timeparam import _sweep_back
-
-            @numba.njit(cache=True, nogil=True, error_model="numpy")
-            def _fwd(rows, two_h, capx, chi, x0, xend, one, x):  # pragma: no cover - compiled
-                # engine.timeparam._sweep_fwd element by element (the same products, sums and extrema),
-                # then every row <= 1 at the chosen speeds (engine.timeparam._sweep's check, in place)
-                n = capx.size
-                R = rows.shape[1]
-                x[0] = x0
-                for i in range(n - 1):
-                    xk = x[i]
-                    th = two_h[i]
-                    up = np.inf
-                    lo = -np.inf
-                    for r in range(R):
-                        g = rows[i, r, 0]
-                        c = rows[i, r, 1]
-                        if c == 0.0:
-                            if g * xk > one:
-                                return i
-                            continue
-                        q = th / c
-                        v = (1.0 - q * g) * xk + q * one
-                        if c > 0.0:
-                            if v < up:
-                                up = v
-                        elif v > lo:
-                            lo = v
-                    lo = max(0.0, lo)
-                    if i + 1 == n - 1:
-                        xj = xend
-                    else:
-                        xj = min(up, chi[i + 1], capx[i + 1])
-                        if xj < lo:
-                            xj = lo
-                    if xj > up or xj < lo:
-                        return i
-                    u = (xj - xk) / th
-                    for r in range(R):
-                        if rows[i, r, 0] * xk + rows[i, r, 1] * u > 1.0:
-                            return i
-                    x[i + 1] = xj
-                return -1
-
-            _SWEEP.append((numba.njit(cache=True, nogil=True, error_model="numpy")(_sweep_back), _fwd))
-        except Exception:  # noqa: BLE001 - see kernel()
-            _SWEEP.append(None)
-    return _SWEEP[0]
+    bits), or ``None`` without compiled kernels."""
+    if kernel(0) is None:
+        return None
+    if _jit_on():
+        if not _SWEEP:
+            try:
+                _SWEEP.append(_build_sweep())
+            except Exception:  # noqa: BLE001 - see kernel()
+                _SWEEP.append(None)
+        return _SWEEP[0]
+    aot = _aot()
+    return None if aot is None else (aot["sweep_back"], aot["sweep_fwd"])
 
 
 _HULL_SYM: list[Any] = []
@@ -1164,16 +1207,17 @@ def hull_sym_prep(pts: np.ndarray, ipos: np.ndarray, ineg: np.ndarray, work: boo
 
 
 def _hull_sym_kernels() -> Any:
-    if not _HULL_SYM:
-        if kernel(0) is None:
-            return None
-        try:
-            _HULL_SYM.append(_build_hull_sym())
-        except Exception:  # noqa: BLE001 - see kernel()
-            _HULL_SYM.append(None)
-    if _HULL_SYM[0] is None or kernel(0) is None:
+    if kernel(0) is None:
         return None
-    return _HULL_SYM[0]
+    if _jit_on():
+        if not _HULL_SYM:
+            try:
+                _HULL_SYM.append(_build_hull_sym())
+            except Exception:  # noqa: BLE001 - see kernel()
+                _HULL_SYM.append(None)
+        return _HULL_SYM[0]
+    aot = _aot()
+    return None if aot is None else (aot["hull_graham"], aot["hull_prep"], aot["hull_assemble"])
 
 
 def hull_sym_rows(px: np.ndarray, py: np.ndarray, ang: np.ndarray, r2: np.ndarray, idx: np.ndarray,
@@ -1435,14 +1479,8 @@ def hulls(pts: np.ndarray, pairs: tuple[np.ndarray, np.ndarray] | None = None, s
     (checked exactly, per row): the chain then runs on the ``ipos`` half and mirrors its result, the
     same vertices in the same order as on every point.  ``scratch_out``: ``order`` is the thread's
     :func:`scratch` array (valid until the next such call)."""
-    if not _HULL:
-        if kernel(0) is None:
-            return None           # not loaded (yet): asked again once numba is (no None kept for good)
-        try:
-            _HULL.append(_build_hull())
-        except Exception:  # noqa: BLE001 - see kernel()
-            _HULL.append(None)
-    if _HULL[0] is None or kernel(0) is None:
+    k = _compiled(_HULL, "hulls", _build_hull)
+    if k is None:
         return None
     B, R = pts.shape[0], pts.shape[1]
     if scratch_out:
@@ -1459,27 +1497,97 @@ def hulls(pts: np.ndarray, pairs: tuple[np.ndarray, np.ndarray] | None = None, s
         partner[ineg] = ipos
         if ipos.size == ineg.size and 2 * ipos.size == R and np.all(partner >= 0):
             posr = ipos
-    _HULL[0](np.ascontiguousarray(pts, float), order, m, posr, partner)
+    k(np.ascontiguousarray(pts, float), order, m, posr, partner)
     return order, m
 
 
 def kernel(nodes: int) -> Any:
     """The compiled forward pass, or ``None`` when the numpy pass should run (see the module doc).
 
-    ``nodes``: the size of the caller's problem in nodes (imports numba from
-    :data:`IMPORT_THRESHOLD` on); 0 = only if numba is loaded already."""
-    if _KERNEL:
+    numba's kernel where it is loaded in this process (:func:`warm`; it releases the GIL), else the
+    ahead-of-time one (:mod:`engine.timeparam_aot`; no numba needed), else numba's, imported for a problem of
+    ``nodes`` nodes from :data:`IMPORT_THRESHOLD` on (0 = only if numba is loaded already)."""
+    if _KERNEL and _KERNEL[0] is not None:
         return _KERNEL[0]
     if os.environ.get("WINDER_NUMBA", "1") == "0":
         return None
+    aot = _aot()
+    if aot is not None:
+        return aot["forward"]
+    if _KERNEL:
+        return None
     if "numba" not in sys.modules and nodes < IMPORT_THRESHOLD:
         return None
+    return _load_jit()
+
+
+def _load_jit() -> Any:
+    """numba's forward kernel, built (loaded from numba's cache, or compiled) now; None where numba is unusable."""
+    if not _KERNEL:
+        try:
+            _light_blas()
+            k = _build_kernel()
+        except Exception:  # noqa: BLE001 - no numba, or no cache locator (frozen build): numpy pass
+            k = None
+        _KERNEL.append(k)
+    return _KERNEL[0]
+
+
+def _jit_on() -> bool:
+    """Whether numba's kernels are the ones in use here (numba's forward kernel is loaded)."""
+    return bool(_KERNEL) and _KERNEL[0] is not None
+
+
+def _compiled(cache: list[Any], name: str, build: Callable[[], Any]) -> Any:
+    """Kernel ``name``: numba's where numba's kernels are in use here (built into ``cache`` on first need),
+    else the ahead-of-time one; None where no compiled kernel runs (the numpy pass)."""
+    if kernel(0) is None:
+        return None
+    if _jit_on():
+        if not cache:
+            try:
+                cache.append(build())
+            except Exception:  # noqa: BLE001 - see kernel()
+                cache.append(None)
+        return cache[0]
+    aot = _aot()
+    return None if aot is None else aot[name]
+
+
+def _aot() -> dict[str, Any] | None:
+    """The ahead-of-time kernels by name (:func:`engine.timeparam_aot.load`), or None."""
+    from engine import timeparam_aot
+
+    return timeparam_aot.load(_jit_kernel)
+
+
+def _jit_kernel(name: str) -> Any:
+    """numba's kernel ``name`` (for a call the ahead-of-time kernel's signature does not take), or None."""
+    from engine.timeparam_aot import KERNELS
+
     try:
-        k = _build_kernel()
-    except Exception:  # noqa: BLE001 - no numba, or no cache locator (frozen build): numpy pass
-        k = None
-    _KERNEL.append(k)
-    return k
+        import numba  # noqa: F401
+
+        _light_blas()
+        builder, index, _spec = KERNELS[name]
+        got = globals()[builder]()
+    except Exception:  # noqa: BLE001 - no numba
+        return None
+    return got if index is None else got[index]
+
+
+def _light_blas() -> None:
+    """SciPy's BLAS and LAPACK for Cython (``scipy.linalg.cython_blas``, ``cython_lapack``) loaded from their
+    files alone (:func:`engine._lightimport.extension_module`) before numba looks for them: numba's first
+    compile or cache load imports them only to check that a BLAS exists, and through ``scipy.linalg``'s
+    ``__init__`` that import costs ~0.13 s (all of ``scipy.linalg`` and its docstrings).  The kernels use
+    neither."""
+    if "scipy.linalg" in sys.modules:
+        return
+    from engine._lightimport import extension_module
+
+    extension_module("scipy.linalg.cython_blas")
+    extension_module("scipy.linalg.cython_lapack")
 
 
 def forward_pass(levf: np.ndarray, klo: np.ndarray, cnt: np.ndarray, bad: np.ndarray, two_h: np.ndarray,
@@ -1503,9 +1611,10 @@ def forward_pass(levf: np.ndarray, klo: np.ndarray, cnt: np.ndarray, bad: np.nda
 
 def warm() -> bool:
     """Import numba and load (or compile) every kernel now, e.g. in a background thread at start-up of a
-    long-running process, so that no later run pays for it while holding the GIL.  Returns whether
-    the kernels are available."""
-    if kernel(1 << 62) is None:
+    long-running process, so that no later run pays for it while holding the GIL, and so that its threads
+    run numba's kernels, which release the GIL (the ahead-of-time ones do not).  Returns whether the
+    kernels are available."""
+    if _load_jit() is None:
         return False
     from engine.timeparam import TimeLimits, parametrize
 

@@ -2,7 +2,9 @@
 
 Both passes must give the same bits of every finite J and its argmin, hence the same laws bit for bit: on the paper's
 example (uniform node spacing, every tube iteration) and on a non-uniform path without the penalty
-term.  Without numba (the frozen build leaves it out) the numpy pass runs and gives the same answer.
+term.  Without compiled kernels the numpy pass runs and gives the same answer.  (In this process the compiled
+kernels are the ahead-of-time ones where they are built: tests/test_timeparam_aot.py compares those with
+numba's just-in-time kernels.)
 """
 
 from __future__ import annotations
@@ -58,6 +60,10 @@ def test_compiled_pass_bit_identical_non_uniform_spacing_no_penalty() -> None:
 
 
 def test_without_numba_the_numpy_pass_gives_the_same_law() -> None:
+    """No numba and no ahead-of-time kernels (engine.timeparam_aot; tests/test_timeparam_aot.py has the frozen
+    build's case, numba absent and those kernels there): the numpy pass."""
+    import os
+
     code = (
         "import sys; sys.modules['numba'] = None\n"         # import numba fails, as in the frozen build
         "from dataclasses import replace\n"
@@ -68,7 +74,8 @@ def test_without_numba_the_numpy_pass_gives_the_same_law() -> None:
         "assert timeparam_jit.kernel(10**12) is None\n"
         "print(repr(law.total_time_s))\n"
     )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
+                         env={**os.environ, "WINDER_AOT": "0"})
     assert out.returncode == 0, out.stderr
     s, X, dX, ddX = example_path()
     law = _law(True, s, X, dX, ddX, replace(example_limits(), levels=74))
