@@ -76,8 +76,19 @@ def stage_sources(rev: str | None = None) -> Path:
             t.extractall(STAGE, filter="data")
     else:
         for d in SOURCE_DIRS:
-            shutil.copytree(ROOT / d, STAGE / d, ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.pyo"))
+            shutil.copytree(ROOT / d, STAGE / d, ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.pyo",
+                                                                            "_timeparam_kernels*"))
     return STAGE
+
+
+def build_kernels(stage: Path) -> None:
+    """The time law's kernels compiled ahead of time (``engine/timeparam_aot.py``) from the staged sources
+    into the staged ``engine`` package, so that the frozen app runs them without numba (it is left out);
+    where they cannot be built, the app runs the numpy passes (the same answers, slower) and this says so."""
+    env = {**os.environ, "PYTHONPATH": str(stage)}
+    proc = subprocess.run([sys.executable, "-m", "engine.timeparam_aot", "--quiet"], cwd=stage, env=env,
+                          capture_output=True, text=True)
+    print(f"build: {(proc.stdout + proc.stderr).strip()}", flush=True)
 
 
 def source_digest(root: Path = ROOT) -> str:
@@ -85,7 +96,8 @@ def source_digest(root: Path = ROOT) -> str:
     h = hashlib.sha256()
     for d in SOURCE_DIRS:
         for p in sorted((root / d).rglob("*")):
-            if p.is_file() and "__pycache__" not in p.parts and p.suffix not in (".pyc", ".pyo"):
+            if (p.is_file() and "__pycache__" not in p.parts and p.suffix not in (".pyc", ".pyo")
+                    and not p.name.startswith("_timeparam_kernels")):  # (built from the sources: build_kernels)
                 h.update(p.relative_to(root).as_posix().encode() + b"\0" + p.read_bytes() + b"\0")
     return h.hexdigest()
 
@@ -208,6 +220,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     stage = stage_sources(args.from_git)
     digest = source_digest(stage)
+    build_kernels(stage)
     print(f"build: sources of {args.from_git or 'the working tree'} staged in {stage.relative_to(ROOT)}", flush=True)
     ver = version(stage)
     t_build = run_pyinstaller(stage / "installer" / "winder.spec", clean=not args.no_clean)
