@@ -6,7 +6,9 @@ Each case runs as a fresh process (``python -m engine ...``, as the ``winder`` s
 interleaved, ``--repeat`` times; printed: the medians of wall and CPU time (user + system of the child
 and the processes it forked) and the targets (vessel <= 1.5 s, pipe <= 1 s, ``--version`` <= 0.15 s).
 ``winder run`` runs a laminate's layers side by side on the CPUs available (wall < CPU); the ``-j1``
-rows run them one after the other.  The machine is shared: the load average is printed; on a loaded
+rows run them one after the other; the ``numpy passes`` rows run the time laws without compiled kernels
+(``WINDER_AOT=0``: the ahead-of-time kernels of engine/timeparam_aot.py off, numba not loaded), for the
+ratio those kernels give.  The machine is shared: the load average is printed; on a loaded
 machine CPU time is the steadier figure.  Bytecode is written and used (as an
 installed program has it): ``PYTHONDONTWRITEBYTECODE`` is removed from the children's environment and a
 first unmeasured run of every case warms the caches (bytecode, numba's on-disk cache).
@@ -29,7 +31,9 @@ TARGETS = {"pressure_vessel": 1.5, "pipe": 1.0, "--version": 0.15}
 
 
 def _run(args: list[str], env: dict[str, str]) -> tuple[float, float]:
-    """(wall, cpu) seconds of one child process."""
+    """(wall, cpu) seconds of one child process (``args`` may start with ``{"VAR": "value"}``: its environment)."""
+    if args and isinstance(args[0], dict):
+        env, args = {**env, **args[0]}, args[1:]
     t0 = time.perf_counter()
     proc = subprocess.Popen([sys.executable, "-m", "engine", *args], cwd=ROOT, env=env,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
@@ -58,6 +62,9 @@ def main() -> int:
             "pressure_vessel -j1": ["run", str(EX / "pressure_vessel.toml"), "-o", f"{tmp}/v1.ngc", "--quiet",
                                     "--jobs", "1"],
             "pipe -j1": ["run", str(EX / "pipe.toml"), "-o", f"{tmp}/p1.ngc", "--quiet", "--jobs", "1"],
+            "pressure_vessel numpy passes": [{"WINDER_AOT": "0"}, "run", str(EX / "pressure_vessel.toml"), "-o",
+                                             f"{tmp}/vn.ngc", "--quiet"],
+            "pipe numpy passes": [{"WINDER_AOT": "0"}, "run", str(EX / "pipe.toml"), "-o", f"{tmp}/pn.ngc", "--quiet"],
         }
         for a in cases.values():                       # warm-up: bytecode, numba cache
             _run(a, env)
@@ -69,13 +76,15 @@ def main() -> int:
         load1 = os.getloadavg()[0]
     print(f"load average {load0:.2f} -> {load1:.2f} on {os.cpu_count()} cores; medians of {args.repeat} "
           f"interleaved runs")
-    print(f"{'case':<20}{'wall s':>9}{'cpu s':>9}{'target s':>10}  verdict wall / CPU")
-    for k, r in res.items():
-        wall = statistics.median(w for w, _ in r)
-        cpu = statistics.median(c for _, c in r)
+    print(f"{'case':<30}{'wall s':>9}{'cpu s':>9}{'target s':>10}  verdict wall / CPU")
+    med = {k: (statistics.median(w for w, _ in r), statistics.median(c for _, c in r)) for k, r in res.items()}
+    for k, (wall, cpu) in med.items():
         t = TARGETS[k.split()[0]]
-        print(f"{k:<20}{wall:9.3f}{cpu:9.3f}{t:10.2f}  {'PASS' if wall <= t else 'FAIL'} / "
+        print(f"{k:<30}{wall:9.3f}{cpu:9.3f}{t:10.2f}  {'PASS' if wall <= t else 'FAIL'} / "
               f"{'PASS' if cpu <= t else 'FAIL'}")
+    for ex in ("pressure_vessel", "pipe"):
+        (w1, c1), (w0, c0) = med[ex], med[f"{ex} numpy passes"]
+        print(f"{ex}: compiled time-law kernels / numpy passes: wall {w1 / w0:.3f}, CPU {c1 / c0:.3f}")
     return 0
 
 
