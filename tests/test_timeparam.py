@@ -487,6 +487,7 @@ def test_threaded_chunk_building_gives_the_same_answer(example, monkeypatch) -> 
     v0, j0 = _dp(prob, lo, hi, 300)
     monkeypatch.setattr(tp, "_THREADS", True)
     v1, j1 = _dp(prob, lo, hi, 300)
+    tp.shutdown_pool()          # (its thread would keep later tests of this process from forking)
     assert np.array_equal(j0, j1) and np.array_equal(v0, v1)
 
 

@@ -77,6 +77,7 @@ def test_dense_intervals_over_many_chunks_with_the_builder_thread(monkeypatch: p
         monkeypatch.setattr(tp, "_THREADS", threads)
         for share in (0.0, 0.3, 0.7):
             _same(_law(share, s, X, dX, ddX, lim, monkeypatch=monkeypatch), ref)
+    tp.shutdown_pool()          # (its thread would keep later tests of this process from forking)
 
 
 def test_dense_intervals_report_infeasibility_as_the_lists(monkeypatch: pytest.MonkeyPatch) -> None:
