@@ -17,8 +17,8 @@ APT_PKGS := libgl1 libegl1 libglu1-mesa libgl1-mesa-dri libosmesa6 libxkbcommon0
   libxcb-xkb1 xvfb xauth x11-utils linuxcnc-uspace python3-venv gcc python3-dev
 
 EXAMPLE := resources/examples/pressure_vessel.toml
-# the time law's kernels compiled ahead of time (engine/timeparam_aot.py): rebuilt when their source changes
-AOT := engine/_timeparam_kernels$(shell $(PYTHON) -c 'import sysconfig; print(sysconfig.get_config_var("EXT_SUFFIX"))')
+# the engine's kernels compiled ahead of time (engine/aot.py): rebuilt when their source changes
+AOT := engine/_aot_kernels$(shell $(PYTHON) -c 'import sysconfig; print(sysconfig.get_config_var("EXT_SUFFIX"))')
 
 .PHONY: run test sysdeps venv lint bench clean installer installer-test
 
@@ -51,8 +51,8 @@ $(STAMP): pyproject.toml
 	$(VPY) -c "from engine.timeparam_jit import warm; warm()"
 	touch $(STAMP)
 
-$(AOT): engine/timeparam_jit.py engine/timeparam_aot.py $(STAMP)
-	$(VPY) -m engine.timeparam_aot --quiet
+$(AOT): engine/aot.py engine/timeparam_jit.py engine/mandrel_jit.py $(STAMP)
+	$(VPY) -m engine.aot --quiet
 
 lint: venv
 	$(VENV)/bin/ruff check .

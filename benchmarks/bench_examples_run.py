@@ -7,7 +7,7 @@ interleaved, ``--repeat`` times; printed: the medians of wall and CPU time (user
 and the processes it forked) and the targets (vessel <= 1.5 s, pipe <= 1 s, ``--version`` <= 0.15 s).
 ``winder run`` runs a laminate's layers side by side on the CPUs available (wall < CPU); the ``-j1``
 rows run them one after the other; the ``numpy passes`` rows run the time laws without compiled kernels
-(``WINDER_AOT=0``: the ahead-of-time kernels of engine/timeparam_aot.py off, numba not loaded), for the
+(``WINDER_AOT=0``: the ahead-of-time kernels of engine/aot.py off, numba not loaded), for the
 ratio those kernels give.  The machine is shared: the load average is printed; on a loaded
 machine CPU time is the steadier figure.  Bytecode is written and used (as an
 installed program has it): ``PYTHONDONTWRITEBYTECODE`` is removed from the children's environment and a

@@ -361,8 +361,15 @@ array operations cost ~1 µs each whatever the size: a few points of an 81-term 
 
 def _chebval(x: FloatArray, c: FloatArray) -> FloatArray:
     """``numpy.polynomial.chebyshev.chebval(x, c)`` for a 1-D series, bit for bit (the same Clenshaw
-    recurrence in the same order; IEEE double arithmetic is the same in Python floats and numpy)."""
+    recurrence in the same order; IEEE double arithmetic is the same in Python floats, numpy and compiled
+    code): small arrays in Python floats, larger ones by :func:`engine.mandrel_jit.chebval` where it runs."""
     x = np.asarray(x, dtype=float)
+    if len(c) >= 3:
+        from engine.mandrel_jit import chebval
+
+        got = chebval(x, np.asarray(c))  # compiled (ahead of time), the same recurrence: the same bits
+        if got is not None:
+            return got
     if x.size > _SMALL_CHEBVAL or len(c) < 3:
         return C.chebval(x, c)
     cs = [float(v) for v in c]

@@ -10,7 +10,7 @@ Which compiled kernels run (:func:`kernel`, :func:`_compiled`), all giving the s
 
 * numba's just-in-time kernels where they are loaded in this process (:func:`warm`; the GUI loads them in
   the background: they release the GIL, so its worker threads leave the window responsive);
-* else the same kernels compiled ahead of time (:mod:`engine.timeparam_aot`, built at install time): no
+* else the same kernels compiled ahead of time (:mod:`engine.aot`, built at install time): no
   numba at run time, well under a millisecond to load, so a one-shot ``winder run`` and the frozen build
   (which leaves numba out, see installer/README.md) get them from their first law;
 * else numba's, imported when it pays: not when numba is missing or cannot compile/cache here, nor when it
@@ -982,7 +982,7 @@ def sweep_kernels() -> tuple[Any, Any] | None:
                 _SWEEP.append(None)
         return _SWEEP[0]
     aot = _aot()
-    return None if aot is None else (aot["sweep_back"], aot["sweep_fwd"])
+    return (aot["sweep_back"], aot["sweep_fwd"]) if "sweep_back" in aot else None
 
 
 _HULL_SYM: list[Any] = []
@@ -1217,7 +1217,7 @@ def _hull_sym_kernels() -> Any:
                 _HULL_SYM.append(None)
         return _HULL_SYM[0]
     aot = _aot()
-    return None if aot is None else (aot["hull_graham"], aot["hull_prep"], aot["hull_assemble"])
+    return (aot["hull_graham"], aot["hull_prep"], aot["hull_assemble"]) if "hull_prep" in aot else None
 
 
 def hull_sym_rows(px: np.ndarray, py: np.ndarray, ang: np.ndarray, r2: np.ndarray, idx: np.ndarray,
@@ -1505,15 +1505,15 @@ def kernel(nodes: int) -> Any:
     """The compiled forward pass, or ``None`` when the numpy pass should run (see the module doc).
 
     numba's kernel where it is loaded in this process (:func:`warm`; it releases the GIL), else the
-    ahead-of-time one (:mod:`engine.timeparam_aot`; no numba needed), else numba's, imported for a problem of
+    ahead-of-time one (:mod:`engine.aot`; no numba needed), else numba's, imported for a problem of
     ``nodes`` nodes from :data:`IMPORT_THRESHOLD` on (0 = only if numba is loaded already)."""
     if _KERNEL and _KERNEL[0] is not None:
         return _KERNEL[0]
     if os.environ.get("WINDER_NUMBA", "1") == "0":
         return None
-    aot = _aot()
+    aot = _aot().get("forward")
     if aot is not None:
-        return aot["forward"]
+        return aot
     if _KERNEL:
         return None
     if "numba" not in sys.modules and nodes < IMPORT_THRESHOLD:
@@ -1550,30 +1550,14 @@ def _compiled(cache: list[Any], name: str, build: Callable[[], Any]) -> Any:
             except Exception:  # noqa: BLE001 - see kernel()
                 cache.append(None)
         return cache[0]
-    aot = _aot()
-    return None if aot is None else aot[name]
+    return _aot().get(name)
 
 
-def _aot() -> dict[str, Any] | None:
-    """The ahead-of-time kernels by name (:func:`engine.timeparam_aot.load`), or None."""
-    from engine import timeparam_aot
+def _aot() -> dict[str, Any]:
+    """The ahead-of-time kernels by name (:func:`engine.aot.load`; empty where there are none)."""
+    from engine import aot
 
-    return timeparam_aot.load(_jit_kernel)
-
-
-def _jit_kernel(name: str) -> Any:
-    """numba's kernel ``name`` (for a call the ahead-of-time kernel's signature does not take), or None."""
-    from engine.timeparam_aot import KERNELS
-
-    try:
-        import numba  # noqa: F401
-
-        _light_blas()
-        builder, index, _spec = KERNELS[name]
-        got = globals()[builder]()
-    except Exception:  # noqa: BLE001 - no numba
-        return None
-    return got if index is None else got[index]
+    return aot.load()
 
 
 def _light_blas() -> None:

@@ -77,16 +77,16 @@ def stage_sources(rev: str | None = None) -> Path:
     else:
         for d in SOURCE_DIRS:
             shutil.copytree(ROOT / d, STAGE / d, ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.pyo",
-                                                                            "_timeparam_kernels*"))
+                                                                            "_aot_kernels*"))
     return STAGE
 
 
 def build_kernels(stage: Path) -> None:
-    """The time law's kernels compiled ahead of time (``engine/timeparam_aot.py``) from the staged sources
+    """The engine's kernels compiled ahead of time (``engine/aot.py``) from the staged sources
     into the staged ``engine`` package, so that the frozen app runs them without numba (it is left out);
-    where they cannot be built, the app runs the numpy passes (the same answers, slower) and this says so."""
+    where they cannot be built, the app runs the numpy code (the same answers, slower) and this says so."""
     env = {**os.environ, "PYTHONPATH": str(stage)}
-    proc = subprocess.run([sys.executable, "-m", "engine.timeparam_aot", "--quiet"], cwd=stage, env=env,
+    proc = subprocess.run([sys.executable, "-m", "engine.aot", "--quiet"], cwd=stage, env=env,
                           capture_output=True, text=True)
     print(f"build: {(proc.stdout + proc.stderr).strip()}", flush=True)
 
@@ -97,7 +97,7 @@ def source_digest(root: Path = ROOT) -> str:
     for d in SOURCE_DIRS:
         for p in sorted((root / d).rglob("*")):
             if (p.is_file() and "__pycache__" not in p.parts and p.suffix not in (".pyc", ".pyo")
-                    and not p.name.startswith("_timeparam_kernels")):  # (built from the sources: build_kernels)
+                    and not p.name.startswith("_aot_kernels")):  # (built from the sources: build_kernels)
                 h.update(p.relative_to(root).as_posix().encode() + b"\0" + p.read_bytes() + b"\0")
     return h.hexdigest()
 

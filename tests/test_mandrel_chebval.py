@@ -27,3 +27,30 @@ def test_isotensoid_small_and_large_evaluations_agree() -> None:
     for k in (0, 17, 150, 300):
         one = seg.eval(z[k:k + 1])
         assert (one[0][0], one[1][0], one[2][0]) == (r[k], dr[k], d2r[k])
+
+
+def test_compiled_chebval_bit_for_bit_and_used() -> None:
+    """The compiled sum (engine.mandrel_jit, ahead of time) is numpy's chebval bit for bit on every size and
+    shape, extreme coefficients and points outside [-1, 1] included; _chebval takes it where it runs."""
+    from engine import aot
+    from engine.mandrel_jit import chebval
+
+    if "chebval" not in aot.load():
+        import pytest
+
+        pytest.fail("engine._aot_kernels is not built from this source: run `make venv` (python -m engine.aot)")
+    rng = np.random.default_rng(1)
+    for _ in range(400):
+        c = rng.normal(size=int(rng.integers(3, 120))) * 10 ** rng.uniform(-8, 8)
+        n = int(rng.integers(1, 3000))
+        x = rng.uniform(-1.5, 1.5, size=n)
+        got = chebval(x, c)
+        assert got is not None
+        np.testing.assert_array_equal(got, C.chebval(x, c))
+    x = np.linspace(-1, 1, 60).reshape(3, 4, 5)
+    zc = _isotensoid_series(0.25)[0]
+    got = chebval(x, zc)
+    assert got.shape == x.shape
+    np.testing.assert_array_equal(got, C.chebval(x, zc))
+    np.testing.assert_array_equal(_chebval(x, zc), C.chebval(x, zc))
+    assert chebval(x, zc[:2]) is None and chebval(np.zeros(0), zc) is None   # numpy's own: 2 terms, no points

@@ -1,6 +1,6 @@
-"""The time law's kernels compiled ahead of time (engine.timeparam_aot, issue 16): the same laws bit for bit
-as numba's just-in-time kernels and the numpy passes, without numba at run time, and never fed arguments
-their compiled signature does not take."""
+"""The engine's kernels compiled ahead of time (engine.aot, issue 16): the time law's give the same laws bit
+for bit as numba's just-in-time kernels and the numpy passes, without numba at run time, and no kernel is
+ever fed arguments its compiled signature does not take."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from engine import timeparam_aot, timeparam_jit
+from engine import aot as aot_mod
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "resources" / "examples"
@@ -46,7 +46,7 @@ keep = np.sort(np.r_[0, np.random.default_rng(3).choice(np.arange(1, 299), 180, 
 add(parametrize(s[keep], X[keep], dX[keep], ddX[keep], replace(example_limits(), levels=60, penalty=0.0),
                 method="dp"))
 k = J.kernel(0)
-from engine import timeparam_aot as A
+from engine import aot as A
 print(json.dumps({"laws": out, "kernel": type(k).__name__, "misses": A.MISSES,
                   "numba": "numba" in sys.modules and sys.modules["numba"] is not None}))
 """
@@ -61,18 +61,19 @@ def _laws(mode: str, **env: str) -> dict:
 
 @pytest.fixture(scope="module")
 def aot() -> dict:
-    got = timeparam_jit._aot()
-    assert got is not None, "engine._timeparam_kernels is not built from this source: run `make venv` " \
-                            "(python -m engine.timeparam_aot)"
+    got = aot_mod.load()
+    assert set(got) == set(aot_mod.KERNELS), ("engine._aot_kernels is not built from this source: run "
+                                              "`make venv` (python -m engine.aot)")
     return got
 
 
 def test_the_module_is_this_sources_and_has_every_kernel(aot: dict) -> None:
     import importlib
 
-    mod = importlib.import_module(timeparam_aot.MODULE)
-    assert int(mod.stamp()) == timeparam_aot.source_stamp()
-    assert set(aot) == set(timeparam_aot.KERNELS)
+    mod = importlib.import_module(aot_mod.MODULE)
+    for source in aot_mod.SOURCES:
+        assert int(getattr(mod, f"stamp_{source}")()) == aot_mod.source_stamp(source)
+    assert set(aot) == set(aot_mod.KERNELS)
 
 
 def test_aot_jit_and_numpy_give_the_same_laws_bit_for_bit(aot: dict) -> None:
@@ -140,12 +141,12 @@ def test_arguments_the_signature_does_not_take_go_to_numba(aot: dict, monkeypatc
     A, V = rng.uniform(1, 2, 3), rng.uniform(1, 2, 3)
     k = aot["limits"]
     good = k(d1, d2, h, x0, u, tau, A, V)
-    monkeypatch.setattr(timeparam_aot, "MISSES", {})
+    monkeypatch.setattr(aot_mod, "MISSES", {})
     strided = np.repeat(h, 2)[::2]
     assert not strided.flags.c_contiguous
     pytest.importorskip("numba")
     assert k(d1, d2, strided, x0, u, tau, A, V) == good                    # numba's kernel, the same answer
-    assert timeparam_aot.MISSES == {"limits": 1}
+    assert aot_mod.MISSES == {"limits": 1}
     monkeypatch.setattr(k, "_alt", None)
     monkeypatch.setattr(k, "fallback", lambda: None)
     with pytest.raises(TypeError, match="limits"):
@@ -157,15 +158,20 @@ def test_arguments_the_signature_does_not_take_go_to_numba(aot: dict, monkeypatc
     assert k(d1, d2, h, x0, u, tau, A, V) == good
 
 
-def test_a_module_built_from_other_source_or_switched_off_is_not_used(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(timeparam_aot, "_LOADED", [])
-    assert timeparam_aot.load(lambda name: None) is not None                # (this source's: used)
-    monkeypatch.setattr(timeparam_aot, "_LOADED", [])
-    with monkeypatch.context() as m:
-        m.setattr(timeparam_aot, "source_stamp", lambda: 12345)
-        assert timeparam_aot.load(lambda name: None) is None
+def test_kernels_of_a_changed_source_or_switched_off_are_not_used(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Each source file is stamped on its own: the kernels of a file changed since the build are left out
+    (the others still run); WINDER_AOT=0 and WINDER_NUMBA=0 leave them all out."""
+    real = aot_mod.source_stamp
+    monkeypatch.setattr(aot_mod, "_LOADED", [])
+    assert set(aot_mod.load()) == set(aot_mod.KERNELS)                      # (this source's: used)
+    for changed in aot_mod.SOURCES:
+        monkeypatch.setattr(aot_mod, "_LOADED", [])
+        with monkeypatch.context() as m:
+            m.setattr(aot_mod, "source_stamp", lambda src, c=changed: 12345 if src == c else real(src))
+            got = aot_mod.load()
+        assert got and set(got) == {n for n, k in aot_mod.KERNELS.items() if k[0] != changed}
     for var in ("WINDER_AOT", "WINDER_NUMBA"):
-        monkeypatch.setattr(timeparam_aot, "_LOADED", [])
+        monkeypatch.setattr(aot_mod, "_LOADED", [])
         with monkeypatch.context() as m:
             m.setenv(var, "0")
-            assert timeparam_aot.load(lambda name: None) is None
+            assert aot_mod.load() == {}

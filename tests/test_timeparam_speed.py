@@ -60,7 +60,7 @@ def test_compiled_pass_bit_identical_non_uniform_spacing_no_penalty() -> None:
 
 
 def test_without_numba_the_numpy_pass_gives_the_same_law() -> None:
-    """No numba and no ahead-of-time kernels (engine.timeparam_aot; tests/test_timeparam_aot.py has the frozen
+    """No numba and no ahead-of-time kernels (engine.aot; tests/test_timeparam_aot.py has the frozen
     build's case, numba absent and those kernels there): the numpy pass."""
     import os
 
