@@ -227,16 +227,16 @@ def windows(lev: np.ndarray, xall: np.ndarray, xn: np.ndarray, ch: tuple[np.ndar
             t_lo: np.ndarray, t_hi: np.ndarray, nb: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """The DP windows ``(klo, cnt, bad)`` of :func:`engine.timeparam._dp` (levels uniform in ṡ), the
     same integers as its numpy code; ``None`` without numba."""
-    k = _compiled(_WINDOWS, "windows", _build_windows)
-    if k is None:
+    kern = _compiled(_WINDOWS, "windows", _build_windows)
+    if kern is None:
         return None
     n1, M = lev.shape[0] - 1, lev.shape[1]
     klo = np.empty((n1, M), np.int64)
     cnt = np.empty((n1, M), np.int64)
     bad = np.empty((n1, M), np.bool_)
     rq, rk, lq, lk = ch
-    k(lev, xall, xn, rq, rk, lq, lk, int(L), xjb, xjt, degenerate, plo, sp_p, t_lo, t_hi, int(nb),
-      klo, cnt, bad)
+    kern(lev, xall, xn, rq, rk, lq, lk, int(L), xjb, xjt, degenerate, plo, sp_p, t_lo, t_hi, int(nb),
+         klo, cnt, bad)
     return klo, cnt, bad
 
 
@@ -510,8 +510,8 @@ def dp_pass(levels: tuple[np.ndarray, ...], xn: np.ndarray, ch: tuple[np.ndarray
 
     Returns ``(candidates, unreachable node or -1, final speed reached, jidx, sdot)`` (``jidx``, ``sdot``
     valid only when the pass succeeded: node -1 and final reached), or ``None`` without numba."""
-    k = _compiled(_FUSED, "dp_pass", _build_fused)
-    if k is None or lomask != 4095 or himask != -4096:    # (the kernel's constants: 12 low bits)
+    kern = _compiled(_FUSED, "dp_pass", _build_fused)
+    if kern is None or lomask != 4095 or himask != -4096:    # (the kernel's constants: 12 low bits)
         return None
     plo_, span, phi, frac = levels
     n, M = plo_.size, frac.size
@@ -528,10 +528,10 @@ def dp_pass(levels: tuple[np.ndarray, ...], xn: np.ndarray, ch: tuple[np.ndarray
     jidx = np.empty(n, np.int64)
     sdot = np.empty(n)
     rq, rk, lq, lk, rs, ls = ch
-    total, bad_node, final_ok = k(plo_, span, phi, frac, lev, xn, rq, rk, lq, lk, rs, ls, int(L),
-                                  xjb, xjt, degenerate, plo, sp_p, t_lo, t_hi, int(nb), two_h, kq_h,
-                                  bool(uniform_h), int(chunk), bool(use_k), np.int64(lomask),
-                                  np.int64(himask), Jraw, jidx, sdot)
+    total, bad_node, final_ok = kern(plo_, span, phi, frac, lev, xn, rq, rk, lq, lk, rs, ls, int(L),
+                                     xjb, xjt, degenerate, plo, sp_p, t_lo, t_hi, int(nb), two_h, kq_h,
+                                     bool(uniform_h), int(chunk), bool(use_k), np.int64(lomask),
+                                     np.int64(himask), Jraw, jidx, sdot)
     return int(total), int(bad_node), bool(final_ok), jidx, sdot
 
 
@@ -617,8 +617,8 @@ def chains(allr: np.ndarray, order: np.ndarray, m: np.ndarray, h: np.ndarray, xn
     the same for the left chain: the quotients numpy's ``interp`` computes), or ``None`` (without numba,
     or where the numpy code handles parallel normals or NaN vertices).  ``work``: the chain arrays are the
     thread's :func:`scratch` arrays (valid until the next such call)."""
-    k = _compiled(_CHAINS, "chains", _build_chains)
-    if k is None:
+    kern = _compiled(_CHAINS, "chains", _build_chains)
+    if kern is None:
         return None
     B = order.shape[0]
     V = int(m.max())
@@ -630,10 +630,10 @@ def chains(allr: np.ndarray, order: np.ndarray, m: np.ndarray, h: np.ndarray, xn
         out = {k: np.empty(B * L) for k in ("rq", "rk", "lq", "lk")}
         out.update({k: np.empty(max(B * L - 1, 0)) for k in ("rs", "ls")})
     out.update({k: np.empty(B) for k in ("xjb", "xjt", "uhi", "ulo", "xkt")})
-    ok = k(np.ascontiguousarray(allr, float), np.ascontiguousarray(order, np.int64),
-           np.ascontiguousarray(m, np.int64), V, np.ascontiguousarray(h, float),
-           np.ascontiguousarray(xn_cur, float), out["rq"], out["rk"], out["lq"], out["lk"], out["xjb"],
-           out["xjt"], out["uhi"], out["ulo"], out["xkt"], out["rs"], out["ls"])
+    ok = kern(np.ascontiguousarray(allr, float), np.ascontiguousarray(order, np.int64),
+              np.ascontiguousarray(m, np.int64), V, np.ascontiguousarray(h, float),
+              np.ascontiguousarray(xn_cur, float), out["rq"], out["rk"], out["lq"], out["lk"], out["xjb"],
+              out["xjt"], out["uhi"], out["ulo"], out["xkt"], out["rs"], out["ls"])
     return out if ok else None
 
 
@@ -713,12 +713,12 @@ def limit_ratios(d1: np.ndarray, d2: np.ndarray, h: np.ndarray, x0: np.ndarray, 
                  A: np.ndarray, V: np.ndarray) -> tuple[float, float] | None:
     """The worst acceleration and speed ratios of :func:`engine.timeparam._limit_ratios` (bit for bit its
     numpy code's), or ``None`` without numba (loaded)."""
-    k = _compiled(_LIMITS, "limits", _build_limits)
-    if k is None or d1.shape[0] == 0:
+    kern = _compiled(_LIMITS, "limits", _build_limits)
+    if kern is None or d1.shape[0] == 0:
         return None
     c = np.ascontiguousarray
-    acc, spd = k(c(d1, float), c(d2, float), c(h, float), c(x0, float), c(u, float), c(tau, float),
-                 c(A, float), c(V, float))
+    acc, spd = kern(c(d1, float), c(d2, float), c(h, float), c(x0, float), c(u, float), c(tau, float),
+                    c(A, float), c(V, float))
     return float(acc), float(spd)
 
 
@@ -784,11 +784,11 @@ def constraint_rows(P: np.ndarray, Q: np.ndarray, A: np.ndarray, inv_sdd: float 
     (bit for bit) from the Bernstein coefficients ``P``, ``Q`` (N-1, p, 5 or 1) of the acceleration
     constraints, the limits ``A`` (p,) and ``1/s̈_T`` (``None``: no s̈_T rows).  False (nothing written)
     without numba (loaded)."""
-    k = _compiled(_ROWS, "rows", _build_rows)
-    if k is None:
+    kern = _compiled(_ROWS, "rows", _build_rows)
+    if kern is None:
         return False
     c = np.ascontiguousarray
-    k(c(P, float), c(Q, float), c(A, float), 0.0 if inv_sdd is None else float(inv_sdd), rows, hull_rows)
+    kern(c(P, float), c(Q, float), c(A, float), 0.0 if inv_sdd is None else float(inv_sdd), rows, hull_rows)
     return True
 
 
@@ -844,15 +844,15 @@ def group_rows(allr: np.ndarray, order: np.ndarray, keep: np.ndarray, at_start: 
     code's): ``rows`` (B, 2·mx·R + 2·mx, 2) from the intervals' rows ``allr``, their hull vertex ids
     ``order`` (N-1, R), ``keep`` and ``at_start`` masks, the groups' intervals ``fi`` (B, mx), offsets
     ``off`` (mm), ``valid`` slots and cap rows ``crow`` (B, mx, 2); ``None`` without numba (loaded)."""
-    k = _compiled(_GROUPS, "groups", _build_groups)
-    if k is None:
+    kern = _compiled(_GROUPS, "groups", _build_groups)
+    if kern is None:
         return None
     B, mx = fi.shape
     R = order.shape[1]
     rows = np.empty((B, 2 * mx * R + 2 * mx, 2))
     c = np.ascontiguousarray
-    k(c(allr, float), c(order, np.int64), c(keep, np.bool_), c(at_start, np.bool_), c(fi, np.int64),
-      c(off, float), c(valid, np.bool_), c(crow, float), rows)
+    kern(c(allr, float), c(order, np.int64), c(keep, np.bool_), c(at_start, np.bool_), c(fi, np.int64),
+         c(off, float), c(valid, np.bool_), c(crow, float), rows)
     return rows
 
 
@@ -972,17 +972,7 @@ def _build_sweep() -> tuple[Any, Any]:
 def sweep_kernels() -> tuple[Any, Any] | None:
     """:func:`engine.timeparam._sweep_back` and :func:`engine.timeparam._sweep_fwd` compiled (the same
     bits), or ``None`` without compiled kernels."""
-    if kernel(0) is None:
-        return None
-    if _jit_on():
-        if not _SWEEP:
-            try:
-                _SWEEP.append(_build_sweep())
-            except Exception:  # noqa: BLE001 - see kernel()
-                _SWEEP.append(None)
-        return _SWEEP[0]
-    aot = _aot()
-    return (aot["sweep_back"], aot["sweep_fwd"]) if "sweep_back" in aot else None
+    return _compiled(_SWEEP, ("sweep_back", "sweep_fwd"), _build_sweep)
 
 
 _HULL_SYM: list[Any] = []
@@ -1207,17 +1197,7 @@ def hull_sym_prep(pts: np.ndarray, ipos: np.ndarray, ineg: np.ndarray, work: boo
 
 
 def _hull_sym_kernels() -> Any:
-    if kernel(0) is None:
-        return None
-    if _jit_on():
-        if not _HULL_SYM:
-            try:
-                _HULL_SYM.append(_build_hull_sym())
-            except Exception:  # noqa: BLE001 - see kernel()
-                _HULL_SYM.append(None)
-        return _HULL_SYM[0]
-    aot = _aot()
-    return (aot["hull_graham"], aot["hull_prep"], aot["hull_assemble"]) if "hull_prep" in aot else None
+    return _compiled(_HULL_SYM, ("hull_graham", "hull_prep", "hull_assemble"), _build_hull_sym)
 
 
 def hull_sym_rows(px: np.ndarray, py: np.ndarray, ang: np.ndarray, r2: np.ndarray, idx: np.ndarray,
@@ -1479,8 +1459,8 @@ def hulls(pts: np.ndarray, pairs: tuple[np.ndarray, np.ndarray] | None = None, s
     (checked exactly, per row): the chain then runs on the ``ipos`` half and mirrors its result, the
     same vertices in the same order as on every point.  ``scratch_out``: ``order`` is the thread's
     :func:`scratch` array (valid until the next such call)."""
-    k = _compiled(_HULL, "hulls", _build_hull)
-    if k is None:
+    kern = _compiled(_HULL, "hulls", _build_hull)
+    if kern is None:
         return None
     B, R = pts.shape[0], pts.shape[1]
     if scratch_out:
@@ -1497,7 +1477,7 @@ def hulls(pts: np.ndarray, pairs: tuple[np.ndarray, np.ndarray] | None = None, s
         partner[ineg] = ipos
         if ipos.size == ineg.size and 2 * ipos.size == R and np.all(partner >= 0):
             posr = ipos
-    k(np.ascontiguousarray(pts, float), order, m, posr, partner)
+    kern(np.ascontiguousarray(pts, float), order, m, posr, partner)
     return order, m
 
 
@@ -1538,9 +1518,10 @@ def _jit_on() -> bool:
     return bool(_KERNEL) and _KERNEL[0] is not None
 
 
-def _compiled(cache: list[Any], name: str, build: Callable[[], Any]) -> Any:
-    """Kernel ``name``: numba's where numba's kernels are in use here (built into ``cache`` on first need),
-    else the ahead-of-time one; None where no compiled kernel runs (the numpy pass)."""
+def _compiled(cache: list[Any], name: str | tuple[str, ...], build: Callable[[], Any]) -> Any:
+    """Kernel ``name``: numba's where numba's kernels are in use here (``build()``, kept in ``cache``), else
+    the ahead-of-time one; None where no compiled kernel runs (the numpy pass).  A tuple of names: a builder
+    of several kernels, their ahead-of-time names in the order it returns them (a tuple back)."""
     if kernel(0) is None:
         return None
     if _jit_on():
@@ -1550,7 +1531,10 @@ def _compiled(cache: list[Any], name: str, build: Callable[[], Any]) -> Any:
             except Exception:  # noqa: BLE001 - see kernel()
                 cache.append(None)
         return cache[0]
-    return _aot().get(name)
+    aot = _aot()
+    if isinstance(name, tuple):
+        return tuple(aot[n] for n in name) if all(n in aot for n in name) else None
+    return aot.get(name)
 
 
 def _aot() -> dict[str, Any]:
