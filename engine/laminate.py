@@ -1226,6 +1226,7 @@ class _Scheduler:
         self.join = join  # the layers will be joined into one program (run_laminate(upto="nc"))
         self.prebuilt: dict[int, tuple[Any, Any]] = {}  # distance functions for the join, built while waiting
         self.laid: dict[int, LayerResult] = {}  # layers wound here, with their figures (made while waiting)
+        self.figs: dict[int, dict[str, Any]] = {}  # the children's layers' figures but the time (made while waiting)
         self.pool = pool  # an engine.layer_pool.LayerPool: its workers instead of forked children
         self.queue: list[_Prepared] = []
         self.children: dict[int, _Child] = {}  # by layer index
@@ -1304,6 +1305,19 @@ class _Scheduler:
         """The result of layer ``p``, wound in this process, with its figures (:func:`_laid`)."""
         self.laid[p.i] = _laid(job, p, self.out[p.i])
 
+    def _prefigure(self, job: Job, p: _Prepared) -> None:
+        """The figures of layer ``p``, whose pipeline runs in a child, but for its time (they come from its
+        preparation): made while this process waits, not after the child's answer."""
+        self.figs[p.i] = _figures(job, p.i, p.name, p.layer, p.ljob, p.surface, p.line, p.thickness, None)
+
+    def _prefigures(self, job: Job, done: set[int]) -> list[Callable[[], None]]:
+        """:meth:`_prefigure` steps for the children's layers not yet in ``done`` (added to it)."""
+        import functools
+
+        new = [c.layer for i, c in self.children.items() if i not in done]
+        done.update(p.i for p in new)
+        return [functools.partial(self._prefigure, job, p) for p in new]
+
     def finish(self, job: Job, slots: list[Any], state: State | None, n: int,
                active: list[Any]) -> list[LayerResult]:
         """Every prepared layer's result, in order; the first failing layer's error (in layer order) is
@@ -1318,10 +1332,12 @@ class _Scheduler:
 
         # what the join will need and the layers' answers do not change: built while this process waits
         idle = _join_prework(slots, self.prebuilt) if self.join else []
+        figured: set[int] = set()   # the children's figures go first (needed right at their answers)
         try:
             self.queue.sort(key=_pipeline_cost, reverse=True)
             while self.queue or self._running():
                 self._poll()
+                idle[:0] = self._prefigures(job, figured)   # (of the children forked since)
                 while len(self.queue) > 1 and self._running() < self.workers and not self._small(self.queue[0]):
                     p = self.queue.pop(0)
                     self._spawn(p, sub(p))
@@ -1364,7 +1380,7 @@ class _Scheduler:
                 raise got.exc
             if isinstance(got, InputError):
                 raise _located(got, self.jp, p.i, p.layer) from None
-            filled.append(_laid(job, p, got))
+            filled.append(_laid(job, p, got, self.figs.get(p.i) if p.i in self.children else None))
         return filled
 
 
@@ -1700,9 +1716,13 @@ def _prepare_layer(job: Job, jp: str | None, i: int, layer: Any, name: str, key:
                      grown=grown)
 
 
-def _laid(job: Job, p: _Prepared, res: Any) -> LayerResult:
-    """The layer's result from its preparation and its pipeline result."""
-    figs = _figures(job, p.i, p.name, p.layer, p.ljob, p.surface, p.line, p.thickness, res)
+def _laid(job: Job, p: _Prepared, res: Any, figs: dict[str, Any] | None = None) -> LayerResult:
+    """The layer's result from its preparation and its pipeline result (``figs``: its figures made from the
+    preparation before the pipeline ended, :func:`_figures` with ``res`` None; their time is added here)."""
+    if figs is None:
+        figs = _figures(job, p.i, p.name, p.layer, p.ljob, p.surface, p.line, p.thickness, res)
+    else:
+        figs = {**figs, "time_s": _figures_time(res)}
     return LayerResult(index=p.i, name=p.name, kind=p.layer.kind, key=p.key, surface=p.surface, grown=p.grown,
                        result=res, thickness=p.thickness, figures=figs)
 
@@ -1779,7 +1799,7 @@ def _figures(job: Job, i: int, name: str, layer: Any, ljob: Job, surface: Any, l
         circuits = int(line.circuits)
         passes = 2 * circuits
         overlap = float(max(cov.get("overlap_mm", 0.0), 0.0) / b)
-    time_s = float(res.blocks.total) if getattr(res, "blocks", None) is not None else 0.0
+    time_s = _figures_time(res)
     return {
         "index": i + 1, "name": name, "kind": layer.kind,
         "angle_deg_cylinder": math.degrees(beta_c),
@@ -1793,6 +1813,11 @@ def _figures(job: Job, i: int, name: str, layer: Any, ljob: Job, surface: Any, l
         "volume_laid_mm3": vol, "volume_between_mm3": th.volume_mm3,
         "pole_radii_after_mm": None,
     }
+
+
+def _figures_time(res: Any) -> float:
+    """A layer's figure ``time_s``: its blocks' total time (s), 0 without blocks (or without a result yet)."""
+    return float(res.blocks.total) if getattr(res, "blocks", None) is not None else 0.0
 
 
 def _length_mid(line: Any, th: Thickness, kind: str) -> float:

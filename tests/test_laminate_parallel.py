@@ -591,12 +591,46 @@ def test_figures_of_layers_wound_here_are_made_while_the_children_run(layup, mon
         orig_init(self, *a, **k)
         running.append(self)
 
-    def laid(job_, p, res):  # noqa: ANN001, ANN202
+    def laid(job_, p, res, *figs):  # noqa: ANN001, ANN002, ANN202
         when.setdefault(p.i, running[-1]._running() > 0)
-        return orig_laid(job_, p, res)
+        return orig_laid(job_, p, res, *figs)
 
     monkeypatch.setattr(lam._Scheduler, "__init__", init)
     monkeypatch.setattr(lam, "_laid", laid)
     res = lam.run_laminate(job, workers=2)
     _same_result(one, res)
     assert when[1] and when[4], when      # the hoops (wound here) while the polar or helical child ran
+
+
+def test_figures_of_the_childrens_layers_are_made_while_they_run(layup, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The layers wound in children get their figures from their preparation while this process waits
+    (all but their time, which comes with the answer), not after the answer: the same figures as in one
+    process."""
+    job, one = layup
+    before: dict[int, bool] = {}  # layer -> figures made (without a result) while its child still ran
+    running: list[lam._Scheduler] = []
+    orig_figs, orig_init = lam._figures, lam._Scheduler.__init__
+
+    def init(self, *a, **k):  # noqa: ANN001, ANN002, ANN003, ANN202
+        orig_init(self, *a, **k)
+        running.append(self)
+
+    def figures(job_, i, *a):  # noqa: ANN001, ANN002, ANN202
+        if a[-1] is None:
+            before[i] = i in running[-1].children and i not in running[-1].out
+        return orig_figs(job_, i, *a)
+
+    def slow_child(*a):  # noqa: ANN002, ANN202 - (in the forked child) long enough for this process to wait
+        import time
+
+        time.sleep(0.5)
+        return real_child(*a)
+
+    real_child = lam._pipeline_child
+    monkeypatch.setattr(lam._Scheduler, "__init__", init)
+    monkeypatch.setattr(lam, "_figures", figures)
+    monkeypatch.setattr(lam, "_pipeline_child", slow_child)
+    res = lam.run_laminate(job, workers=2)
+    _same_result(one, res)
+    assert before.get(0) and before.get(3), before   # the polar and the helical layer
+    assert [lr.figures["time_s"] for lr in res.layers] == [lr.figures["time_s"] for lr in one.layers]
