@@ -118,3 +118,12 @@ def test_fixed_digits_marks_what_it_cannot_write() -> None:
     k, ok = fixed_digits([np.nan, np.inf, -np.inf, 1e16, -1e15, 99.5, -0.0], 0)
     assert ok.tolist() == [False, False, False, False, False, True, True]
     assert k.tolist()[-2:] == [100, 0]
+
+
+def test_the_four_digit_table_is_the_formatted_numbers() -> None:
+    from engine.post import _numtext
+
+    tab = _numtext._chunk_table()
+    want = np.frombuffer("".join(f"{i:04d}" for i in range(10_000)).encode("ascii"), np.uint8).reshape(10_000, 4)
+    assert tab.dtype == np.uint8 and not tab.flags.writeable
+    np.testing.assert_array_equal(tab, want)
