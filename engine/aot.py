@@ -36,7 +36,7 @@ import numpy as np
 MODULE = "engine._aot_kernels"
 """The extension module the build writes into the ``engine`` package."""
 
-SOURCES = ("timeparam_jit", "mandrel_jit")
+SOURCES = ("timeparam_jit", "mandrel_jit", "payout_jit")
 """The modules of ``engine`` that hold the kernels' numba code (each stamped on its own)."""
 
 # every kernel: (module of SOURCES, its builder there, index in what the builder returns or None, argument
@@ -68,6 +68,10 @@ KERNELS: dict[str, tuple[str, str, int | None, tuple[str, ...]]] = {
     "hull_assemble": ("timeparam_jit", "_build_hull_sym", 2, ("i8:2", "i8:1", "i8:1", "i8:2", "i8:1")),
     "hulls": ("timeparam_jit", "_build_hull", None, ("f8:3", "i8:2", "i8:1", "i8:1", "i8:1")),
     "chebval": ("mandrel_jit", "_build_chebval", None, ("f8:1", "f8:1", "f8:1", "f8:1", "f8:1")),
+    "tube_pre": ("payout_jit", "_build_tube", 0, ("f8:2", "f8:1", "i8:1", "b1", "b1", "f8:1", "f8:1", "f8:1")),
+    "tube_post": ("payout_jit", "_build_tube", 1, ("f8:2", "f8:1", "f8:1", "i8:1", "b1", "b1", "f8:1")),
+    "tube_step": ("payout_jit", "_build_tube", 2, ("f8:1",) * 7 + ("f8", "f8") + ("f8:1",) * 5),
+    "tube_newton": ("payout_jit", "_build_tube", 3, ("f8:1",) * 9 + ("f8", "f8", "f8:1", "f8:1")),
 }
 
 MISSES: dict[str, int] = {}

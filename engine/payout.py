@@ -1520,6 +1520,26 @@ class _Tube:
         self._cap: FloatArray | None = None
         # products of :meth:`_l_of_mu` that do not depend on μ, for :meth:`g` (the same products: the same bits)
         self._ra, self._b2, self._r2 = self.rf * self.af, self.bf * self.bf, self.rf * self.rf
+        # the compiled steps (engine.payout_jit: the same bits), with the geometry as one table of rows
+        from engine.payout_jit import kernels
+
+        self._kern = kernels()
+        self._n1 = int(self.rf.shape[0])
+        self._noidx = np.zeros(0, dtype=np.int64)
+        self.geometry_changed()
+
+    def geometry_changed(self) -> None:
+        """Take the per-interval geometry attributes again into the compiled steps' table (after code that
+        changes them, e.g. a test's made-up azimuths; the numpy code reads the attributes themselves)."""
+        from engine.payout_jit import G_ROWS
+
+        self._G: FloatArray | None = None
+        if self._kern is not None:
+            rows = {"ra": self._ra, "b2": self._b2, "r2": self._r2, "ds": self.ds, "af": self.af, "rf": self.rf,
+                    "cf": self.cf, "vf": self.vf, "vt": self.vt, "rt": self.rt, "at": self.at, "ct": self.ct,
+                    "theta_t": self.theta_t}
+            G = np.ascontiguousarray(np.stack([np.asarray(rows[r], dtype=np.float64) for r in G_ROWS]))
+            self._G = G if G.shape == (len(G_ROWS), self._n1) else None
 
     # exact per-point maps --------------------------------------------------------------------
     def _l_of_mu(self, mu: FloatArray, r: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
@@ -1542,7 +1562,13 @@ class _Tube:
 
         The arithmetic of :meth:`g_reference` operation for operation (so bit for bit), with the μ-free
         products made once, temporaries reused, and the branches of ``np.where`` that no entry takes not
-        computed (the forward propagation calls this ~3 000 times per example law; ~10 % less time)."""
+        computed (the forward propagation calls this ~3 000 times per example law; ~10 % less time).
+        Where the compiled steps run (:mod:`engine.payout_jit`), by them around numpy's ``arctan2``: the
+        same bits again."""
+        if self._G is not None:
+            out = self._g_compiled(mu, idx)
+            if out is not None:
+                return out
         rf, af, cf, rt, at, ct = self.rf[idx], self.af[idx], self.cf[idx], self.rt[idx], self.at[idx], self.ct[idx]
         if self.k:  # l(μ), as _l_of_mu
             b2, r2 = self._b2[idx], self._r2[idx]
@@ -1587,6 +1613,29 @@ class _Tube:
         out = need - np.hypot(h, ct * need)
         inf = np.isinf(need)
         return np.where(inf, np.inf, out) if inf.any() else out
+
+    def _g_compiled(self, mu: FloatArray, idx: NDArray[np.int64] | slice) -> FloatArray | None:
+        """:meth:`g` by the compiled kernels; None where the arguments are not theirs (the numpy code runs)."""
+        if type(mu) is not np.ndarray or mu.dtype != np.float64 or mu.ndim != 1 or not mu.flags.c_contiguous:
+            return None
+        n = mu.shape[0]
+        if isinstance(idx, slice):
+            if idx != slice(None) or n != self._n1:
+                return None
+            full, ix = True, self._noidx
+        else:
+            if (type(idx) is not np.ndarray or idx.dtype != np.int64 or idx.ndim != 1 or not idx.flags.c_contiguous
+                    or idx.shape[0] != n or (n and (int(idx.min()) < 0 or int(idx.max()) >= self._n1))):
+                return None
+            full, ix = False, idx
+        pre, post = self._kern[0], self._kern[1]
+        k = bool(self.k)
+        l, num, den = np.empty(n), np.empty(n), np.empty(n)
+        pre(self._G, mu, ix, full, k, l, num, den)
+        ang = np.arctan2(num, den)   # numpy's own (its bits differ from a compiled loop's on some CPUs)
+        out = np.empty(n)
+        post(self._G, l, ang, ix, full, k, out)
+        return out
 
     def g_reference(self, mu: FloatArray, idx: NDArray[np.int64] | slice = slice(None)) -> FloatArray:
         """:meth:`g` written plainly (the tested reference)."""
@@ -1687,6 +1736,8 @@ class _Tube:
         cap = h + 1.0
         C = np.zeros(x.size)
         y = self._sweep(x, A, cap, C)
+        if self._G is not None and self._fits(x, A, h):
+            return self._forward_compiled(x, A, h, y, cap, C, tol)
         prev = np.inf
         newton = True
         for _ in range(80):
@@ -1708,6 +1759,42 @@ class _Tube:
             y_new = self._sweep(x, Ahat, cap, C)
             if newton:
                 y_new = self._newton(x, y, y_new, A, cap, gv, gfin, C)
+            y = y_new
+        raise _FastFail("forward propagation did not settle")
+
+    def _fits(self, x: FloatArray, A: FloatArray, h: FloatArray) -> bool:
+        """Whether the compiled forward closure takes these arrays (C-contiguous float64 of the grid's sizes)."""
+        n = self._n1 + 1
+        return all(type(a) is np.ndarray and a.dtype == np.float64 and a.ndim == 1 and a.flags.c_contiguous
+                   and a.shape[0] == m for a, m in ((x, n), (A, n - 1), (h, n)))
+
+    def _forward_compiled(self, x: FloatArray, A: FloatArray, h: FloatArray, y: FloatArray, cap: FloatArray,
+                          C: FloatArray, tol: float) -> FloatArray | None:
+        """:meth:`forward` after its first sweep ``y``, each round's checks, frozen-increment sweep and
+        Newton sweeps (:meth:`_newton`) by the compiled kernels; g by :meth:`g`.  The same operations, the same
+        bits."""
+        step, newton_k = self._kern[2], self._kern[3]
+        n = x.shape[0]
+        big = 1e3 * self.scale
+        inc, yd, dy, info = np.empty(n - 1), np.empty(n - 1), np.empty(n - 1), np.empty(1)
+        prev = np.inf
+        newton = True
+        for _ in range(80):
+            gv = self.g(y[:-1])
+            y_new = np.empty(n)
+            status = step(x, A, y, gv, h, cap, C, tol, big, inc, y_new, yd, dy, info)
+            if status == 0:
+                return None
+            if status == 1:
+                return y
+            worst = float(info[0])
+            newton = newton and worst < prev  # Newton steps only while they pay
+            prev = worst
+            if newton:
+                g2 = self.g(yd)
+                z = np.empty(n)
+                newton_k(x, y, y_new, A, cap, C, gv, g2, dy, 1e-13 * self.scale, big, inc, z)
+                y_new = z
             y = y_new
         raise _FastFail("forward propagation did not settle")
 

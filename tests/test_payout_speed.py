@@ -252,6 +252,7 @@ def test_tube_g_is_its_reference_bit_for_bit(name: str, k: int) -> None:
         for variant in ("as is", "theta", "behind"):
             tube.theta_t = np.where(some, -1.0, theta) if variant == "theta" else theta
             tube.vt = np.where(some, vt + 3.0, vt) if variant == "behind" else vt
+            tube.geometry_changed()  # into the compiled steps' table (engine.payout_jit), where they run
             for mu in cases:
                 for idx in (slice(None), np.flatnonzero(rng.uniform(size=lo.size) < 0.3)):
                     m = mu if isinstance(idx, slice) else mu[idx]
