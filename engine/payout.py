@@ -319,18 +319,50 @@ class _Contour:
         self.tree = cKDTree(np.column_stack([self.bz, self.br]))
         self.z_min, self.z_max = float(self.z[0]), float(self.z[-1])
         self.r_max = float(self.r.max())
+        self.edge_max = float(np.hypot(np.diff(self.bz), np.diff(self.br)).max())  # longest boundary segment
 
     def distance(self, Z: FloatArray, R: FloatArray, far: float | None = None) -> FloatArray:
         """Signed distance (mm); with ``far``, points provably at least ``far`` away (beyond the
-        bounding box of the generatrix grown by ``far``) skip the KD-tree and get +inf."""
+        bounding box of the generatrix grown by ``far``) skip the KD-tree, and points outside the body
+        provably more than ``far + 1`` away (no boundary vertex within ``far + 1`` + the longest boundary
+        segment: every segment is farther than ``far + 1``) end the KD-tree's search early; both get +inf.
+        Every value below ``far + 1`` (and every value inside the body) is the one without ``far``, bit for
+        bit (the search finds the same nearest vertex)."""
         if far is not None:
             out = np.full(np.shape(Z), np.inf)
             near = (R < self.r_max + far) & (Z > self.z_min - far) & (Z < self.z_max + far)
             if near.any():
-                out[near] = self.distance(np.asarray(Z)[near], np.asarray(R)[near])
+                out[near] = self._distance(np.asarray(Z)[near], np.asarray(R)[near],
+                                           far + 1.0 + self.edge_max + 1e-6)
             return out
+        return self._distance(Z, R, None)
+
+    def _distance(self, Z: FloatArray, R: FloatArray, bound: float | None) -> FloatArray:
+        """:meth:`distance` without the box; ``bound``: the nearest vertex is looked for within it only
+        (points with none there get +inf outside the body; inside the body they are searched again)."""
         Zf, Rf = np.ravel(Z), np.ravel(R)
-        _, j = self.tree.query(np.column_stack([Zf, Rf]))
+        P = np.column_stack([Zf, Rf])
+        keep = None
+        if bound is None:
+            _, j = self.tree.query(P)
+        else:
+            d0, j = self.tree.query(P, distance_upper_bound=bound)
+            none = np.isinf(d0)
+            if none.any():
+                inner = none & (Zf >= self.z_min) & (Zf <= self.z_max) & (Rf < np.interp(Zf, self.z, self.r))
+                if inner.any():
+                    j[inner] = self.tree.query(P[inner])[1]
+                if not inner.all():
+                    keep = ~(none & ~inner)
+        if keep is None:
+            return self._refine(Zf, Rf, j).reshape(np.shape(Z))
+        out = np.full(Zf.shape, np.inf)
+        if keep.any():
+            out[keep] = self._refine(Zf[keep], Rf[keep], j[keep])
+        return out.reshape(np.shape(Z))
+
+    def _refine(self, Zf: FloatArray, Rf: FloatArray, j: NDArray[np.int64]) -> FloatArray:
+        """Signed distance of the points (Zf, Rf) from the two boundary segments at their nearest vertices j."""
         best = np.full(Zf.shape, np.inf)
         m = self.bz.size
         for a in (j - 1, j):
@@ -340,7 +372,7 @@ class _Contour:
             t = np.clip(((Zf - z0) * ez + (Rf - r0) * er) / (ez * ez + er * er), 0.0, 1.0)
             best = np.minimum(best, np.hypot(Zf - z0 - t * ez, Rf - r0 - t * er))
         inside = (Zf >= self.z_min) & (Zf <= self.z_max) & (Rf < np.interp(Zf, self.z, self.r))
-        return np.where(inside, -best, best).reshape(np.shape(Z))
+        return np.where(inside, -best, best)
 
 
 def _first_true_run(ok: NDArray[np.bool_]) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.bool_]]:

@@ -137,3 +137,34 @@ def test_clearance_counts_the_end_faces() -> None:
     c = _Contour(Mandrel.pipe(75.0, 1000.0))
     d = c.distance(np.array([-5.0, -5.0, 500.0, 1010.0, 500.0, -20.0]), np.array([30.0, 80.0, 100.0, 70.0, 50.0, 0.0]))
     assert d == pytest.approx([5.0, np.hypot(5.0, 5.0), 25.0, 10.0, -25.0, 20.0], abs=1e-9)
+
+
+@pytest.mark.parametrize("name", ["pipe", "pressure_vessel", "bottle"])
+def test_far_distances_are_the_full_search_below_far_plus_one(name: str) -> None:
+    """distance(far=f) ends the k-d tree's search at f + 1 + the longest boundary segment: every value
+    below f + 1, and every value inside the body, is the full search's bit for bit; the others are +inf
+    where the full search gives at least f + 1 (what the envelope and the line check read is unchanged)."""
+    path = ROOT / "resources" / "examples" / f"{name}.toml"
+    c = _Contour(build_mandrel(load_job(path), path))
+    rng = np.random.default_rng(3)
+    n = 200_000
+    Z = rng.uniform(c.z_min - 40.0, c.z_max + 40.0, n)
+    R = rng.uniform(0.0, c.r_max + 40.0, n)
+    # and points just around the boundary and its face vertices (near-ties of the nearest vertex)
+    k = rng.integers(0, c.bz.size, 20_000)
+    Z = np.concatenate([Z, c.bz[k] + rng.normal(0, 0.5, k.size), np.repeat(c.bz[:50], 3)])
+    R = np.concatenate([R, c.br[k] + rng.normal(0, 0.5, k.size), np.repeat(c.br[:50], 3) + 0.25])
+    full = c.distance(Z, R)
+    cuts = 0
+    for f in (0.01, 5.0, 20.0):
+        box = (R < c.r_max + f) & (Z > c.z_min - f) & (Z < c.z_max + f)
+        ref = np.where(box, full, np.inf)        # the box alone (the search to the end inside it)
+        got = c.distance(Z, R, far=f)
+        keep = (ref < f + 1.0) | (ref < 0)
+        assert np.array_equal(got[keep], ref[keep])            # bit for bit
+        cut = ~keep & np.isfinite(ref) & np.isinf(got)
+        assert (ref[cut] >= f + 1.0).all()
+        cuts += int(cut.sum())
+        assert np.array_equal(got[~keep & ~cut], ref[~keep & ~cut])
+        assert np.array_equal(np.minimum(got, f + 1.0), np.minimum(ref, f + 1.0))   # what the checks read
+    assert cuts > 100   # (the search was ended early: near the ends of a pipe, over the domes of a vessel)
