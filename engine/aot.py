@@ -72,6 +72,12 @@ KERNELS: dict[str, tuple[str, str, int | None, tuple[str, ...]]] = {
     "tube_post": ("payout_jit", "_build_tube", 1, ("f8:2", "f8:1", "f8:1", "i8:1", "b1", "b1", "f8:1")),
     "tube_step": ("payout_jit", "_build_tube", 2, ("f8:1",) * 7 + ("f8", "f8") + ("f8:1",) * 5),
     "tube_newton": ("payout_jit", "_build_tube", 3, ("f8:1",) * 9 + ("f8", "f8", "f8:1", "f8:1")),
+    "ipm_res": ("payout_jit", "_build_ipm", 0, ("i8:1", "i8:1", "f8:1", "b1") + ("i8:1", "i8:1", "f8:1") * 2
+                + ("f8:1",) * 11),
+    "ipm_fac": ("payout_jit", "_build_ipm", 1, ("f8:1", "f8:1", "i8:1", "i8:1", "i8:1", "b1:1") + ("f8:1",) * 6),
+    "ipm_rhs": ("payout_jit", "_build_ipm", 2, ("i8:1", "i8:1") + ("f8:1",) * 7 + ("b1", "f8") + ("f8:1",) * 3),
+    "ipm_aff": ("payout_jit", "_build_ipm", 3, ("f8:1", "f8:1", "f8", "f8", "f8", "i8:1", "i8:1") + ("f8:1",) * 10),
+    "ipm_fin": ("payout_jit", "_build_ipm", 4, ("f8:1", "f8:1", "f8", "f8", "f8", "i8:1", "i8:1") + ("f8:1",) * 9),
 }
 
 MISSES: dict[str, int] = {}
@@ -238,7 +244,27 @@ def build(out_dir: str | Path | None = None, quiet: bool = False) -> Path:
             exec(f"def stamp():\n    return {stamp}\n", ns)  # noqa: S102 - the source's stamp as a constant
             cc.export(f"stamp_{source}", types.int64())(ns["stamp"])
         cc.compile()
-    return Path(cc.output_dir) / cc._output_file
+    path = Path(cc.output_dir) / cc._output_file
+    _check_loads(path)
+    return path
+
+
+def _check_loads(path: Path) -> None:
+    """Load the built module in a fresh process; remove it and raise RuntimeError if it does not load (a kernel
+    numba could compile but not export: e.g. a recursive one leaves an unresolved symbol, and the whole module
+    would silently be unused)."""
+    import subprocess
+
+    name = MODULE.rpartition(".")[2]
+    code = ("import importlib.machinery as m, importlib.util as u, sys\n"
+            f"loader = m.ExtensionFileLoader({name!r}, sys.argv[1])\n"
+            f"mod = u.module_from_spec(u.spec_from_loader({name!r}, loader))\n"
+            "loader.exec_module(mod)\n")
+    proc = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True)
+    if proc.returncode != 0:
+        path.unlink(missing_ok=True)
+        last = (proc.stderr.strip().splitlines() or ["no message"])[-1]
+        raise RuntimeError(f"the built module does not load ({last}); removed")
 
 
 def main(argv: list[str] | None = None) -> int:

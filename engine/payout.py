@@ -2165,16 +2165,35 @@ class _CyclicKKT:
         self.qo = np.asarray(Qc[idx, (idx + 1) % m]).ravel()
 
     def factor(self, d: FloatArray) -> Callable[[FloatArray], FloatArray]:
+        """The solve of the Newton system Q + Aᵀ·diag(d)·A (its diagonal and off-diagonal by ``np.bincount``)."""
+        m = self.m
+        dg = self.qd + np.bincount(self.j1, d * self.w1 * self.w1, m) + np.bincount(self.j2, d * self.w2 * self.w2, m)
+        off = self.qo + np.bincount(self.iv, np.where(self.pair, d * self.w1 * self.w2, 0.0), m)
+        cb, zu, g, c, denom = self.factor_parts(dg, off)
+        dpbtrs = self._lapack()[1]
+
+        def solve(rhs: FloatArray) -> FloatArray:
+            x = dpbtrs(cb, rhs, lower=1)[0]
+            return x - zu * ((g * x[0] + c * x[-1]) / g / denom)
+
+        return solve
+
+    @staticmethod
+    def _lapack() -> tuple[Any, Any]:
         from engine._lightimport import flapack
 
         # what cholesky_banded / cho_solve_banded call, without their per-call argument checks (~0.15 ms
         # each, 3–4 calls per Newton step) and without importing scipy.linalg
         lp = flapack()
-        dpbtrf, dpbtrs = lp.dpbtrf, lp.dpbtrs
+        return lp.dpbtrf, lp.dpbtrs
 
+    def factor_parts(self, dg: FloatArray, off: FloatArray) -> tuple[Any, FloatArray, Any, Any, Any]:
+        """The banded Cholesky factor of the matrix with diagonal ``dg`` and off-diagonal ``off`` (``off[-1]``
+        the corner entry) less its corner, and the Sherman–Morrison terms ``(cb, zu, g, c, denom)``: a solve is
+        ``x = pbtrs(cb, rhs); x − zu·((g·x₀ + c·x₋₁)/g/denom)``.  Raises LinAlgError where it is not positive
+        definite."""
+        dpbtrf, dpbtrs = self._lapack()
         m = self.m
-        dg = self.qd + np.bincount(self.j1, d * self.w1 * self.w1, m) + np.bincount(self.j2, d * self.w2 * self.w2, m)
-        off = self.qo + np.bincount(self.iv, np.where(self.pair, d * self.w1 * self.w2, 0.0), m)
         c = off[-1]  # M[m-1, 0]
         g = -dg[0]
         ab = np.zeros((2, m))
@@ -2189,12 +2208,7 @@ class _CyclicKKT:
         u[0], u[-1] = g, c
         zu = dpbtrs(cb, u, lower=1)[0]
         denom = 1.0 + (g * zu[0] + c * zu[-1]) / g
-
-        def solve(rhs: FloatArray) -> FloatArray:
-            x = dpbtrs(cb, rhs, lower=1)[0]
-            return x - zu * ((g * x[0] + c * x[-1]) / g / denom)
-
-        return solve
+        return cb, zu, g, c, denom
 
 
 def _vdot(a: FloatArray, b: FloatArray) -> float:
@@ -2220,6 +2234,14 @@ def _ipm_qp(Q: Any, c: FloatArray, A: Any, b: FloatArray, x0: FloatArray, max_it
     z = np.ones(m)
     bscale = 1.0 + float(np.abs(b).max())
     cscale = 1.0 + float(np.abs(c).max())
+    if kkt is not None:
+        from engine.payout_jit import ipm_kernels
+
+        kern = ipm_kernels()
+        if kern is not None and _ipm_fits(Q, c, A, At, b, x, kkt):
+            return _ipm_compiled(kern, Q, np.ascontiguousarray(c, dtype=np.float64), A, At,
+                                 np.ascontiguousarray(b, dtype=np.float64), x, s, z, bscale, cscale, max_iter,
+                                 kkt, state)
     for _ in range(max_iter):
         check_cancel(state)
         Qx, Atz = Q @ x, At @ z
@@ -2263,6 +2285,68 @@ def _ipm_qp(Q: Any, c: FloatArray, A: Any, b: FloatArray, x0: FloatArray, max_it
         s += a * dsl
         z += a * dz
         if not (np.isfinite(x).all() and np.isfinite(z).all()):
+            return None
+    return None
+
+
+def _csr_parts(M: Any) -> tuple[NDArray[np.int64], NDArray[np.int64], FloatArray]:
+    """A compressed sparse matrix's index pointers, indices (int64) and data (float64), C-contiguous."""
+    return (np.ascontiguousarray(M.indptr, dtype=np.int64), np.ascontiguousarray(M.indices, dtype=np.int64),
+            np.ascontiguousarray(M.data, dtype=np.float64))
+
+
+def _ipm_fits(Q: Any, c: Any, A: Any, At: Any, b: Any, x: FloatArray, kkt: _CyclicKKT) -> bool:
+    """Whether :func:`_ipm_compiled` takes these: Q in CSC or CSR, A and Aᵀ in CSR, float64 data, sizes that match."""
+    n, m = x.shape[0], A.shape[0]
+    return (getattr(Q, "format", None) in ("csc", "csr") and getattr(A, "format", None) == "csr"
+            and getattr(At, "format", None) == "csr" and Q.shape == (n, n) and A.shape == (m, n)
+            and kkt.m == n and kkt.j1.shape[0] == m and np.shape(c) == (n,) and np.shape(b) == (m,)
+            and all(M.dtype == np.float64 for M in (Q, A, At)) and n >= 1 and m >= 1)
+
+
+def _ipm_compiled(kern: tuple[Any, ...], Q: Any, c: FloatArray, A: Any, At: Any, b: FloatArray, x: FloatArray,
+                  s: FloatArray, z: FloatArray, bscale: float, cscale: float, max_iter: int, kkt: _CyclicKKT,
+                  state: State | None) -> FloatArray | None:
+    """:func:`_ipm_qp`'s iterations on the cyclic problem by the compiled kernels (engine.payout_jit), the
+    banded Cholesky by LAPACK as before: the same operations in the same order, the same bits."""
+    res_k, fac_k, rhs_k, aff_k, fin_k = kern
+    dpbtrs = kkt._lapack()[1]
+    n, m = x.shape[0], s.shape[0]
+    Qp, Qi, Qd = _csr_parts(Q)
+    qcsc = Q.format == "csc"
+    Ap, Ai, Ad = _csr_parts(A)
+    Tp, Ti, Td = _csr_parts(At)
+    pair = np.ascontiguousarray(kkt.pair, dtype=np.bool_)
+    j1, j2, iv = (np.ascontiguousarray(a, dtype=np.int64) for a in (kkt.j1, kkt.j2, kkt.iv))
+    w1, w2, qd, qo = (np.ascontiguousarray(a, dtype=np.float64) for a in (kkt.w1, kkt.w2, kkt.qd, kkt.qo))
+    Qx, Atz, rd, rhs, dx = (np.empty(n) for _ in range(5))
+    rp, rc, t, dsl, dz = (np.empty(m) for _ in range(5))
+    w = np.empty(max(n, m))
+    dg, off = np.empty(kkt.m), np.empty(kkt.m)
+    info = np.empty(8)
+    for _ in range(max_iter):
+        check_cancel(state)
+        res_k(Qp, Qi, Qd, qcsc, Ap, Ai, Ad, Tp, Ti, Td, x, s, z, c, b, Qx, Atz, rd, rp, w, info)
+        gap = float(info[0])
+        obj = abs(0.5 * float(info[1]) + float(info[2]))
+        dscale = cscale + float(info[3]) + float(info[4])
+        if info[5] <= 1e-9 * bscale and info[6] <= 1e-7 * dscale and gap <= 1e-9 * max(1.0, obj):
+            return x
+        fac_k(s, z, j1, j2, iv, pair, w1, w2, qd, qo, dg, off)
+        try:
+            cb, zu, g, cc, denom = kkt.factor_parts(dg, off)
+        except (RuntimeError, np.linalg.LinAlgError, ValueError):
+            return None
+        zu = np.ascontiguousarray(zu, dtype=np.float64)
+        g, cc, denom = float(g), float(cc), float(denom)
+        rhs_k(Tp, Ti, Td, s, z, rp, rd, dsl, dz, False, 0.0, rc, t, rhs)
+        x1 = np.ascontiguousarray(dpbtrs(cb, rhs, lower=1)[0], dtype=np.float64)
+        aff_k(x1, zu, g, cc, denom, Ap, Ai, Ad, rp, rc, s, z, dx, dsl, dz, w, info)
+        mu_aff = float(info[1]) / m
+        sigma = (mu_aff / (gap / m)) ** 3 if gap > 0 else 0.0
+        rhs_k(Tp, Ti, Td, s, z, rp, rd, dsl, dz, True, sigma * gap / m, rc, t, rhs)
+        x1 = np.ascontiguousarray(dpbtrs(cb, rhs, lower=1)[0], dtype=np.float64)
+        if not fin_k(x1, zu, g, cc, denom, Ap, Ai, Ad, rp, rc, s, z, dx, dsl, dz, x):
             return None
     return None
 

@@ -176,6 +176,222 @@ def _build_tube() -> tuple[Any, Any, Any, Any]:
     return _pre, _post, _step, _newton
 
 
+def _build_ipm() -> tuple[Any, Any, Any, Any, Any]:
+    """numba's kernels ``(res, fac, rhs, aff, fin)`` of :func:`engine.payout._ipm_qp`'s Newton step on the cyclic
+    (15) problem (see :func:`engine.payout._ipm_compiled` for the order they run in).  Sparse products as
+    SciPy's ``csr_matvec``/``csc_matvec`` make them (row by row from 0.0 / column by column), dot products
+    as numpy's pairwise ``add.reduce``, ``bincount`` index by index, maxima and minima propagating NaN as
+    numpy's and Python's ``min`` as Python's: the numpy code's bits."""
+    import math
+
+    import numba
+
+    opts = dict(cache=True, nogil=True, error_model="numpy")
+
+    @numba.njit(inline="always")
+    def _block(a, lo, n):  # pragma: no cover - compiled; numpy's pairwise_sum for n <= 128
+        if n < 8:
+            res = 0.0
+            for i in range(n):
+                res += a[lo + i]
+            return res
+        r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+        r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+        i = 8
+        top = n - (n % 8)
+        while i < top:
+            r0 += a[lo + i]
+            r1 += a[lo + i + 1]
+            r2 += a[lo + i + 2]
+            r3 += a[lo + i + 3]
+            r4 += a[lo + i + 4]
+            r5 += a[lo + i + 5]
+            r6 += a[lo + i + 6]
+            r7 += a[lo + i + 7]
+            i += 8
+        res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+        while i < n:
+            res += a[lo + i]
+            i += 1
+        return res
+
+    @numba.njit
+    def _sum(a):  # pragma: no cover - compiled; numpy.add.reduce(a) for 1-D float64
+        # numpy's pairwise_sum: above 128 entries, the sum of the halves split at n/2 rounded down to a
+        # multiple of 8; its recursion walked with an explicit stack (ahead-of-time code cannot recurse)
+        n = a.shape[0]
+        if n <= 128:
+            return 0.0 + _block(a, 0, n)   # (numpy adds the sum to its identity, +0.0: -0.0 sums to +0.0)
+        los = np.empty(64, np.int64)
+        ns = np.empty(64, np.int64)
+        stage = np.empty(64, np.int64)
+        left = np.empty(64)
+        sp = 0
+        los[0], ns[0], stage[0] = 0, n, 0
+        ret = 0.0
+        have = False
+        while True:
+            if have:
+                if sp < 0:
+                    return 0.0 + ret
+                if stage[sp] == 1:       # its first half summed: keep it, sum the second
+                    left[sp] = ret
+                    stage[sp] = 2
+                    h = ns[sp] // 2
+                    h -= h % 8
+                    los[sp + 1], ns[sp + 1], stage[sp + 1] = los[sp] + h, ns[sp] - h, 0
+                    sp += 1
+                    have = False
+                else:                    # both halves summed
+                    ret = left[sp] + ret
+                    sp -= 1
+                continue
+            k = ns[sp]
+            if k <= 128:
+                ret = _block(a, los[sp], k)
+                sp -= 1
+                have = True
+            else:
+                h = k // 2
+                h -= h % 8
+                stage[sp] = 1
+                los[sp + 1], ns[sp + 1], stage[sp + 1] = los[sp], h, 0
+                sp += 1
+
+    @numba.njit(inline="always")
+    def _csr(p, ix, d, v, out):  # pragma: no cover - compiled; scipy's csr_matvec into zeros
+        for i in range(p.shape[0] - 1):
+            acc = 0.0
+            for jj in range(p[i], p[i + 1]):
+                acc += d[jj] * v[ix[jj]]
+            out[i] = acc
+
+    @numba.njit(inline="always")
+    def _csc(p, ix, d, v, out):  # pragma: no cover - compiled; scipy's csc_matvec into zeros
+        out[:] = 0.0
+        for j in range(p.shape[0] - 1):
+            for ii in range(p[j], p[j + 1]):
+                out[ix[ii]] += d[ii] * v[j]
+
+    @numba.njit(inline="always")
+    def _absmax(a):  # pragma: no cover - compiled; numpy.abs(a).max() (NaN if any)
+        m = abs(a[0])
+        for i in range(1, a.shape[0]):
+            v = abs(a[i])
+            if v != v or m != m:
+                m = np.nan
+            elif v > m:
+                m = v
+        return m
+
+    @numba.njit(inline="always")
+    def _step(v, dv):  # pragma: no cover - compiled; min(1.0, float(np.where(dv < 0, -v/dv, inf).min()))
+        r = np.inf
+        for i in range(v.shape[0]):
+            q = -v[i] / dv[i] if dv[i] < 0 else np.inf
+            if q != q or r != r:
+                r = np.nan
+            elif q < r:
+                r = q
+        return r if r < 1.0 else 1.0   # Python's min(1.0, r): 1.0 unless r < 1.0 (NaN too)
+
+    @numba.njit(inline="always")
+    def _pymin(a, b):  # pragma: no cover - compiled; Python's min(a, b)
+        return b if b < a else a
+
+    @numba.njit(**opts)
+    def _res(Qp, Qi, Qd, qcsc, Ap, Ai, Ad, Tp, Ti, Td, x, s, z, c, b, Qx, Atz, rd, rp, w, info):
+        # pragma: no cover - compiled
+        if qcsc:
+            _csc(Qp, Qi, Qd, x, Qx)
+        else:
+            _csr(Qp, Qi, Qd, x, Qx)
+        _csr(Tp, Ti, Td, z, Atz)
+        for i in range(x.shape[0]):
+            rd[i] = (Qx[i] + c[i]) - Atz[i]
+        _csr(Ap, Ai, Ad, x, rp)
+        for i in range(s.shape[0]):
+            rp[i] = (rp[i] - s[i]) - b[i]
+        for i in range(s.shape[0]):
+            w[i] = s[i] * z[i]
+        info[0] = _sum(w)
+        for i in range(x.shape[0]):
+            w[i] = x[i] * Qx[i]
+        info[1] = _sum(w[:x.shape[0]])
+        for i in range(x.shape[0]):
+            w[i] = c[i] * x[i]
+        info[2] = _sum(w[:x.shape[0]])
+        info[3] = _absmax(Qx)
+        info[4] = _absmax(Atz)
+        info[5] = _absmax(rp)
+        info[6] = _absmax(rd)
+        return 0
+
+    @numba.njit(**opts)
+    def _fac(s, z, j1, j2, iv, pair, w1, w2, qd, qo, dg, off):  # pragma: no cover - compiled
+        m = qd.shape[0]
+        b1 = np.zeros(m)
+        b2 = np.zeros(m)
+        b3 = np.zeros(m)
+        for k in range(s.shape[0]):
+            d = z[k] / s[k]
+            b1[j1[k]] += (d * w1[k]) * w1[k]
+            b2[j2[k]] += (d * w2[k]) * w2[k]
+            b3[iv[k]] += (d * w1[k]) * w2[k] if pair[k] else 0.0
+        for i in range(m):
+            dg[i] = (qd[i] + b1[i]) + b2[i]
+            off[i] = qo[i] + b3[i]
+        return 0
+
+    @numba.njit(**opts)
+    def _rhs(Tp, Ti, Td, s, z, rp, rd, dsl, dz, second, kconst, rc, t, rhs):  # pragma: no cover - compiled
+        for i in range(s.shape[0]):
+            v = -s[i] * z[i]
+            rc[i] = (v - dsl[i] * dz[i]) + kconst if second else v
+            t[i] = (rc[i] - z[i] * rp[i]) / s[i]
+        _csr(Tp, Ti, Td, t, rhs)
+        for i in range(rhs.shape[0]):
+            rhs[i] = -rd[i] + rhs[i]
+        return 0
+
+    @numba.njit(inline="always")
+    def _newton_dir(x1, zu, g, c, denom, Ap, Ai, Ad, rp, rc, s, z, dx, dsl, dz):  # pragma: no cover - compiled
+        fac = ((g * x1[0] + c * x1[x1.shape[0] - 1]) / g) / denom
+        for i in range(x1.shape[0]):
+            dx[i] = x1[i] - zu[i] * fac
+        _csr(Ap, Ai, Ad, dx, dsl)
+        for i in range(s.shape[0]):
+            dsl[i] = dsl[i] + rp[i]
+            dz[i] = (rc[i] - z[i] * dsl[i]) / s[i]
+
+    @numba.njit(**opts)
+    def _aff(x1, zu, g, c, denom, Ap, Ai, Ad, rp, rc, s, z, dx, dsl, dz, w, info):  # pragma: no cover - compiled
+        _newton_dir(x1, zu, g, c, denom, Ap, Ai, Ad, rp, rc, s, z, dx, dsl, dz)
+        a = _pymin(_step(s, dsl), _step(z, dz))
+        for i in range(s.shape[0]):
+            w[i] = (s[i] + a * dsl[i]) * (z[i] + a * dz[i])
+        info[0] = a
+        info[1] = _sum(w)
+        return 0
+
+    @numba.njit(**opts)
+    def _fin(x1, zu, g, c, denom, Ap, Ai, Ad, rp, rc, s, z, dx, dsl, dz, x):  # pragma: no cover - compiled
+        _newton_dir(x1, zu, g, c, denom, Ap, Ai, Ad, rp, rc, s, z, dx, dsl, dz)
+        a = 0.995 * _pymin(_step(s, dsl), _step(z, dz))
+        a = a if a < 1.0 else 1.0   # Python's min(1.0, a)
+        ok = True
+        for i in range(x.shape[0]):
+            x[i] = x[i] + a * dx[i]
+            ok = ok and math.isfinite(x[i])
+        for i in range(s.shape[0]):
+            s[i] = s[i] + a * dsl[i]
+            z[i] = z[i] + a * dz[i]
+            ok = ok and math.isfinite(z[i])
+        return 1 if ok else 0
+
+    return _res, _fac, _rhs, _aff, _fin
+
+
 def kernels() -> tuple[Any, Any, Any, Any] | None:
     """The ahead-of-time kernels ``(pre, post, step, newton)`` without their argument checks (the callers in
     :class:`engine.payout._Tube` pass arrays they made: C-contiguous float64, int64 indices), or None where
@@ -192,3 +408,20 @@ def kernels() -> tuple[Any, Any, Any, Any] | None:
 
 
 _KERNELS: list[Any] = []
+
+
+def ipm_kernels() -> tuple[Any, Any, Any, Any, Any] | None:
+    """The ahead-of-time kernels ``(res, fac, rhs, aff, fin)`` of the (15) interior point without their argument
+    checks (:func:`engine.payout._ipm_compiled` passes arrays it made), or None where they do not run."""
+    if _IPM:
+        return _IPM[0]
+    from engine import aot
+
+    got = aot.load()
+    names = ("ipm_res", "ipm_fac", "ipm_rhs", "ipm_aff", "ipm_fin")
+    out = tuple(got[n].fn for n in names) if all(n in got for n in names) else None
+    _IPM.append(out)
+    return out
+
+
+_IPM: list[Any] = []

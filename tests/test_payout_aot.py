@@ -17,19 +17,20 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _require_kernels() -> None:
-    if payout_jit.kernels() is None:
+    if payout_jit.kernels() is None or payout_jit.ipm_kernels() is None:
         pytest.fail("engine._aot_kernels is not built from this source: run `make venv` (python -m engine.aot)")
 
 
 @pytest.fixture
 def numpy_only(monkeypatch: pytest.MonkeyPatch):  # noqa: ANN201
-    """A switch: inside ``with numpy_only():`` new _Tube objects run the numpy code."""
+    """A switch: inside ``with numpy_only():`` new _Tube objects and the (15) interior point run the numpy code."""
     import contextlib
 
     @contextlib.contextmanager
     def switch():  # noqa: ANN202
         with monkeypatch.context() as m:
             m.setattr(payout_jit, "_KERNELS", [None])
+            m.setattr(payout_jit, "_IPM", [None])
             yield
 
     return switch
@@ -147,3 +148,58 @@ def test_the_kernels_run_without_numba() -> None:
             "print('ok')\n")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert proc.returncode == 0 and proc.stdout.split() == ["ok"], proc.stderr
+
+
+def test_the_kernels_sums_are_numpys_pairwise_sums() -> None:
+    """The interior point's dot products (its gap, the affine step's centring) are numpy's pairwise
+    ``add.reduce``: the kernel's sum against numpy on every size up to 600 and long arrays (several levels
+    of numpy's halving), signed zeros, NaN and infinities included."""
+    import scipy.sparse as sp
+
+    _require_kernels()
+    res_k = payout_jit.ipm_kernels()[0]
+    rng = np.random.default_rng(2)
+    Q = sp.csc_matrix(sp.identity(2))
+    sizes = list(range(1, 600)) + [int(k) for k in rng.integers(600, 300_000, 40)]
+    specials = [np.full(9, -0.0), np.full(3, -0.0), np.array([np.nan, 1.0] * 80), np.array([np.inf, -np.inf, 1.0])]
+    for a in [rng.standard_normal(n) * 10 ** rng.uniform(-4, 4, n) for n in sizes] + specials:
+        m = a.size
+        A = sp.csr_matrix((np.ones(m), (np.arange(m), np.arange(m) % 2)), shape=(m, 2))
+        At = A.T.tocsr()
+        parts = [np.ascontiguousarray(v, dtype=t) for M in (Q, A, At) for v, t in
+                 ((M.indptr, np.int64), (M.indices, np.int64), (M.data, np.float64))]
+        info = np.empty(8)
+        with np.errstate(all="ignore"):
+            res_k(*parts[:3], True, *parts[3:], np.zeros(2), np.ascontiguousarray(a), np.ones(m), np.zeros(2),
+                  np.zeros(m), np.empty(2), np.empty(2), np.empty(2), np.empty(m), np.empty(max(m, 2)), info)
+            want = np.add.reduce(a * np.ones(m))
+        assert info[0] == want or (np.isnan(info[0]) and np.isnan(want)), m
+        assert np.signbit(info[0]) == np.signbit(want), m
+
+
+@pytest.mark.parametrize("name", ["pipe", "pressure_vessel", "bottle"])
+def test_interior_point_compiled_is_numpy_bit_for_bit(name: str, numpy_only, monkeypatch) -> None:  # noqa: ANN001
+    """Every (15) QP the law solves, by the compiled Newton steps and by the numpy code: the same iterate
+    bit for bit (or both None), on the examples' refined grids."""
+    _require_kernels()
+    job, mandrel, line = _example(name)
+    calls: list[tuple] = []
+    real = payout._ipm_qp
+
+    def record(Q, c, A, b, x0, max_iter=100, kkt=None, state=None):  # noqa: ANN001, ANN202
+        got = real(Q, c, A, b, x0, max_iter, kkt, state)
+        calls.append((Q, c, A, b, x0.copy(), max_iter, kkt, got))
+        return got
+
+    compiled = []
+    real_compiled = payout._ipm_compiled
+    monkeypatch.setattr(payout, "_ipm_qp", record)
+    monkeypatch.setattr(payout, "_ipm_compiled", lambda *a: compiled.append(1) or real_compiled(*a))
+    payout.min_range_law(line, mandrel, job.payout)
+    assert calls and len(compiled) == sum(k is not None for *_r, k, _g in calls) > 0   # the kernels ran
+    with numpy_only():
+        for Q, c, A, b, x0, max_iter, kkt, got in calls:
+            want = real(Q, c, A, b, x0, max_iter, kkt)
+            assert (got is None) == (want is None)
+            if got is not None:
+                assert np.array_equal(got, want)

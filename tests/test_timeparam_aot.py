@@ -175,3 +175,17 @@ def test_kernels_of_a_changed_source_or_switched_off_are_not_used(monkeypatch: p
         with monkeypatch.context() as m:
             m.setenv(var, "0")
             assert aot_mod.load() == {}
+
+
+def test_a_built_module_that_does_not_load_is_refused(tmp_path: Path) -> None:
+    """The build loads what it built in a fresh process: a module that does not load (a kernel numba could
+    compile but not export leaves an unresolved symbol) is removed and the build fails, rather than every
+    run silently going without its kernels."""
+    bad = tmp_path / "_aot_kernels.cpython-311-x86_64-linux-gnu.so"
+    bad.write_bytes(b"\x7fELF not really a shared object")
+    with pytest.raises(RuntimeError, match="does not load"):
+        aot_mod._check_loads(bad)
+    assert not bad.exists()
+    good = next(Path(aot_mod.__file__).parent.glob("_aot_kernels*.so"))
+    aot_mod._check_loads(good)   # the real one loads
+    assert good.exists()
