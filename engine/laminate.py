@@ -1011,7 +1011,7 @@ def run_laminate(
         t1 = time.perf_counter()
         laid = [lr for lr in results if lr.result is not None and lr.result.machine is not None]
         machine = laid[0].result.machine if laid else load_machine_for_job(job, jp)
-        res = _join(res, machine, sched.prebuilt if sched is not None else None)
+        res = _join(res, machine, sched.prebuilt if sched is not None else None, side=parallel and pool is None)
         times["nc"] = times.get("nc", 0.0) + time.perf_counter() - t1
     _reap_exited()
     times["total"] = time.perf_counter() - t0
@@ -1507,6 +1507,101 @@ def _answer_folders() -> list[str]:
     return out + ([tmp] if tmp not in out else [])
 
 
+class _ForkedCall:
+    """A function running in a forked process (:func:`_fork_call`); :meth:`result` waits for its answer."""
+
+    def __init__(self, pid: int, fd: int) -> None:
+        self.pid, self.fd = pid, fd
+        self.done = False
+
+    def result(self) -> Any:
+        """The function's value, or None where it raised or the process died (the caller computes it itself)."""
+        import os
+        import pickle
+
+        chunks = []
+        try:
+            while True:
+                got = os.read(self.fd, 1 << 20)
+                if not got:
+                    break
+                chunks.append(got)
+        finally:
+            self.close()
+        try:
+            kind, value = pickle.loads(b"".join(chunks))
+        except Exception:  # noqa: BLE001 - nothing or a partial answer: it died
+            return None
+        return value if kind == "ok" else None
+
+    def close(self) -> None:
+        """Stop the process if it still runs, reap it and close the pipe (idempotent)."""
+        import os
+        import signal
+
+        if self.done:
+            return
+        self.done = True
+        try:
+            os.kill(self.pid, signal.SIGKILL)
+        except OSError:
+            pass
+        try:
+            os.waitpid(self.pid, 0)
+        except ChildProcessError:
+            pass
+        try:
+            os.close(self.fd)
+        except OSError:
+            pass
+
+
+def _fork_call(fn: Callable[[], Any]) -> _ForkedCall | None:
+    """Run ``fn()`` in a forked process that sends its value back pickled through a pipe; None where forking
+    is not possible here (another thread runs, no fork) or the system refuses it.  The process ignores
+    Ctrl-C and dies with this one; an exception in it is not sent (the caller then runs ``fn`` itself and
+    meets it there, as without the fork)."""
+    import os
+    import pickle
+    import signal
+
+    if not _can_fork():
+        return None
+    r, w = os.pipe()
+    parent = os.getpid()
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+    try:
+        try:
+            pid = os.fork()
+        except OSError:
+            os.close(r)
+            os.close(w)
+            return None
+        if pid == 0:  # the child: never returns into the caller's code
+            code = 1
+            try:
+                signal.signal(signal.SIGINT, signal.SIG_IGN)
+                signal.signal(signal.SIGTERM, signal.SIG_DFL)
+                _die_with_parent()
+                if os.getppid() == parent:
+                    signal.pthread_sigmask(signal.SIG_SETMASK, old)
+                    os.close(r)
+                    try:
+                        data = pickle.dumps(("ok", fn()), protocol=pickle.HIGHEST_PROTOCOL)
+                    except BaseException:  # noqa: BLE001 - the caller runs fn itself and meets it
+                        data = pickle.dumps(("failed", None))
+                    view = memoryview(data)
+                    while view:
+                        view = view[os.write(w, view):]
+                    code = 0
+            finally:
+                os._exit(code)
+        os.close(w)
+        return _ForkedCall(pid, r)
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
 def _die_with_parent() -> None:
     """Linux: this (child) process gets SIGKILL when its parent dies, whatever kills the parent (best
     effort: elsewhere the parent's cleanup and :func:`_remove_stale_files` must do)."""
@@ -1875,9 +1970,12 @@ def _sorted(x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
     return x[o], y[o]
 
 
-def _join(res: LaminateResult, machine: Any, fns: dict[int, tuple[Any, Any]] | None = None) -> LaminateResult:
+def _join(res: LaminateResult, machine: Any, fns: dict[int, tuple[Any, Any]] | None = None,
+          side: bool = False) -> LaminateResult:
     """Join the layers' blocks with transition moves into one program and render it (``fns``: the laminate
-    surfaces' distance functions already built, see :func:`transition_clearance`)."""
+    surfaces' distance functions already built, see :func:`transition_clearance`).  ``side``: the
+    transitions' clearance may be checked in a forked process while this one renders the NC text (a
+    command line's run whose layers ran side by side; the same answer, see :func:`_fork_call`)."""
     from engine.blocks import Blocks
     from engine.machine_setup import controller_for
     from engine.post import get_post
@@ -1959,10 +2057,24 @@ def _join(res: LaminateResult, machine: Any, fns: dict[int, tuple[Any, Any]] | N
     # the profile that addresses the machine's axes (e.g. linuxcnc_robot for the robot cell's E1, J1..J6),
     # as the single-line NC stage chooses it
     profile = controller_for(post.name, job.post.controller, machine)
-    text = post.render(blocks, machine, profile)
+    setup = job.machine.setup
+    helper = None
+    import functools
+
+    if side and setup is not None and any(n >= 1 for _b, n, _t in transitions):
+        # the transitions' clearance (its branch and bound over the free fibre's tail is most of the join)
+        # in a forked process while this one renders the text: the join's two halves on two cores
+        helper = _fork_call(functools.partial(_transition_clearance_with_depths, machine, blocks, new_layers,
+                                              transitions, res.mandrel, setup, fns))
+    try:
+        text = post.render(blocks, machine, profile)
+        clearance = helper.result() if helper is not None else None
+    finally:
+        if helper is not None:
+            helper.close()
     over: list[float] = []
     problems = _joined_problems(machine, blocks, text, new_layers, transitions, placement, res.mandrel,
-                                job.machine.setup, depths=over, fns=fns)
+                                setup, depths=over, fns=fns, clearance=clearance)
     return replace(res, layers=tuple(new_layers), machine=machine, blocks=blocks, nc_text=text,
                    post_name=post.name, extension=post.extension, transitions=tuple(transitions),
                    transition_fibre_over_mm=tuple(over),
@@ -2142,14 +2254,24 @@ def prebuild_distance(surface: Any, fns: dict[int, tuple[Any, Any]]) -> None:
         fns[id(surface)] = (surface, mandrel_distance_fn(surface))
 
 
+def _transition_clearance_with_depths(machine: Any, blocks: Any, layers: list[LayerResult],
+                                      transitions: list[tuple[int, int, float]], bare: Any, setup: Any,
+                                      fns: dict[int, tuple[Any, Any]] | None) -> tuple[list[Any], list[float]]:
+    """:func:`transition_clearance` and its depths, as one answer (for :func:`_fork_call`)."""
+    depths: list[float] = []
+    return transition_clearance(machine, blocks, layers, transitions, bare, setup, depths=depths, fns=fns), depths
+
+
 def _joined_problems(machine: Any, blocks: Any, text: str, layers: list[LayerResult],
                      transitions: list[tuple[int, int, float]], placement: Any, bare: Any = None,
                      setup: Any = None, depths: list[float] | None = None,
-                     fns: dict[int, tuple[Any, Any]] | None = None) -> list[str]:
+                     fns: dict[int, tuple[Any, Any]] | None = None,
+                     clearance: tuple[list[Any], list[float]] | None = None) -> list[str]:
     """What the joined program breaks beyond the layers' own checks: every block of it (the layers' speed
     ramps, the transitions, the common placement) against every position, speed and speed-jump limit,
     the eye's clearance along the transitions (with ``bare`` and ``setup``), grouped and located by NC line,
-    time and layer or transition; a placement that does not fit says which would."""
+    time and layer or transition; a placement that does not fit says which would.  ``clearance``: the
+    answer of :func:`_transition_clearance_with_depths` already made (its depths go to ``depths``)."""
     from engine.blocks import check_blocks
     from engine.machine_setup import group_violations
 
@@ -2157,7 +2279,13 @@ def _joined_problems(machine: Any, blocks: Any, text: str, layers: list[LayerRes
            if v.kind != "position"}
     viol = [v for v in check_blocks(machine, blocks) if v.kind == "position" or (v.kind, v.axis) not in own]
     if bare is not None and setup is not None:
-        viol += transition_clearance(machine, blocks, layers, transitions, bare, setup, depths=depths, fns=fns)
+        if clearance is not None:
+            viol += clearance[0]
+            if depths is not None:
+                depths.extend(clearance[1])
+        else:
+            viol += transition_clearance(machine, blocks, layers, transitions, bare, setup, depths=depths,
+                                         fns=fns)
     out: list[str] = []
     if placement is not None and not placement.fits:
         out.append(placement.message())

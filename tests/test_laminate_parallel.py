@@ -101,10 +101,51 @@ def test_same_program_report_and_arrays_with_any_number_of_processes(layup, work
             assert lr.result.mandrel is lr.surface
 
 
-def test_the_example_vessel_byte_for_byte() -> None:
+def test_the_example_vessel_byte_for_byte(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The vessel side by side: its program, report (transition clearance and tail depths included) and
+    arrays those of one process; the join checked its transitions in a forked process meanwhile."""
     path = EXAMPLES / "pressure_vessel.toml"
     job = load_job(path)
-    assert lam.run_laminate(job, path, workers=2).nc_text == lam.run_laminate(job, path, workers=1).nc_text
+    forks = []
+    real = lam._fork_call
+    monkeypatch.setattr(lam, "_fork_call", lambda fn: forks.append(fn) or real(fn))
+    many = lam.run_laminate(job, path, workers=2)
+    assert len(forks) == 1
+    one = lam.run_laminate(job, path, workers=1)
+    assert len(forks) == 1                       # one process: no fork in the join either
+    _same_result(one, many)
+    assert many.transition_fibre_over_mm == one.transition_fibre_over_mm and any(many.transition_fibre_over_mm)
+
+
+def test_fork_call_answers_or_says_none() -> None:
+    """A forked call's value comes back; where the call raises or the process dies the answer is None (the
+    caller computes it itself); with another thread running nothing is forked; close() stops a process
+    still running and reaps it."""
+    import os
+    import signal
+    import threading
+    import time
+
+    big = np.arange(300_000, dtype=float)        # more than a pipe holds: the answer is read while written
+    call = lam._fork_call(lambda: (big * 2.0, "text"))
+    got = call.result()
+    assert np.array_equal(got[0], big * 2.0) and got[1] == "text"
+    assert lam._fork_call(lambda: 1 / 0).result() is None
+    assert lam._fork_call(lambda: os.kill(os.getpid(), signal.SIGKILL)).result() is None
+    slow = lam._fork_call(lambda: time.sleep(30))
+    t0 = time.perf_counter()
+    slow.close()
+    assert time.perf_counter() - t0 < 5.0
+    with pytest.raises(ChildProcessError):
+        os.waitpid(slow.pid, os.WNOHANG)
+    stop = threading.Event()
+    th = threading.Thread(target=stop.wait)
+    th.start()
+    try:
+        assert lam._fork_call(lambda: 1) is None
+    finally:
+        stop.set()
+        th.join()
 
 
 def _run_here_log(job, workers: int, monkeypatch: pytest.MonkeyPatch) -> tuple:  # noqa: ANN001
@@ -550,10 +591,10 @@ def test_the_joins_distances_are_built_while_the_layers_run(layup, monkeypatch: 
             during_join.append(id(surface))
         return orig_fn(surface, *a, **k)
 
-    def join(res, machine, fns=None):  # noqa: ANN001, ANN202
+    def join(res, machine, fns=None, side=False):  # noqa: ANN001, ANN202
         given.append(dict(fns or {}))
         joining.append(True)
-        return orig_join(res, machine, fns)
+        return orig_join(res, machine, fns, side=side)
 
     monkeypatch.setattr(ms, "mandrel_distance_fn", counting)
     monkeypatch.setattr(lam, "_join", join)

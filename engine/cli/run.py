@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from typing import Any
 
 from engine.errors import InfeasibleError
 
@@ -56,7 +57,9 @@ def run(args: argparse.Namespace) -> int:
         result = run_laminate(job, args.job, post_name=args.post, state=CliState(quiet=args.quiet),
                               workers=args.jobs if args.jobs is not None else default_workers())
         write = write_laminate
-    report = result.report()
+    # the report is made only where it is read (a --report file, the summary printed without --quiet):
+    # ~0.02 s on the example vessel, after its last layer
+    report: dict[str, Any] = result.report() if (args.report or not args.quiet) else {}
     report["output"] = str(out)
     rc = 0
     try:
