@@ -72,6 +72,8 @@ KERNELS: dict[str, tuple[str, str, int | None, tuple[str, ...]]] = {
     "tube_post": ("payout_jit", "_build_tube", 1, ("f8:2", "f8:1", "f8:1", "i8:1", "b1", "b1", "f8:1")),
     "tube_step": ("payout_jit", "_build_tube", 2, ("f8:1",) * 7 + ("f8", "f8") + ("f8:1",) * 5),
     "tube_newton": ("payout_jit", "_build_tube", 3, ("f8:1",) * 9 + ("f8", "f8", "f8:1", "f8:1")),
+    "tube_edge_mid": ("payout_jit", "_build_edge", 0, ("f8:1",) * 4 + ("i8", "f8", "f8:1")),
+    "tube_edge_upd": ("payout_jit", "_build_edge", 1, ("f8:1",) * 8),
     "ipm_res": ("payout_jit", "_build_ipm", 0, ("i8:1", "i8:1", "f8:1", "b1") + ("i8:1", "i8:1", "f8:1") * 2
                 + ("f8:1",) * 11),
     "ipm_fac": ("payout_jit", "_build_ipm", 1, ("f8:1", "f8:1", "i8:1", "i8:1", "i8:1", "b1:1") + ("f8:1",) * 6),

@@ -1723,6 +1723,9 @@ class _Tube:
         fa = self.g(a, idx) - a - B
         fb = self.g(b, idx) - b - B
         last = np.zeros(a.size)  # +1: b moved last step, −1: a moved
+        if self._G is not None and all(type(v) is np.ndarray and v.dtype == np.float64 and v.ndim == 1
+                                       and v.flags.c_contiguous and v.shape == a.shape for v in (a, b, fa, fb, B)):
+            return self._edge_compiled(idx, a.copy(), b.copy(), fa, fb, B, tol, last)
         for it in range(200):
             w = b - a
             if w.max() <= tol:
@@ -1736,6 +1739,18 @@ class _Tube:
             fb = np.where(~bad & (last < 0), 0.5 * fb, np.where(bad, fm, fb))
             a, b = np.where(bad, a, m), np.where(bad, m, b)
             last = np.where(bad, 1.0, -1.0)
+        return a
+
+    def _edge_compiled(self, idx: NDArray[np.int64], a: FloatArray, b: FloatArray, fa: FloatArray, fb: FloatArray,
+                       B: FloatArray, tol: float, last: FloatArray) -> FloatArray:
+        """:meth:`_edge`'s steps by the compiled kernels (engine.payout_jit), g by :meth:`g`: the same bits."""
+        mid, upd = self._kern[4], self._kern[5]
+        for it in range(200):
+            m = np.empty(a.size)
+            if mid(a, b, fa, fb, it, float(tol), m):
+                break
+            gm = self.g(m, idx)
+            upd(a, b, fa, fb, last, m, np.ascontiguousarray(gm, dtype=np.float64), B)
         return a
 
     # propagation ------------------------------------------------------------------------------

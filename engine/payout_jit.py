@@ -176,6 +176,62 @@ def _build_tube() -> tuple[Any, Any, Any, Any]:
     return _pre, _post, _step, _newton
 
 
+def _build_edge() -> tuple[Any, Any]:
+    """numba's kernels ``(mid, upd)`` of :meth:`engine.payout._Tube._edge`'s Illinois steps: ``mid`` the next
+    trial points (1 where every bracket is already narrow enough), ``upd`` the brackets after g there; numpy's
+    operations element by element (its ``clip``, ``where``, NaN-propagating ``max``)."""
+    import math
+
+    import numba
+
+    opts = dict(cache=True, nogil=True, error_model="numpy")
+
+    @numba.njit(**opts)
+    def _mid(a, b, fa, fb, it, tol, m):  # pragma: no cover - compiled
+        n = a.shape[0]
+        wmax = -np.inf
+        for i in range(n):
+            w = b[i] - a[i]
+            if w != w or wmax != wmax:
+                wmax = np.nan
+            elif w > wmax:
+                wmax = w
+        if wmax <= tol:
+            return 1
+        side = it % 3 != 2
+        for i in range(n):
+            w = b[i] - a[i]
+            v = a[i] - fa[i] * w / (fb[i] - fa[i])
+            if math.isfinite(v) and side:
+                lo = a[i] + 0.25 * tol
+                hi = b[i] - 0.25 * tol
+                v = v if (v != v or v > lo) else lo      # numpy.clip's min(max(v, lo), hi), NaN kept
+                v = v if (v != v or v < hi) else hi
+                m[i] = v
+            else:
+                m[i] = 0.5 * (a[i] + b[i])
+        return 0
+
+    @numba.njit(**opts)
+    def _upd(a, b, fa, fb, last, m, gm, B):  # pragma: no cover - compiled
+        for i in range(a.shape[0]):
+            fm = (gm[i] - m[i]) - B[i]
+            bad = fm > 0
+            if bad:
+                fa[i] = 0.5 * fa[i] if last[i] > 0 else fa[i]
+                fb[i] = fm
+                b[i] = m[i]
+                last[i] = 1.0
+            else:
+                fa[i] = fm
+                fb[i] = 0.5 * fb[i] if last[i] < 0 else fb[i]
+                a[i] = m[i]
+                last[i] = -1.0
+        return 0
+
+    return _mid, _upd
+
+
 def _build_ipm() -> tuple[Any, Any, Any, Any, Any]:
     """numba's kernels ``(res, fac, rhs, aff, fin)`` of :func:`engine.payout._ipm_qp`'s Newton step on the cyclic
     (15) problem (see :func:`engine.payout._ipm_compiled` for the order they run in).  Sparse products as
@@ -392,16 +448,16 @@ def _build_ipm() -> tuple[Any, Any, Any, Any, Any]:
     return _res, _fac, _rhs, _aff, _fin
 
 
-def kernels() -> tuple[Any, Any, Any, Any] | None:
-    """The ahead-of-time kernels ``(pre, post, step, newton)`` without their argument checks (the callers in
-    :class:`engine.payout._Tube` pass arrays they made: C-contiguous float64, int64 indices), or None where
-    they do not run (not built, stale, switched off): the numpy code runs."""
+def kernels() -> tuple[Any, ...] | None:
+    """The ahead-of-time kernels ``(pre, post, step, newton, edge_mid, edge_upd)`` without their argument checks
+    (the callers in :class:`engine.payout._Tube` pass arrays they made: C-contiguous float64, int64 indices),
+    or None where they do not run (not built, stale, switched off): the numpy code runs."""
     if _KERNELS:
         return _KERNELS[0]
     from engine import aot
 
     got = aot.load()
-    names = ("tube_pre", "tube_post", "tube_step", "tube_newton")
+    names = ("tube_pre", "tube_post", "tube_step", "tube_newton", "tube_edge_mid", "tube_edge_upd")
     out = tuple(got[n].fn for n in names) if all(n in got for n in names) else None
     _KERNELS.append(out)
     return out

@@ -203,3 +203,30 @@ def test_interior_point_compiled_is_numpy_bit_for_bit(name: str, numpy_only, mon
             assert (got is None) == (want is None)
             if got is not None:
                 assert np.array_equal(got, want)
+
+
+@pytest.mark.parametrize("name", ["pipe", "pressure_vessel", "bottle"])
+def test_implied_bounds_compiled_are_numpy_bit_for_bit(name: str, numpy_only, monkeypatch) -> None:  # noqa: ANN001
+    """The implied upper bounds (their Illinois searches for the edge g(μ) − μ = B) on random pull-speed
+    caps: the compiled steps and the numpy code give the same bounds bit for bit (or both none)."""
+    _require_kernels()
+    job, mandrel, line = _example(name)
+    geo, env, _ = payout._prepare(line, mandrel, job.payout, job.payout.parameter, 300, None, None)
+    prob = payout._Problem(geo, env, 1)
+    fast = payout._Tube(prob)
+    with numpy_only():
+        slow = payout._Tube(prob)
+    edges = []
+    real = payout._Tube._edge_compiled
+    monkeypatch.setattr(payout._Tube, "_edge_compiled", lambda self, *a: edges.append(1) or real(self, *a))
+    u = prob.u(prob.mu_lo)
+    rng = np.random.default_rng(8)
+    with np.errstate(all="ignore"):
+        for _ in range(40):
+            T = float(np.quantile(u[np.isfinite(u)], rng.uniform(0.0, 1.0))) * rng.uniform(0.2, 2.0)
+            _A, B = fast._steps(None, T)
+            a, b = fast.implied_hi(B.copy()), slow.implied_hi(B.copy())
+            assert (a is None) == (b is None)
+            if a is not None:
+                assert np.array_equal(a, b)
+    assert len(edges) >= 2   # (the searches ran)
