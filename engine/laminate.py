@@ -2061,14 +2061,22 @@ def _join(res: LaminateResult, machine: Any, fns: dict[int, tuple[Any, Any]] | N
     helper = None
     import functools
 
+    first = set(range((len(transitions) + 1) // 2))
     if side and setup is not None and any(n >= 1 for _b, n, _t in transitions):
-        # the transitions' clearance (its branch and bound over the free fibre's tail is most of the join)
-        # in a forked process while this one renders the text: the join's two halves on two cores
-        helper = _fork_call(functools.partial(_transition_clearance_with_depths, machine, blocks, new_layers,
-                                              transitions, res.mandrel, setup, fns))
+        # the transitions' clearance (its branch and bound over the free fibre's tail is most of the join):
+        # the first half of them in a forked process while this one renders the text, then the rest
+        helper = _fork_call(functools.partial(_transition_raw, machine, blocks, new_layers, transitions,
+                                              res.mandrel, setup, True, fns, first))
+    clearance = None
     try:
         text = post.render(blocks, machine, profile)
-        clearance = helper.result() if helper is not None else None
+        if helper is not None:
+            rest = _transition_raw(machine, blocks, new_layers, transitions, res.mandrel, setup, True, fns,
+                                   set(range(len(transitions))) - first)
+            part = helper.result()
+            if part is not None:
+                both = part.merged(rest)
+                clearance = (both.violations(), [float(d) for d in both.depths])
     finally:
         if helper is not None:
             helper.close()
@@ -2172,7 +2180,54 @@ def transition_clearance(machine: Any, blocks: Any, layers: list[LayerResult],
     ``fns`` (optional): the surfaces' distance functions, ``{id(surface): (surface, mandrel_distance_fn(surface))}``,
     as :func:`prebuild_distance` makes them (the laminate run builds them while it waits for its layers);
     the missing ones are built here and added to it."""
-    from engine.kinematics import forward_kinematics, violations_from_mask
+    raw = _transition_raw(machine, blocks, layers, transitions, bare, setup, depths is not None, fns)
+    if depths is not None:
+        depths.extend(float(d) for d in raw.depths)
+    return raw.violations()
+
+
+@dataclass
+class _TransitionRaw:
+    """What :func:`transition_clearance` measured, before it is told as violations: the smallest gaps per block
+    of the joined program (inf where not measured), the tail depth of each transition (None: not measured)."""
+
+    d_surf: FloatArray
+    d_sup: dict[str, FloatArray]
+    f_sup: dict[str, FloatArray]
+    depths: list[float | None]
+    gap: float
+    f_gap: float
+
+    def merged(self, other: _TransitionRaw) -> _TransitionRaw:
+        """The measures of two disjoint sets of transitions together (each block is one transition's: the
+        smaller of the two values is the one measured)."""
+        return _TransitionRaw(np.minimum(self.d_surf, other.d_surf),
+                              {k: np.minimum(v, other.d_sup[k]) for k, v in self.d_sup.items()},
+                              {k: np.minimum(v, other.f_sup[k]) for k, v in self.f_sup.items()},
+                              [a if a is not None else b for a, b in zip(self.depths, other.depths)],
+                              self.gap, self.f_gap)
+
+    def violations(self) -> list[Any]:
+        from engine.kinematics import violations_from_mask
+
+        gap, f_gap = self.gap, self.f_gap
+        out = violations_from_mask("clearance", None, self.d_surf < gap - 1e-6, self.d_surf, gap, " mm",
+                                   where="block", what="gap between the eye and the laminate on a transition")
+        for name, d in self.d_sup.items():
+            out += violations_from_mask("clearance", None, d < gap - 1e-6, d, gap, " mm", where="block",
+                                        what=f"gap between the eye and the {name} on a transition")
+        for name, d in self.f_sup.items():
+            out += violations_from_mask("clearance", None, d < f_gap - 1e-6, d, f_gap, " mm", where="block",
+                                        what=f"gap between the free fibre and the {name} on a transition")
+        return out
+
+
+def _transition_raw(machine: Any, blocks: Any, layers: list[LayerResult], transitions: list[tuple[int, int, float]],
+                    bare: Any, setup: Any, with_depths: bool, fns: dict[int, tuple[Any, Any]] | None = None,
+                    which: set[int] | None = None) -> _TransitionRaw:
+    """:func:`transition_clearance`'s measures of the transitions ``which`` (all: None); the tail depths with
+    ``with_depths``."""
+    from engine.kinematics import forward_kinematics
     from engine.machine_setup import (
         _rect_distance,
         _segment_min_rho,
@@ -2197,18 +2252,20 @@ def transition_clearance(machine: Any, blocks: Any, layers: list[LayerResult],
         in one transition and the last laid layer's in the next); called with its bound each time."""
         prebuild_distance(surface, built)
         return built[id(surface)][1]
+    depths: list[float | None] = []
     for j, (b0, n, _t) in enumerate(transitions):
+        if which is not None and j not in which:
+            depths.append(None)
+            continue
         if j + 1 >= len(laid) or n < 1:
-            if depths is not None:
-                depths.append(0.0)
+            depths.append(0.0)
             continue
         qq = q[b0: b0 + n + 1]
         dense = (qq[:-1, None, :] + u[None, :, None] * np.diff(qq, axis=0)[:, None, :]).reshape(-1, q.shape[1])
         blk = np.repeat(np.arange(b0, b0 + n), u.size)
         dense, blk = dense[:-1], blk[:-1]                # the next layer's first point is its own
         if dense.shape[0] == 0:
-            if depths is not None:
-                depths.append(0.0)
+            depths.append(0.0)
             continue
         eye, _ = forward_kinematics(machine, dense, fibre=False)
         z, rho = eye[:, 2], np.hypot(eye[:, 0], eye[:, 1])
@@ -2218,10 +2275,11 @@ def transition_clearance(machine: Any, blocks: Any, layers: list[LayerResult],
             np.minimum.at(d_sup[ob.name], blk, _rect_distance(z, rho, ob))
         anchor = _last_laid_point(machine, q[b0], laid[j])
         if anchor is None:
-            if depths is not None:
-                depths.append(0.0)
+            depths.append(0.0)
             continue
-        if depths is not None:
+        if not with_depths:
+            depths.append(0.0)
+        else:
             v = anchor[None, :] - eye
             length = np.linalg.norm(v, axis=1)
             along = v / np.maximum(length, 1e-12)[:, None]
@@ -2233,15 +2291,7 @@ def transition_clearance(machine: Any, blocks: Any, layers: list[LayerResult],
         a_rep = np.broadcast_to(anchor, eye.shape)
         for ob in support_obstacles(bare, setup):
             np.minimum.at(f_sup[ob.name], blk, _segment_min_rho(a_rep, eye, ob.z0, ob.z1) - ob.radius)
-    out = violations_from_mask("clearance", None, d_surf < gap - 1e-6, d_surf, gap, " mm", where="block",
-                               what="gap between the eye and the laminate on a transition")
-    for name, d in d_sup.items():
-        out += violations_from_mask("clearance", None, d < gap - 1e-6, d, gap, " mm", where="block",
-                                    what=f"gap between the eye and the {name} on a transition")
-    for name, d in f_sup.items():
-        out += violations_from_mask("clearance", None, d < f_gap - 1e-6, d, f_gap, " mm", where="block",
-                                    what=f"gap between the free fibre and the {name} on a transition")
-    return out
+    return _TransitionRaw(d_surf, d_sup, f_sup, depths, gap, f_gap)
 
 
 def prebuild_distance(surface: Any, fns: dict[int, tuple[Any, Any]]) -> None:
@@ -2254,14 +2304,6 @@ def prebuild_distance(surface: Any, fns: dict[int, tuple[Any, Any]]) -> None:
         fns[id(surface)] = (surface, mandrel_distance_fn(surface))
 
 
-def _transition_clearance_with_depths(machine: Any, blocks: Any, layers: list[LayerResult],
-                                      transitions: list[tuple[int, int, float]], bare: Any, setup: Any,
-                                      fns: dict[int, tuple[Any, Any]] | None) -> tuple[list[Any], list[float]]:
-    """:func:`transition_clearance` and its depths, as one answer (for :func:`_fork_call`)."""
-    depths: list[float] = []
-    return transition_clearance(machine, blocks, layers, transitions, bare, setup, depths=depths, fns=fns), depths
-
-
 def _joined_problems(machine: Any, blocks: Any, text: str, layers: list[LayerResult],
                      transitions: list[tuple[int, int, float]], placement: Any, bare: Any = None,
                      setup: Any = None, depths: list[float] | None = None,
@@ -2271,7 +2313,7 @@ def _joined_problems(machine: Any, blocks: Any, text: str, layers: list[LayerRes
     ramps, the transitions, the common placement) against every position, speed and speed-jump limit,
     the eye's clearance along the transitions (with ``bare`` and ``setup``), grouped and located by NC line,
     time and layer or transition; a placement that does not fit says which would.  ``clearance``: the
-    answer of :func:`_transition_clearance_with_depths` already made (its depths go to ``depths``)."""
+    transitions' clearance violations and tail depths already measured (the depths go to ``depths``)."""
     from engine.blocks import check_blocks
     from engine.machine_setup import group_violations
 

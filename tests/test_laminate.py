@@ -566,6 +566,17 @@ def test_transition_clearance_against_the_laminate_and_the_supports() -> None:
     probs = _joined_problems(res.machine, bad, res.nc_text, layers, trans, None, res.mandrel, setup)
     clr = [p for p in probs if "gap between the eye and the laminate on a transition" in p]
     assert len(clr) == 1 and clr[0].endswith("transition to layer 2") and re.search(r"NC line \d+", clr[0])
+    # measured in two parts (the join's two processes), the same violations and depths
+    from engine.laminate import _transition_raw
+
+    depths: list[float] = []
+    whole = transition_clearance(res.machine, bad, layers, trans, res.mandrel, setup, depths=depths)
+    for first in ({0}, {1}, set(), {0, 1}):
+        a = _transition_raw(res.machine, bad, layers, trans, res.mandrel, setup, True, None, first)
+        b = _transition_raw(res.machine, bad, layers, trans, res.mandrel, setup, True, None,
+                            set(range(len(trans))) - first)
+        both = a.merged(b)
+        assert both.violations() == whole and both.depths == depths
 
 
 def test_supports_stay_those_of_the_bare_mandrel_under_the_laminate() -> None:
