@@ -1405,14 +1405,29 @@ def _fork_pipeline(jp: str | None, p: _Prepared, upto: str, register: Callable[[
     Raises OSError where the system refuses the fork (nothing is left then)."""
     import os
     import secrets
-    import signal
 
     tag = f"winder-{os.getpid()}-{p.i}-{secrets.token_hex(6)}"
     paths = [os.path.join(folder, tag) for folder in _answer_folders()]
+
+    def adopt(pid: int, r: int) -> _Child:
+        child = _Child(pid, r, p, paths)
+        register(child)
+        return child
+
+    return _fork_with(lambda w: _pipeline_child(w, jp, p, upto, paths), adopt)
+
+
+def _fork_with(body: Callable[[int], None], adopt: Callable[[int, int], Any]) -> Any:
+    """Fork a process that runs ``body(w)`` (``w``: the write end of a pipe to this process) and exits; here
+    ``adopt(pid, r)`` (``r``: the pipe's read end) is called and its value returned.  Ctrl-C and kill stay
+    pending across the fork: the child ignores them (and dies with this process) before they can arrive,
+    this process takes them after ``adopt`` (so whatever it registers can always be stopped).  Raises
+    OSError where the system refuses the fork (nothing is left then)."""
+    import os
+    import signal
+
     r, w = os.pipe()
     parent = os.getpid()
-    # Ctrl-C and kill stay pending across the fork: the child ignores them before they can arrive, this
-    # process takes them after it has registered the child (and then kills it)
     old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
     try:
         try:
@@ -1430,16 +1445,14 @@ def _fork_pipeline(jp: str | None, p: _Prepared, upto: str, register: Callable[[
                 if os.getppid() == parent:  # else the parent died before that took effect
                     signal.pthread_sigmask(signal.SIG_SETMASK, old)
                     os.close(r)
-                    _pipeline_child(w, jp, p, upto, paths)
+                    body(w)
                     code = 0
             finally:
                 os._exit(code)
         os.close(w)
-        child = _Child(pid, r, p, paths)
-        register(child)
+        return adopt(pid, r)
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, old)
-    return child
 
 
 def _budget_state() -> tuple[int | None, bool]:
@@ -1559,47 +1572,26 @@ class _ForkedCall:
 def _fork_call(fn: Callable[[], Any]) -> _ForkedCall | None:
     """Run ``fn()`` in a forked process that sends its value back pickled through a pipe; None where forking
     is not possible here (another thread runs, no fork) or the system refuses it.  The process ignores
-    Ctrl-C and dies with this one; an exception in it is not sent (the caller then runs ``fn`` itself and
-    meets it there, as without the fork)."""
+    Ctrl-C and dies with this one (:func:`_fork_with`); an exception in it is not sent (the caller then runs
+    ``fn`` itself and meets it there, as without the fork)."""
     import os
     import pickle
-    import signal
+
+    def body(w: int) -> None:
+        try:
+            data = pickle.dumps(("ok", fn()), protocol=pickle.HIGHEST_PROTOCOL)
+        except BaseException:  # noqa: BLE001 - the caller runs fn itself and meets it
+            data = pickle.dumps(("failed", None))
+        view = memoryview(data)
+        while view:
+            view = view[os.write(w, view):]
 
     if not _can_fork():
         return None
-    r, w = os.pipe()
-    parent = os.getpid()
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
     try:
-        try:
-            pid = os.fork()
-        except OSError:
-            os.close(r)
-            os.close(w)
-            return None
-        if pid == 0:  # the child: never returns into the caller's code
-            code = 1
-            try:
-                signal.signal(signal.SIGINT, signal.SIG_IGN)
-                signal.signal(signal.SIGTERM, signal.SIG_DFL)
-                _die_with_parent()
-                if os.getppid() == parent:
-                    signal.pthread_sigmask(signal.SIG_SETMASK, old)
-                    os.close(r)
-                    try:
-                        data = pickle.dumps(("ok", fn()), protocol=pickle.HIGHEST_PROTOCOL)
-                    except BaseException:  # noqa: BLE001 - the caller runs fn itself and meets it
-                        data = pickle.dumps(("failed", None))
-                    view = memoryview(data)
-                    while view:
-                        view = view[os.write(w, view):]
-                    code = 0
-            finally:
-                os._exit(code)
-        os.close(w)
-        return _ForkedCall(pid, r)
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        return _fork_with(body, _ForkedCall)
+    except OSError:
+        return None
 
 
 def _die_with_parent() -> None:

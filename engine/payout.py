@@ -1524,6 +1524,13 @@ class _FastFail(Exception):
     """The fast path cannot settle this case exactly: use the HiGHS formulations."""
 
 
+def _f8_vector(v: Any, n: int | None = None) -> bool:
+    """Whether ``v`` is a C-contiguous 1-D float64 array (of ``n`` entries): what the compiled steps of
+    :class:`_Tube` read as raw memory."""
+    return (type(v) is np.ndarray and v.dtype == np.float64 and v.ndim == 1 and v.flags.c_contiguous
+            and (n is None or v.shape[0] == n))
+
+
 class _Tube:
     """Step bounds of μ along the cycle (exact cyclic case only).
 
@@ -1648,7 +1655,7 @@ class _Tube:
 
     def _g_compiled(self, mu: FloatArray, idx: NDArray[np.int64] | slice) -> FloatArray | None:
         """:meth:`g` by the compiled kernels; None where the arguments are not theirs (the numpy code runs)."""
-        if type(mu) is not np.ndarray or mu.dtype != np.float64 or mu.ndim != 1 or not mu.flags.c_contiguous:
+        if not _f8_vector(mu):
             return None
         n = mu.shape[0]
         if isinstance(idx, slice):
@@ -1723,8 +1730,7 @@ class _Tube:
         fa = self.g(a, idx) - a - B
         fb = self.g(b, idx) - b - B
         last = np.zeros(a.size)  # +1: b moved last step, −1: a moved
-        if self._G is not None and all(type(v) is np.ndarray and v.dtype == np.float64 and v.ndim == 1
-                                       and v.flags.c_contiguous and v.shape == a.shape for v in (a, b, fa, fb, B)):
+        if self._G is not None and all(_f8_vector(v, a.size) for v in (a, b, fa, fb, B)):
             return self._edge_compiled(idx, a.copy(), b.copy(), fa, fb, B, tol, last)
         for it in range(200):
             w = b - a
@@ -1812,8 +1818,7 @@ class _Tube:
     def _fits(self, x: FloatArray, A: FloatArray, h: FloatArray) -> bool:
         """Whether the compiled forward closure takes these arrays (C-contiguous float64 of the grid's sizes)."""
         n = self._n1 + 1
-        return all(type(a) is np.ndarray and a.dtype == np.float64 and a.ndim == 1 and a.flags.c_contiguous
-                   and a.shape[0] == m for a, m in ((x, n), (A, n - 1), (h, n)))
+        return _f8_vector(x, n) and _f8_vector(A, n - 1) and _f8_vector(h, n)
 
     def _forward_compiled(self, x: FloatArray, A: FloatArray, h: FloatArray, y: FloatArray, cap: FloatArray,
                           C: FloatArray, tol: float) -> FloatArray | None:
