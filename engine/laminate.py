@@ -1128,6 +1128,22 @@ class _Failed:
         self.exc = exc
 
 
+def _kill_and_reap(pid: int, kill: bool = True) -> None:
+    """Stop the child ``pid`` (``kill``: SIGKILL first, else wait for its own end) and reap it."""
+    import os
+    import signal
+
+    if kill:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    try:
+        os.waitpid(pid, 0)
+    except ChildProcessError:  # reaped already (an interrupt came between the wait and the flag)
+        pass
+
+
 class _Child:
     """A forked process running one layer's pipeline (:func:`_fork_pipeline`)."""
 
@@ -1180,20 +1196,9 @@ class _Child:
         self.reaped = True
 
     def reap(self, kill: bool = True) -> None:
-        import os
-        import signal
-
         if self.reaped:
             return
-        if kill:
-            try:
-                os.kill(self.pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
-        try:
-            os.waitpid(self.pid, 0)
-        except ChildProcessError:  # reaped already (an interrupt came between the wait and the flag)
-            pass
+        _kill_and_reap(self.pid, kill)
         self.reaped = True
 
     def remove_files(self) -> None:
@@ -1550,19 +1555,11 @@ class _ForkedCall:
     def close(self) -> None:
         """Stop the process if it still runs, reap it and close the pipe (idempotent)."""
         import os
-        import signal
 
         if self.done:
             return
         self.done = True
-        try:
-            os.kill(self.pid, signal.SIGKILL)
-        except OSError:
-            pass
-        try:
-            os.waitpid(self.pid, 0)
-        except ChildProcessError:
-            pass
+        _kill_and_reap(self.pid)
         try:
             os.close(self.fd)
         except OSError:
