@@ -36,7 +36,7 @@ import numpy as np
 MODULE = "engine._aot_kernels"
 """The extension module the build writes into the ``engine`` package."""
 
-SOURCES = ("timeparam_jit", "mandrel_jit", "payout_jit")
+SOURCES = ("timeparam_jit", "mandrel_jit", "payout_jit", "winding_jit")
 """The modules of ``engine`` that hold the kernels' numba code (each stamped on its own)."""
 
 # every kernel: (module of SOURCES, its builder there, index in what the builder returns or None, argument
@@ -74,6 +74,8 @@ KERNELS: dict[str, tuple[str, str, int | None, tuple[str, ...]]] = {
     "tube_newton": ("payout_jit", "_build_tube", 3, ("f8:1",) * 9 + ("f8", "f8", "f8:1", "f8:1")),
     "tube_edge_mid": ("payout_jit", "_build_edge", 0, ("f8:1",) * 4 + ("i8", "f8", "f8:1")),
     "tube_edge_upd": ("payout_jit", "_build_edge", 1, ("f8:1",) * 8),
+    "clairaut_rk4": ("winding_jit", "_build_rk4", None, ("f8:1",) * 7 + ("i8", "i8", "f8", "f8", "b1", "f8:1", "f8:1",
+                                                                    "b1", "b1", "f8:1", "f8:1")),
     "ipm_res": ("payout_jit", "_build_ipm", 0, ("i8:1", "i8:1", "f8:1", "b1") + ("i8:1", "i8:1", "f8:1") * 2
                 + ("f8:1",) * 11),
     "ipm_fac": ("payout_jit", "_build_ipm", 1, ("f8:1", "f8:1", "i8:1", "i8:1", "i8:1", "b1:1") + ("f8:1",) * 6),

@@ -290,6 +290,11 @@ def integrate(
     Returns the C values at nodes i0..i1 (in travel order) and, with ``sens``, dC/dλ.  With
     ``lo``/``hi`` the values are clipped to [lo, hi] after every step (reachable-set envelopes).
     """
+    from engine.winding_jit import rk4
+
+    got = rk4(grid, i0, i1, c0, lam, sens, lo, hi)   # the same loop compiled (the same numbers), where built
+    if got is not None:
+        return got
     hs = grid.h
     AL, AM, AR = grid.A
     BL, BM, BR = grid.B
