@@ -6,12 +6,13 @@ Each case runs as a fresh process (``python -m engine ...``, as the ``winder`` s
 interleaved, ``--repeat`` times; printed: the medians of wall and CPU time (user + system of the child
 and the processes it forked) and the targets (vessel <= 1.5 s, pipe <= 1 s, ``--version`` <= 0.15 s).
 ``winder run`` runs a laminate's layers side by side on the CPUs available (wall < CPU); the ``-j1``
-rows run them one after the other; the ``numpy passes`` rows run the time laws without compiled kernels
-(``WINDER_AOT=0``: the ahead-of-time kernels of engine/aot.py off, numba not loaded), for the
-ratio those kernels give.  The machine is shared: the load average is printed; on a loaded
-machine CPU time is the steadier figure.  Bytecode is written and used (as an
-installed program has it): ``PYTHONDONTWRITEBYTECODE`` is removed from the children's environment and a
-first unmeasured run of every case warms the caches (bytecode, numba's on-disk cache).
+rows run them one after the other; the ``numpy passes`` rows run without the engine's compiled kernels
+(``WINDER_AOT=0``: the ahead-of-time kernels of engine/aot.py off - the time laws', the payout's, the
+dome's sums, the Clairaut passes' -, numba not loaded), for the ratio those kernels give.  The machine is
+shared: the load average is printed; on a loaded machine CPU time is the steadier figure.  Bytecode is
+written and used (as an installed program has it): ``PYTHONDONTWRITEBYTECODE`` is removed from the
+children's environment and a first unmeasured run of every case warms the caches (bytecode, numba's
+on-disk cache).
 """
 
 from __future__ import annotations
@@ -84,7 +85,7 @@ def main() -> int:
               f"{'PASS' if cpu <= t else 'FAIL'}")
     for ex in ("pressure_vessel", "pipe"):
         (w1, c1), (w0, c0) = med[ex], med[f"{ex} numpy passes"]
-        print(f"{ex}: compiled time-law kernels / numpy passes: wall {w1 / w0:.3f}, CPU {c1 / c0:.3f}")
+        print(f"{ex}: compiled kernels / numpy passes: wall {w1 / w0:.3f}, CPU {c1 / c0:.3f}")
     return 0
 
 
