@@ -174,6 +174,21 @@ class PassGrid:
         return int(np.argmin(np.abs(self.z - z)))
 
 
+def _far_from_nodes(tu: FloatArray, tb: FloatArray, tol: float) -> NDArray[np.bool_]:
+    """For each of ``tb``: whether every node of the sorted ``tu`` is more than ``tol`` from it, i.e.
+    ``min |tu − x| > tol`` (:func:`_far_from_nodes_reference`, the same comparisons): the smallest distance
+    is at one of x's two neighbours in ``tu`` (rounding is monotone, so that holds for the float values too)."""
+    if tu.size < 2:
+        return _far_from_nodes_reference(tu, tb, tol)
+    k = np.clip(np.searchsorted(tu, tb), 1, tu.size - 1)
+    return np.minimum(np.abs(tu[k - 1] - tb), np.abs(tu[k] - tb)) > tol
+
+
+def _far_from_nodes_reference(tu: FloatArray, tb: FloatArray, tol: float) -> NDArray[np.bool_]:
+    """:func:`_far_from_nodes` by a scan of every node per point (the tested reference)."""
+    return np.array([np.min(np.abs(tu - x)) > tol for x in tb], dtype=bool)
+
+
 def build_grid(
     mandrel: Any, za: float, zb: float, left: str, right: str, n_out: int, refine: int, extra_z: list[float]
 ) -> PassGrid:
@@ -198,7 +213,7 @@ def build_grid(
         b_out = np.array([True] * len(bz) + [False] * len(inner))
         tb = t_of_z(kind, za, L, bza)
         tol = 1e-9 * (t1 - t0)
-        keep = np.array([np.min(np.abs(tu - x)) > tol for x in tb], dtype=bool)
+        keep = _far_from_nodes(tu, tb, tol)
         # snap uniform nodes that coincide with a breakpoint onto it
         for x, zx in zip(tb[~keep], bza[~keep]):
             j = int(np.argmin(np.abs(tu - x)))

@@ -51,3 +51,21 @@ def test_compiled_rk4_is_the_python_loop_bit_for_bit(name: str, monkeypatch: pyt
         assert (ss is None) == (ref_ss is None)
         if ss is not None:
             assert type(ss) is list and np.array_equal(np.array(ss), np.array(ref_ss), equal_nan=True)
+
+
+def test_breakpoints_far_from_the_nodes_as_the_full_scan() -> None:
+    """build_grid's test of which breakpoints lie off the uniform nodes (two neighbours by a sorted search)
+    gives the full scan's answer: random points, points on nodes, at midpoints, a tolerance away, outside
+    the range, NaN and infinities."""
+    rng = np.random.default_rng(6)
+    for n in (2, 3, 17, 1000, 6001):
+        t0, t1 = sorted(rng.uniform(-3, 3, 2))
+        tu = np.linspace(t0, t1, n)
+        tol = 1e-9 * (t1 - t0)
+        mids = 0.5 * (tu[1:] + tu[:-1])
+        tb = np.concatenate([rng.uniform(t0 - 1, t1 + 1, 500), tu[rng.integers(0, n, 50)], mids[:50],
+                             tu[:20] + tol, tu[:20] - tol, tu[:20] + 2 * tol, tu[:20] + 0.5 * tol,
+                             [np.nan, np.inf, -np.inf, t0 - 1e9, t1 + 1e9]])
+        np.testing.assert_array_equal(wc._far_from_nodes(tu, tb, tol), wc._far_from_nodes_reference(tu, tb, tol))
+    one = np.array([0.5])
+    np.testing.assert_array_equal(wc._far_from_nodes(one, np.array([0.5, 0.7]), 1e-9), [False, True])
