@@ -1,5 +1,6 @@
-"""Compiled steps of the payout's interval propagation (issue 16): :class:`engine.payout._Tube`'s map g,
-its forward closure and its Newton sweeps, bit for bit the numpy code's answers.
+"""Compiled steps of the payout (issue 16), bit for bit the numpy code's answers: :class:`engine.payout._Tube`'s
+map g, its forward closure, its Newton sweeps and its edge searches; and the Newton steps of the (15)
+interior point (:func:`engine.payout._ipm_compiled`).
 
 The narrowest-band and max-min searches of the min-range law (:func:`engine.payout._fast_lp13`, ``_fast_lp14``)
 bisect on the pull-speed bounds; each trial is a forward closure of ~650 points: dozens of sweeps and
@@ -448,36 +449,30 @@ def _build_ipm() -> tuple[Any, Any, Any, Any, Any]:
     return _res, _fac, _rhs, _aff, _fin
 
 
-def kernels() -> tuple[Any, ...] | None:
-    """The ahead-of-time kernels ``(pre, post, step, newton, edge_mid, edge_upd)`` without their argument checks
-    (the callers in :class:`engine.payout._Tube` pass arrays they made: C-contiguous float64, int64 indices),
-    or None where they do not run (not built, stale, switched off): the numpy code runs."""
-    if _KERNELS:
-        return _KERNELS[0]
-    from engine import aot
+def _load(names: tuple[str, ...], cache: list[Any]) -> tuple[Any, ...] | None:
+    """The ahead-of-time kernels ``names`` without their argument checks, or None where one of them does not
+    run (not built, stale, switched off); remembered in ``cache``."""
+    if not cache:
+        from engine import aot
 
-    got = aot.load()
-    names = ("tube_pre", "tube_post", "tube_step", "tube_newton", "tube_edge_mid", "tube_edge_upd")
-    out = tuple(got[n].fn for n in names) if all(n in got for n in names) else None
-    _KERNELS.append(out)
-    return out
+        got = aot.load()
+        cache.append(tuple(got[n].fn for n in names) if all(n in got for n in names) else None)
+    return cache[0]
+
+
+def kernels() -> tuple[Any, ...] | None:
+    """The kernels ``(pre, post, step, newton, edge_mid, edge_upd)`` of :class:`engine.payout._Tube` (its callers
+    pass arrays they made: C-contiguous float64, int64 indices), or None: the numpy code runs."""
+    return _load(("tube_pre", "tube_post", "tube_step", "tube_newton", "tube_edge_mid", "tube_edge_upd"), _KERNELS)
 
 
 _KERNELS: list[Any] = []
 
 
-def ipm_kernels() -> tuple[Any, Any, Any, Any, Any] | None:
-    """The ahead-of-time kernels ``(res, fac, rhs, aff, fin)`` of the (15) interior point without their argument
-    checks (:func:`engine.payout._ipm_compiled` passes arrays it made), or None where they do not run."""
-    if _IPM:
-        return _IPM[0]
-    from engine import aot
-
-    got = aot.load()
-    names = ("ipm_res", "ipm_fac", "ipm_rhs", "ipm_aff", "ipm_fin")
-    out = tuple(got[n].fn for n in names) if all(n in got for n in names) else None
-    _IPM.append(out)
-    return out
+def ipm_kernels() -> tuple[Any, ...] | None:
+    """The kernels ``(res, fac, rhs, aff, fin)`` of the (15) interior point (:func:`engine.payout._ipm_compiled`
+    passes arrays it made), or None: the numpy code runs."""
+    return _load(("ipm_res", "ipm_fac", "ipm_rhs", "ipm_aff", "ipm_fin"), _IPM)
 
 
 _IPM: list[Any] = []
