@@ -1128,6 +1128,18 @@ class _Failed:
         self.exc = exc
 
 
+def _read_to_end(fd: int) -> bytes:
+    """Everything a child writes to the pipe ``fd`` until it closes its end (exits or dies)."""
+    import os
+
+    chunks = []
+    while True:
+        got = os.read(fd, 1 << 20)
+        if not got:
+            return b"".join(chunks)
+        chunks.append(got)
+
+
 def _kill_and_reap(pid: int, kill: bool = True) -> None:
     """Stop the child ``pid`` (``kill``: SIGKILL first, else wait for its own end) and reap it."""
     import os
@@ -1160,20 +1172,14 @@ class _Child:
     def receive(self) -> Any:
         """Its answer: the layer's pipeline result (without line and surface), the InputError it raised, or
         None when it died or failed otherwise (the layer is then run here)."""
-        import os
         import pickle
 
-        chunks = []
-        while True:
-            b = os.read(self.fd, 1 << 20)
-            if not b:
-                break
-            chunks.append(b)
+        got = _read_to_end(self.fd)
         self.let_exit()
         try:
-            if not chunks:
+            if not got:
                 return None
-            data, path, spans = pickle.loads(b"".join(chunks))
+            data, path, spans = pickle.loads(got)
             return _unpack(data, path, spans)
         except Exception:  # noqa: BLE001 - a truncated answer: run the layer here
             return None
@@ -1534,20 +1540,14 @@ class _ForkedCall:
 
     def result(self) -> Any:
         """The function's value, or None where it raised or the process died (the caller computes it itself)."""
-        import os
         import pickle
 
-        chunks = []
         try:
-            while True:
-                got = os.read(self.fd, 1 << 20)
-                if not got:
-                    break
-                chunks.append(got)
+            got = _read_to_end(self.fd)
         finally:
             self.close()
         try:
-            kind, value = pickle.loads(b"".join(chunks))
+            kind, value = pickle.loads(got)
         except Exception:  # noqa: BLE001 - nothing or a partial answer: it died
             return None
         return value if kind == "ok" else None
@@ -2064,8 +2064,7 @@ def _join(res: LaminateResult, machine: Any, fns: dict[int, tuple[Any, Any]] | N
                                    set(range(len(transitions))) - first)
             part = helper.result()
             if part is not None:
-                both = part.merged(rest)
-                clearance = (both.violations(), [float(d) for d in both.depths])
+                clearance = part.merged(rest)
     finally:
         if helper is not None:
             helper.close()
@@ -2148,8 +2147,8 @@ def _last_laid_point(machine: Any, q_end: FloatArray, layer: LayerResult) -> Flo
 
 def transition_clearance(machine: Any, blocks: Any, layers: list[LayerResult],
                          transitions: list[tuple[int, int, float]], bare: Any, setup: Any,
-                         depths: list[float] | None = None, fns: dict[int, tuple[Any, Any]] | None = None
-                         ) -> list[Any]:
+                         depths: list[float] | None = None, fns: dict[int, tuple[Any, Any]] | None = None,
+                         measured: _TransitionRaw | None = None) -> list[Any]:
     """The eye along every transition move against the laminate laid so far (the surface the next layer is
     wound on), the shafts, the chuck and the tailstock (of the bare mandrel), and the free fibre - from the
     last laid point of the layer before, which stays where it was laid, to the eye - against the shafts,
@@ -2168,8 +2167,10 @@ def transition_clearance(machine: Any, blocks: Any, layers: list[LayerResult],
 
     ``fns`` (optional): the surfaces' distance functions, ``{id(surface): (surface, mandrel_distance_fn(surface))}``,
     as :func:`prebuild_distance` makes them (the laminate run builds them while it waits for its layers);
-    the missing ones are built here and added to it."""
-    raw = _transition_raw(machine, blocks, layers, transitions, bare, setup, depths is not None, fns)
+    the missing ones are built here and added to it.  ``measured``: these measures already made
+    (:func:`_transition_raw` of every transition, the depths included where ``depths`` is given)."""
+    raw = measured if measured is not None else _transition_raw(machine, blocks, layers, transitions, bare, setup,
+                                                                depths is not None, fns)
     if depths is not None:
         depths.extend(float(d) for d in raw.depths)
     return raw.violations()
@@ -2297,12 +2298,12 @@ def _joined_problems(machine: Any, blocks: Any, text: str, layers: list[LayerRes
                      transitions: list[tuple[int, int, float]], placement: Any, bare: Any = None,
                      setup: Any = None, depths: list[float] | None = None,
                      fns: dict[int, tuple[Any, Any]] | None = None,
-                     clearance: tuple[list[Any], list[float]] | None = None) -> list[str]:
+                     clearance: _TransitionRaw | None = None) -> list[str]:
     """What the joined program breaks beyond the layers' own checks: every block of it (the layers' speed
     ramps, the transitions, the common placement) against every position, speed and speed-jump limit,
     the eye's clearance along the transitions (with ``bare`` and ``setup``), grouped and located by NC line,
     time and layer or transition; a placement that does not fit says which would.  ``clearance``: the
-    transitions' clearance violations and tail depths already measured (the depths go to ``depths``)."""
+    transitions' clearance already measured (:func:`_transition_raw` of all of them, with their depths)."""
     from engine.blocks import check_blocks
     from engine.machine_setup import group_violations
 
@@ -2310,13 +2311,8 @@ def _joined_problems(machine: Any, blocks: Any, text: str, layers: list[LayerRes
            if v.kind != "position"}
     viol = [v for v in check_blocks(machine, blocks) if v.kind == "position" or (v.kind, v.axis) not in own]
     if bare is not None and setup is not None:
-        if clearance is not None:
-            viol += clearance[0]
-            if depths is not None:
-                depths.extend(clearance[1])
-        else:
-            viol += transition_clearance(machine, blocks, layers, transitions, bare, setup, depths=depths,
-                                         fns=fns)
+        viol += transition_clearance(machine, blocks, layers, transitions, bare, setup, depths=depths, fns=fns,
+                                     measured=clearance)
     out: list[str] = []
     if placement is not None and not placement.fits:
         out.append(placement.message())
