@@ -2,7 +2,8 @@
 
 Run: ``.venv/bin/python benchmarks/bench_examples_stages.py [--repeat 3] [--examples pipe pressure_vessel]``
 
-Each run is a fresh process (``python -c``: the same work as ``winder run EXAMPLE -o ... --quiet``) with
+Each run is a fresh process (``python -c``: the same work as ``winder run EXAMPLE -o ... --quiet -j 1``, in one
+process so that every stage's CPU is counted here, not in forked layer children) with
 CPU timers (``time.process_time``) wrapped around the stage functions; the examples are interleaved and
 the medians printed.  Stages nest (the payout's sub-stages are part of the payout; the time laws are
 part of the blocks stage's caller): the lines marked with ``-`` are parts of the line above them.
@@ -73,7 +74,7 @@ ru0 = resource.getrusage(resource.RUSAGE_SELF)
 for label, m, a in json.loads(sys.argv[1]):
     wrap(label, m, a)
 try:
-    rc = main(["run", sys.argv[2], "-o", sys.argv[3], "--quiet"])
+    rc = main(["run", sys.argv[2], "-o", sys.argv[3], "--quiet", "-j", "1"])
 except SystemExit as e:
     rc = e.code
 if rc:

@@ -1,7 +1,9 @@
 """The engine's compiled kernels built ahead of time (issue 16): no numba at run time.
 
 :mod:`engine.timeparam_jit` compiles the time law's hot loops with numba, :mod:`engine.mandrel_jit` the
-isotensoid dome's Chebyshev sums; each kernel gives bit for bit the answer of the numpy code it replaces.
+isotensoid dome's Chebyshev sums, :mod:`engine.payout_jit` the payout's interval propagation and interior
+point, :mod:`engine.winding_jit` the Clairaut pass's integration, :mod:`engine.nearest_jit` the clearance
+distances' nearest-vertex search; each kernel gives bit for bit the answer of the code it replaces.
 numba's just-in-time kernels cost ~0.5 s of CPU to load in every process (numba's import and its
 registries, then the cached machine code), more than they save in a one-shot ``winder run``, which used to
 run the numpy code (3-5x slower there).  This module compiles the same kernels ahead of time into an
@@ -36,7 +38,7 @@ import numpy as np
 MODULE = "engine._aot_kernels"
 """The extension module the build writes into the ``engine`` package."""
 
-SOURCES = ("timeparam_jit", "mandrel_jit", "payout_jit", "winding_jit")
+SOURCES = ("timeparam_jit", "mandrel_jit", "payout_jit", "winding_jit", "nearest_jit")
 """The modules of ``engine`` that hold the kernels' numba code (each stamped on its own)."""
 
 # every kernel: (module of SOURCES, its builder there, index in what the builder returns or None, argument
@@ -82,6 +84,8 @@ KERNELS: dict[str, tuple[str, str, int | None, tuple[str, ...]]] = {
     "ipm_rhs": ("payout_jit", "_build_ipm", 2, ("i8:1", "i8:1") + ("f8:1",) * 7 + ("b1", "f8") + ("f8:1",) * 3),
     "ipm_aff": ("payout_jit", "_build_ipm", 3, ("f8:1", "f8:1", "f8", "f8", "f8", "i8:1", "i8:1") + ("f8:1",) * 10),
     "ipm_fin": ("payout_jit", "_build_ipm", 4, ("f8:1", "f8:1", "f8", "f8", "f8", "i8:1", "i8:1") + ("f8:1",) * 9),
+    "nearest_vertex": ("nearest_jit", "_build_nearest", None,
+                       ("f8:1", "f8:1", "i8:1") + ("f8:1",) * 4 + ("i8", "f8:1", "f8:1", "f8", "f8:1", "i8:1", "b1:1")),
 }
 
 MISSES: dict[str, int] = {}

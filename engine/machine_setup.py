@@ -370,8 +370,9 @@ def mandrel_distance(mandrel: Any, z: np.ndarray, rho: np.ndarray, step_mm: floa
                      upto_mm: float = np.inf) -> np.ndarray:
     """Distance (mm) of points (z, rho) from the mandrel's generatrix (negative inside the mandrel).
 
-    The generatrix is sampled every ``step_mm`` of arc length (a k-d tree finds the nearest sample), so
-    the distance is exact within ``step_mm / 2``; points farther than ``upto_mm`` get ``inf``.
+    The generatrix is sampled every ``step_mm`` of arc length (a k-d tree's search finds the nearest sample:
+    :class:`engine.nearest_jit.NearestVertex`), so the distance is exact within ``step_mm / 2``; points
+    farther than ``upto_mm`` get ``inf``.
     """
     return mandrel_distance_fn(mandrel, step_mm, upto_mm)(z, rho)
 
@@ -379,9 +380,8 @@ def mandrel_distance(mandrel: Any, z: np.ndarray, rho: np.ndarray, step_mm: floa
 def mandrel_distance_fn(mandrel: Any, step_mm: float = 0.05, upto_mm: float = np.inf) -> Any:
     """:func:`mandrel_distance` as a function ``(z, rho, upto=upto_mm) -> distance`` (the sampled generatrix
     built once; a smaller ``upto`` makes the k-d tree queries cheaper)."""
-    from engine._lightimport import ckdtree
+    from engine.nearest_jit import NearestVertex
 
-    cKDTree = ckdtree()  # scipy.spatial.cKDTree, without the rest of scipy.spatial
     zs = np.linspace(mandrel.z_min, mandrel.z_max, 2001)
     rs = np.asarray(mandrel.r(zs), dtype=float)
     arc = np.concatenate(([0.0], np.cumsum(np.hypot(np.diff(zs), np.diff(rs)))))
@@ -393,7 +393,7 @@ def mandrel_distance_fn(mandrel: Any, step_mm: float = 0.05, upto_mm: float = np
             for zz, rr in ((prof[0, 0], prof[0, 1]), (prof[-1, 0], prof[-1, 1]))
             for m in (max(int(rr / step_mm) + 2, 2),)]
     pts = np.vstack([prof, *ends])
-    tree = cKDTree(pts)
+    tree = NearestVertex(pts[:, 0], pts[:, 1])  # a cKDTree's answers, compiled search (engine.nearest_jit)
     zlo, zhi = float(mandrel.z_min), float(mandrel.z_max)
     bins: dict[float, np.ndarray] = {}
 

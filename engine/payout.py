@@ -298,13 +298,13 @@ class _Contour:
     The body is bounded by the generatrix and its two end faces (z = z_min and z = z_max from the
     end radius down to the axis), so an eye beyond an end keeps its clearance from the end face too.
     The boundary is a dense polyline (chord error ~ h²κ/8, about 1e-4 mm here); the nearest vertex
-    comes from a KD-tree and the distance is refined on its two adjacent segments.  Negative inside.
+    comes from a KD-tree's search (:class:`engine.nearest_jit.NearestVertex`: the same vertex, compiled) and
+    the distance is refined on its two adjacent segments.  Negative inside.
     """
 
     def __init__(self, mandrel: Any, n: int = 6000) -> None:
-        from engine._lightimport import ckdtree
+        from engine.nearest_jit import NearestVertex
 
-        cKDTree = ckdtree()  # scipy.spatial.cKDTree, without the rest of scipy.spatial
         z, r = mandrel.sample(n)
         self.z, self.r = np.asarray(z, float), np.asarray(r, float)
         self.r = np.maximum(self.r, 0.0)
@@ -316,7 +316,7 @@ class _Contour:
         left, right = faces
         self.bz = np.concatenate([np.full(left.size, self.z[0]), self.z, np.full(right.size, self.z[-1])])
         self.br = np.concatenate([left, self.r, right[::-1]])
-        self.tree = cKDTree(np.column_stack([self.bz, self.br]))
+        self.tree = NearestVertex(self.bz, self.br)  # a cKDTree's answers, compiled search (engine.nearest_jit)
         self.z_min, self.z_max = float(self.z[0]), float(self.z[-1])
         self.r_max = float(self.r.max())
         self.edge_max = float(np.hypot(np.diff(self.bz), np.diff(self.br)).max())  # longest boundary segment
