@@ -1086,6 +1086,12 @@ class _Problem:
             return sp.csr_matrix((0, self.n)), np.zeros(0)
         return sp.vstack(blocks, format="csr"), np.concatenate(rhs)
 
+    def row_keys(self) -> tuple[Any, ...]:
+        """A name for each row of the range LP in :func:`_solve_range_stage`'s order: the 2(n − 1) band
+        rows, the cut rows of :meth:`cut_rows` (family, interval), the cyclic row."""
+        cut = tuple((name, i) for name, rows in self.rows.items() for i in sorted(rows))
+        return tuple(range(2 * (self.n - 1))) + cut + ("cyclic",)
+
     def cyclic_row(self, mu: FloatArray) -> tuple[FloatArray, float]:
         """Row c·μ = e for l_0 = l_{N-1} (exact when both ends have the same geometry)."""
         c = np.zeros(self.n)
@@ -1139,26 +1145,60 @@ class _LPResult:
     status: int  # scipy.optimize.linprog's codes: 0 optimal, 2 infeasible, 4 numerical trouble, ...
     x: FloatArray | None
     message: str
+    basis: _Basis | None = None  # the optimal simplex basis (direct HiGHS only)
+    iterations: int = 0  # HiGHS's simplex iterations (direct HiGHS only)
+
+
+@dataclass
+class _Basis:
+    """A simplex basis of an LP: HiGHS's status codes (0 at lower, 1 basic, 2 at upper, 3 zero, 4 nonbasic)
+    of every column and row, and a key naming each row, so that the next LP of a cutting-plane loop (the
+    same columns, the same rows re-linearised, rows added) can start from it (:meth:`for_rows`)."""
+
+    cols: NDArray[np.int8]
+    rows: NDArray[np.int8]
+    keys: tuple[Any, ...]
+
+    def for_rows(self, keys: tuple[Any, ...]) -> tuple[NDArray[np.int8], NDArray[np.int8]] | None:
+        """The statuses for an LP with the same columns and rows ``keys``: a kept row keeps its status, a new
+        row is basic (its slack).  None where the result would not have exactly one basic variable per row
+        (a row that left nonbasic): the LP is then solved cold."""
+        if keys == self.keys:
+            return self.cols, self.rows
+        where = {k: i for i, k in enumerate(self.keys)}
+        rows = np.ones(len(keys), dtype=np.int8)
+        for j, k in enumerate(keys):
+            i = where.get(k)
+            if i is not None:
+                rows[j] = self.rows[i]
+        if int((self.cols == 1).sum()) + int((rows == 1).sum()) != len(keys):
+            return None
+        return self.cols, rows
 
 
 def _linprog(c: FloatArray, A_ub: Any, b_ub: FloatArray, A_eq: Any, b_eq: FloatArray,
-             bounds: FloatArray) -> Any:
+             bounds: FloatArray, warm: tuple[NDArray[np.int8], NDArray[np.int8]] | None = None) -> Any:
     """``scipy.optimize.linprog(c, A_ub, b_ub, A_eq, b_eq, bounds, method='highs')`` with
     :data:`_LP_OPTIONS`: the same HiGHS model, options and status checks, so the same answer bit for bit
-    (tests/test_payout_speed.py), called directly where :func:`_highs_core` has HiGHS at hand."""
+    (tests/test_payout_speed.py), called directly where :func:`_highs_core` has HiGHS at hand.
+
+    ``warm`` (column and row statuses, :meth:`_Basis.for_rows`) starts HiGHS's dual simplex from that basis
+    instead of from scratch; the result then carries its own basis (``basis``, without row keys)."""
     core = _highs_core()
     if core is None:
         from scipy.optimize import linprog
 
         return linprog(c, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, bounds=bounds, method=_LP_METHOD,
                        options=dict(_LP_OPTIONS))
-    return _linprog_highs_direct(core, c, A_ub, b_ub, A_eq, b_eq, bounds)
+    return _linprog_highs_direct(core, c, A_ub, b_ub, A_eq, b_eq, bounds, warm)
 
 
 def _linprog_highs_direct(h: Any, c: FloatArray, A_ub: Any, b_ub: FloatArray, A_eq: Any, b_eq: FloatArray,
-                          bounds: FloatArray) -> _LPResult:
+                          bounds: FloatArray, warm: tuple[NDArray[np.int8], NDArray[np.int8]] | None = None
+                          ) -> _LPResult:
     """What ``linprog(method='highs')`` does for sparse A_ub/A_eq and an (n, 2) ``bounds`` (SciPy 1.15+:
-    ``_clean_inputs``, ``_linprog_highs``, ``_highs_wrapper``, ``_check_result``), step for step."""
+    ``_clean_inputs``, ``_linprog_highs``, ``_highs_wrapper``, ``_check_result``), step for step; with
+    ``warm``, from that basis (HiGHS then skips presolve and starts its dual simplex there)."""
     import scipy.sparse as sp
 
     c = np.array(c, dtype=np.float64, copy=True).reshape(-1)
@@ -1207,6 +1247,14 @@ def _linprog_highs_direct(h: Any, c: FloatArray, A_ub: Any, b_ub: FloatArray, A_
         return _LPResult(codes.get(status, 4), None, f"HiGHS refused the options ({highs.modelStatusToString(status)})")
     if highs.passModel(lp) == fail:
         return _LPResult(2, None, "HiGHS could not load the model (HiGHS Status kModelError)")
+    if warm is not None and warm[0].size == c.size and warm[1].size == rhs.size:
+        B = h.HighsBasisStatus
+        codes_in = (B.kLower, B.kBasic, B.kUpper, B.kZero, B.kNonbasic)
+        basis = h.HighsBasis()
+        basis.col_status = [codes_in[i] for i in warm[0].tolist()]
+        basis.row_status = [codes_in[i] for i in warm[1].tolist()]
+        basis.valid = True
+        highs.setBasis(basis)  # refused (kError) if HiGHS finds it singular: it then starts from scratch
     if highs.run() == fail:
         status = highs.getModelStatus()
         return _LPResult(codes.get(status, 4), None, f"HiGHS failed ({highs.modelStatusToString(status)})")
@@ -1225,7 +1273,12 @@ def _linprog_highs_direct(h: Any, c: FloatArray, A_ub: Any, b_ub: FloatArray, A_
     ok = ok and not (slack[:b_ub.size] < -tol).any() and not (np.abs(con) > tol).any()
     if not ok:
         return _LPResult(4, x, "the solution HiGHS returned violates the constraints (numerical difficulties)")
-    return _LPResult(0, x, msg)
+    out = highs.getBasis()
+    basis_out = None
+    if out.valid:
+        basis_out = _Basis(np.array([int(v) for v in out.col_status], dtype=np.int8),
+                           np.array([int(v) for v in out.row_status], dtype=np.int8), ())
+    return _LPResult(0, x, msg, basis_out, int(highs.getInfo().simplex_iteration_count))
 
 
 def _qp_highs(Q: Any, c: FloatArray, A: Any, row_lo: FloatArray, row_hi: FloatArray,
@@ -1397,6 +1450,7 @@ def _solve_range_stage(prob: _Problem, u_floor: float, mu0: FloatArray, state: S
     zero = sp.csr_matrix((n - 1, 1))
     x = np.zeros(n + 2)
     it = 0
+    basis: _Basis | None = None
     while it < max_iter:
         it += 1
         check_cancel(state)
@@ -1411,7 +1465,14 @@ def _solve_range_stage(prob: _Problem, u_floor: float, mu0: FloatArray, state: S
         A_eq = sp.csr_matrix(np.append(cyc, [0.0, 0.0])[None, :])
         bounds = np.column_stack([np.append(prob.mu_lo, [u_floor, -np.inf]),
                                   np.append(prob.mu_hi, [np.inf, np.inf])])
-        res = _linprog(cost, A, b, A_eq, np.array([e]), bounds)
+        # the rounds differ only in re-linearised and added cut rows: each starts from the last one's
+        # optimal basis (a handful of dual simplex steps instead of hundreds from scratch)
+        keys = prob.row_keys()
+        res = _linprog(cost, A, b, A_eq, np.array([e]), bounds,
+                       basis.for_rows(keys) if basis is not None else None)
+        basis = res.basis if isinstance(res, _LPResult) else None
+        if basis is not None:
+            basis.keys = keys
         check_cancel(state)
         if res.status == 2:
             raise _diagnose_infeasible(prob)
