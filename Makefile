@@ -52,7 +52,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 # (not fatal: without the module the numba or numpy code runs, the same answers, slower; the tests say so)
-$(AOT): engine/aot.py engine/timeparam_jit.py engine/mandrel_jit.py engine/payout_jit.py engine/winding_jit.py engine/nearest_jit.py $(STAMP)
+$(AOT): engine/aot.py engine/timeparam_jit.py engine/mandrel_jit.py engine/payout_jit.py engine/winding_jit.py engine/nearest_jit.py engine/numtext_jit.py $(STAMP)
 	-$(VPY) -m engine.aot --quiet
 
 lint: venv

@@ -3,7 +3,8 @@
 :mod:`engine.timeparam_jit` compiles the time law's hot loops with numba, :mod:`engine.mandrel_jit` the
 isotensoid dome's Chebyshev sums, :mod:`engine.payout_jit` the payout's interval propagation and interior
 point, :mod:`engine.winding_jit` the Clairaut pass's integration, :mod:`engine.nearest_jit` the clearance
-distances' nearest-vertex search; each kernel gives bit for bit the answer of the code it replaces.
+distances' nearest-vertex search, :mod:`engine.numtext_jit` the NC move lines' text; each kernel gives bit
+for bit the answer of the code it replaces.
 numba's just-in-time kernels cost ~0.5 s of CPU to load in every process (numba's import and its
 registries, then the cached machine code), more than they save in a one-shot ``winder run``, which used to
 run the numpy code (3-5x slower there).  This module compiles the same kernels ahead of time into an
@@ -38,11 +39,11 @@ import numpy as np
 MODULE = "engine._aot_kernels"
 """The extension module the build writes into the ``engine`` package."""
 
-SOURCES = ("timeparam_jit", "mandrel_jit", "payout_jit", "winding_jit", "nearest_jit")
+SOURCES = ("timeparam_jit", "mandrel_jit", "payout_jit", "winding_jit", "nearest_jit", "numtext_jit")
 """The modules of ``engine`` that hold the kernels' numba code (each stamped on its own)."""
 
 # every kernel: (module of SOURCES, its builder there, index in what the builder returns or None, argument
-# types).  "f8:2" is a C-contiguous float64 array of 2 dimensions; "f8", "i8", "b1" scalars.
+# types).  "f8:2" is a C-contiguous float64 array of 2 dimensions ("u1:1": uint8); "f8", "i8", "b1" scalars.
 KERNELS: dict[str, tuple[str, str, int | None, tuple[str, ...]]] = {
     "forward": ("timeparam_jit", "_build_kernel", None,
                 ("f8:1", "i8:2", "i8:2", "b1:2", "f8:1", "f8:1", "b1", "i8", "i8", "i8", "i8:1")),
@@ -86,13 +87,15 @@ KERNELS: dict[str, tuple[str, str, int | None, tuple[str, ...]]] = {
     "ipm_fin": ("payout_jit", "_build_ipm", 4, ("f8:1", "f8:1", "f8", "f8", "f8", "i8:1", "i8:1") + ("f8:1",) * 9),
     "nearest_vertex": ("nearest_jit", "_build_nearest", None,
                        ("f8:1", "f8:1", "i8:1") + ("f8:1",) * 4 + ("i8", "f8:1", "f8:1", "f8", "f8:1", "i8:1", "b1:1")),
+    "nc_rows": ("numtext_jit", "_build_rows", None,
+                ("i8", "i8:1", "i8:1", "i8:1", "i8:2", "i8:1", "i8:1", "b1:1", "b1:2", "u1:1")),
 }
 
 MISSES: dict[str, int] = {}
 """Calls, by kernel, whose arguments did not match the compiled signature (they ran numba's kernel)."""
 
-_DTYPES = {"f8": np.dtype(np.float64), "i8": np.dtype(np.int64), "b1": np.dtype(np.bool_)}
-_NUMBA_TYPES = {"f8": "float64", "i8": "int64", "b1": "boolean"}
+_DTYPES = {"f8": np.dtype(np.float64), "i8": np.dtype(np.int64), "b1": np.dtype(np.bool_), "u1": np.dtype(np.uint8)}
+_NUMBA_TYPES = {"f8": "float64", "i8": "int64", "b1": "boolean", "u1": "uint8"}
 
 
 def source_stamp(source: str) -> int | None:

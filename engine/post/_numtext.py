@@ -124,8 +124,7 @@ def texts_of_digits(k: np.ndarray, decimals: int, force_point: bool = False) -> 
     k = np.asarray(k, dtype=np.int64).ravel()
     if k.size == 0:
         return []
-    mat, show = digit_matrix(k, decimals, force_point)
-    return join_rows([(mat, show)], k.size)
+    return join_rows([(("digits", k, decimals, force_point), None)], k.size)
 
 
 def join_rows(parts: list[tuple[Any, Any]], n: int) -> list[str]:
@@ -134,6 +133,17 @@ def join_rows(parts: list[tuple[Any, Any]], n: int) -> list[str]:
     or broadcastable to it (a constant word: shape (1, w)), or ``(("digits", k, decimals, force_point),
     shown)`` - the numbers ``k / 10^decimals`` written by :func:`write_digits` where ``shown`` (bool (n,)
     or None for every row)."""
+    from engine.numtext_jit import join_rows as compiled
+
+    fast = compiled(parts, n)   # the same bytes by one compiled loop (engine.numtext_jit), where it applies
+    if fast is not None:
+        return fast
+    return join_rows_reference(parts, n)
+
+
+def join_rows_reference(parts: list[tuple[Any, Any]], n: int) -> list[str]:
+    """:func:`join_rows` by numpy on whole byte matrices (where the compiled loop does not run; its test
+    reference)."""
     widths = [digit_width(c[1], c[2]) if isinstance(c, tuple) else np.shape(c)[-1] for c, _ in parts]
     total = sum(widths) + 1
     chars = np.empty((n, total), np.uint8)
