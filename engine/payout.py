@@ -967,12 +967,14 @@ def _refined(line: Any, mandrel: Any, spec: Any, workspace: Workspace | None, st
 class _EnvCache:
     """The envelope at the line points of the grids solved so far in one :func:`_refined` call (same line,
     mandrel, spec and workspace): each grid point's envelope depends on that point alone, so a refined
-    grid computes it only at its new points (bit for bit the same numbers)."""
+    grid computes it only at its new points (bit for bit the same numbers).  It also carries the last
+    narrowest-band LP's basis to the refined grid's first LP (:func:`_solve_range_stage`)."""
 
     def __init__(self) -> None:
         self.index: NDArray[np.int64] | None = None  # sorted line indices
         self.l_min: FloatArray | None = None
         self.l_max: FloatArray | None = None
+        self.range_basis: _Basis | None = None  # the last narrowest-band LP's basis (_solve_range_stage)
 
     def envelope(self, geo: _Geo, contour: _Contour, clearance: float, l_cap: float,
                  workspace: Workspace | None, state: State | None) -> Envelope:
@@ -1086,11 +1088,16 @@ class _Problem:
             return sp.csr_matrix((0, self.n)), np.zeros(0)
         return sp.vstack(blocks, format="csr"), np.concatenate(rhs)
 
-    def row_keys(self) -> tuple[Any, ...]:
-        """A name for each row of the range LP in :func:`_solve_range_stage`'s order: the 2(n − 1) band
-        rows, the cut rows of :meth:`cut_rows` (family, interval), the cyclic row."""
-        cut = tuple((name, i) for name, rows in self.rows.items() for i in sorted(rows))
-        return tuple(range(2 * (self.n - 1))) + cut + ("cyclic",)
+    def range_keys(self) -> tuple[tuple[Any, ...], tuple[Any, ...]]:
+        """Names of the columns and rows of the range LP in :func:`_solve_range_stage`'s order, by line point
+        (the same names on a refined grid for what it keeps): μ at each grid point, t, T; the band rows of
+        each interval (up: u <= T, down: u >= t), the cut rows of :meth:`cut_rows` (family, interval), the
+        cyclic row."""
+        idx = self.geo.index.tolist()
+        cols = tuple(("mu", i) for i in idx) + ("t", "T")
+        first = idx[:-1]
+        cut = tuple((name, idx[i]) for name, rows in self.rows.items() for i in sorted(rows))
+        return cols, tuple(("up", i) for i in first) + tuple(("down", i) for i in first) + cut + ("cyclic",)
 
     def cyclic_row(self, mu: FloatArray) -> tuple[FloatArray, float]:
         """Row c·μ = e for l_0 = l_{N-1} (exact when both ends have the same geometry)."""
@@ -1152,38 +1159,52 @@ class _LPResult:
 @dataclass
 class _Basis:
     """A simplex basis of an LP: HiGHS's status codes (0 at lower, 1 basic, 2 at upper, 3 zero, 4 nonbasic)
-    of every column and row, and a key naming each row, so that the next LP of a cutting-plane loop (the
-    same columns, the same rows re-linearised, rows added) can start from it (:meth:`for_rows`)."""
+    of every column and row, with a key naming each column and row (:meth:`_Problem.range_keys`), so that
+    the next LP can start from it (:meth:`warm_for`): the next round of a cutting-plane loop (the same
+    columns, the rows re-linearised, rows added) or the first round on a refined grid (columns and rows
+    added between the old ones)."""
 
     cols: NDArray[np.int8]
     rows: NDArray[np.int8]
-    keys: tuple[Any, ...]
+    keys: tuple[Any, ...] = ()
+    col_keys: tuple[Any, ...] = ()
 
-    def for_rows(self, keys: tuple[Any, ...]) -> tuple[NDArray[np.int8], NDArray[np.int8]] | None:
-        """The statuses for an LP with the same columns and rows ``keys``: a kept row keeps its status, a new
-        row is basic (its slack).  None where the result would not have exactly one basic variable per row
-        (a row that left nonbasic): the LP is then solved cold."""
-        if keys == self.keys:
-            return self.cols, self.rows
-        where = {k: i for i, k in enumerate(self.keys)}
-        rows = np.ones(len(keys), dtype=np.int8)
+    def warm_for(self, col_keys: tuple[Any, ...], keys: tuple[Any, ...]
+                 ) -> tuple[NDArray[np.int8], NDArray[np.int8], bool] | None:
+        """The statuses ``(cols, rows, alien)`` for an LP with columns ``col_keys`` and rows ``keys``: a kept
+        column or row keeps its status, a new one is basic (a new row's slack).  With the same columns the
+        result must have exactly one basic variable per row (else None: the LP is solved from scratch);
+        with other columns (a refined grid) it is an *alien* basis, which HiGHS completes to a valid one."""
+        same_cols = col_keys == self.col_keys
+        if same_cols and keys == self.keys:
+            return self.cols, self.rows, False
+        rows = self._map(self.keys, self.rows, keys)
+        if same_cols:
+            if int((self.cols == 1).sum()) + int((rows == 1).sum()) != len(keys):
+                return None
+            return self.cols, rows, False
+        return self._map(self.col_keys, self.cols, col_keys), rows, True
+
+    @staticmethod
+    def _map(old_keys: tuple[Any, ...], old: NDArray[np.int8], keys: tuple[Any, ...]) -> NDArray[np.int8]:
+        where = {k: i for i, k in enumerate(old_keys)}
+        out = np.ones(len(keys), dtype=np.int8)
         for j, k in enumerate(keys):
             i = where.get(k)
             if i is not None:
-                rows[j] = self.rows[i]
-        if int((self.cols == 1).sum()) + int((rows == 1).sum()) != len(keys):
-            return None
-        return self.cols, rows
+                out[j] = old[i]
+        return out
 
 
 def _linprog(c: FloatArray, A_ub: Any, b_ub: FloatArray, A_eq: Any, b_eq: FloatArray,
-             bounds: FloatArray, warm: tuple[NDArray[np.int8], NDArray[np.int8]] | None = None) -> Any:
+             bounds: FloatArray, warm: tuple[NDArray[np.int8], NDArray[np.int8], bool] | None = None) -> Any:
     """``scipy.optimize.linprog(c, A_ub, b_ub, A_eq, b_eq, bounds, method='highs')`` with
     :data:`_LP_OPTIONS`: the same HiGHS model, options and status checks, so the same answer bit for bit
     (tests/test_payout_speed.py), called directly where :func:`_highs_core` has HiGHS at hand.
 
-    ``warm`` (column and row statuses, :meth:`_Basis.for_rows`) starts HiGHS's dual simplex from that basis
-    instead of from scratch; the result then carries its own basis (``basis``, without row keys)."""
+    ``warm`` (column and row statuses and whether the basis is alien, :meth:`_Basis.warm_for`) starts HiGHS's
+    simplex from that basis instead of from scratch; the result then carries its own basis (``basis``,
+    without keys)."""
     core = _highs_core()
     if core is None:
         from scipy.optimize import linprog
@@ -1194,7 +1215,7 @@ def _linprog(c: FloatArray, A_ub: Any, b_ub: FloatArray, A_eq: Any, b_eq: FloatA
 
 
 def _linprog_highs_direct(h: Any, c: FloatArray, A_ub: Any, b_ub: FloatArray, A_eq: Any, b_eq: FloatArray,
-                          bounds: FloatArray, warm: tuple[NDArray[np.int8], NDArray[np.int8]] | None = None
+                          bounds: FloatArray, warm: tuple[NDArray[np.int8], NDArray[np.int8], bool] | None = None
                           ) -> _LPResult:
     """What ``linprog(method='highs')`` does for sparse A_ub/A_eq and an (n, 2) ``bounds`` (SciPy 1.15+:
     ``_clean_inputs``, ``_linprog_highs``, ``_highs_wrapper``, ``_check_result``), step for step; with
@@ -1254,6 +1275,7 @@ def _linprog_highs_direct(h: Any, c: FloatArray, A_ub: Any, b_ub: FloatArray, A_
         basis.col_status = [codes_in[i] for i in warm[0].tolist()]
         basis.row_status = [codes_in[i] for i in warm[1].tolist()]
         basis.valid = True
+        basis.alien = bool(warm[2])
         highs.setBasis(basis)  # refused (kError) if HiGHS finds it singular: it then starts from scratch
     if highs.run() == fail:
         status = highs.getModelStatus()
@@ -1434,12 +1456,16 @@ def _solve_lp_stage(prob: _Problem, kind: str, u_lo: float | None, mu0: FloatArr
 
 
 def _solve_range_stage(prob: _Problem, u_floor: float, mu0: FloatArray, state: State | None, tol: float,
-                       max_iter: int = 40) -> tuple[_Stage, float, float]:
+                       max_iter: int = 40, carry: Any = None) -> tuple[_Stage, float, float]:
     """min (T − t) with t <= u <= T on every interval and t >= ``u_floor``: the narrowest pull-speed band.
 
     The same constraints as (13)/(14) (envelope, cyclicity, no sag, no reverse rotation with the
     cutting-plane loop), so every law the report finds feasible lies in its feasible set and its
     band is never wider.  Returns the stage (value = T − t) and (t, T).
+
+    Every round starts HiGHS from the last optimal basis: the previous round's, or for the first round
+    the one ``carry.range_basis`` holds (the coarser grid's last round, :class:`_EnvCache`); the final
+    basis is left there for the next grid.
     """
     import scipy.sparse as sp
 
@@ -1450,7 +1476,7 @@ def _solve_range_stage(prob: _Problem, u_floor: float, mu0: FloatArray, state: S
     zero = sp.csr_matrix((n - 1, 1))
     x = np.zeros(n + 2)
     it = 0
-    basis: _Basis | None = None
+    basis: _Basis | None = getattr(carry, "range_basis", None)
     while it < max_iter:
         it += 1
         check_cancel(state)
@@ -1467,12 +1493,14 @@ def _solve_range_stage(prob: _Problem, u_floor: float, mu0: FloatArray, state: S
                                   np.append(prob.mu_hi, [np.inf, np.inf])])
         # the rounds differ only in re-linearised and added cut rows: each starts from the last one's
         # optimal basis (a handful of dual simplex steps instead of hundreds from scratch)
-        keys = prob.row_keys()
+        col_keys, keys = prob.range_keys()
         res = _linprog(cost, A, b, A_eq, np.array([e]), bounds,
-                       basis.for_rows(keys) if basis is not None else None)
+                       basis.warm_for(col_keys, keys) if basis is not None else None)
         basis = res.basis if isinstance(res, _LPResult) else None
         if basis is not None:
-            basis.keys = keys
+            basis.keys, basis.col_keys = keys, col_keys
+        if carry is not None:
+            carry.range_basis = basis
         check_cancel(state)
         if res.status == 2:
             raise _diagnose_infeasible(prob)
@@ -2574,7 +2602,7 @@ def _min_range_grid(line: Any, mandrel: Any, spec: Any, workspace: Workspace | N
     # u_min may have a narrower band (pipe.toml: equidistant 3.578 < 3.650); take the narrower one
     mu_band = s14.mu
     band_from = "(13) max min u, then (14) min max u"
-    s_rng, t_rng, T_rng = _solve_range_stage(prob, u_floor, s14.mu, state, tol)
+    s_rng, t_rng, T_rng = _solve_range_stage(prob, u_floor, s14.mu, state, tol, carry=cache)
     scale = max(1.0, abs(s14.value), abs(u13))
     if s_rng.value < (s14.value - u13) - 1e-7 * scale:
         u_lo = t_rng - 1e-7 * max(1.0, abs(t_rng))
