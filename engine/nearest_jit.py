@@ -36,6 +36,10 @@ from numpy.typing import NDArray
 BLOCK = 16
 """Vertices per block (consecutive in z) of the search."""
 
+CHUNK = 8192
+"""Query points per kernel call: an ahead-of-time kernel does not release the GIL, so a long call would
+stall the GUI's thread (its heartbeat test allows 100 ms); a chunk takes ~1-5 ms."""
+
 
 def _build_nearest() -> Any:
     """numba's kernel ``(vz, vr, order, bz0, bz1, br0, br1, block, qz, qr, ub2, d2, j, tie) -> 0`` (see
@@ -173,8 +177,10 @@ class NearestVertex:
         d2 = np.empty(m)
         j = np.empty(m, dtype=np.int64)
         tie = np.empty(m, dtype=np.bool_)
-        self._kernel(self.vz, self.vr, self.order, self.bz0, self.bz1, self.br0, self.br1, BLOCK, qz, qr,
-                     ub * ub, d2, j, tie)
+        for a in range(0, m, CHUNK):  # the kernel holds the GIL: a GUI's thread gets it between chunks
+            b = min(a + CHUNK, m)
+            self._kernel(self.vz, self.vr, self.order, self.bz0, self.bz1, self.br0, self.br1, BLOCK, qz[a:b],
+                         qr[a:b], ub * ub, d2[a:b], j[a:b], tie[a:b])
         d = np.sqrt(d2)
         if tie.any():
             d[tie], j[tie] = self.tree.query(P[tie], distance_upper_bound=ub)

@@ -87,6 +87,10 @@ def _build_rows() -> Any:
     return _rows
 
 
+CHUNK = 8192
+"""Rows per kernel call: an ahead-of-time kernel does not release the GIL, so one call for a whole program
+would stall the GUI's thread; a chunk takes ~2 ms."""
+
 _KERNEL: list[Any] = []
 
 
@@ -153,7 +157,10 @@ def join_rows(parts: list[tuple[Any, Any]], n: int) -> list[str] | None:
     wbytes = np.frombuffer(b"".join(words), np.uint8).astype(np.int64) if woff[-1] else np.zeros(1, np.int64)
     kmat = np.ascontiguousarray(np.stack(krows, axis=1)) if krows else np.zeros((n, 1), np.int64)
     out = np.empty(n * width, np.uint8)
-    length = int(fn(n, kinds, wbytes, woff, kmat, kidx, dec, force, mask, out))
+    length = 0
+    for a in range(0, n, CHUNK):  # the kernel holds the GIL: a GUI's thread gets it between chunks
+        b = min(a + CHUNK, n)
+        length += int(fn(b - a, kinds, wbytes, woff, kmat[a:b], kidx, dec, force, mask[a:b], out[length:]))
     text = out[:length].tobytes().decode("utf-8").split("\n")
     text.pop()
     return text
