@@ -58,7 +58,7 @@ non-geodesic layers, the pipe, the bottle, a laminate; the interpreter included)
 laminate's worker and the parent holding its result fit too.  Not used where the results are
 materialised (:func:`set_results_materialised`: the desktop application's views read whole arrays)."""
 
-REPLICATED_MIN_CIRCUITS = 100
+REPLICATED_MIN_CIRCUITS = 8
 """Circuits (of all repeats of a line together) from which the line is kept as circuit 0 + rule
 (= :data:`engine.periodic.DEFER_MIN_CIRCUITS`; a test keeps them equal)."""
 

@@ -26,8 +26,9 @@ from typing import Any
 import numpy as np
 
 #: circuits from which the winding line keeps its per-point arrays as circuit 0 + rule (:class:`CircuitArray`),
-#: materialised on first use (as :data:`engine.payout.REPLICATE_MIN_CIRCUITS`: every shipped example has fewer)
-DEFER_MIN_CIRCUITS = 100
+#: materialised on first use (as :data:`engine.payout.REPLICATE_MIN_CIRCUITS`; the axes stage replicates from
+#: ``_SHORT_CIRCUITS + 2`` = 5 circuits on)
+DEFER_MIN_CIRCUITS = 8
 
 #: relative tolerance of the periodicity check of the axis path (of 1 + the axis' largest |value|)
 PERIODIC_RTOL = 1e-9

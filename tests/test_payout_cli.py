@@ -136,11 +136,14 @@ def _l_per_circuit_masks(eye1, line) -> np.ndarray:
     return l
 
 
-def test_extend_by_slices_equals_per_circuit_masks(vessel_job) -> None:
-    """The slice form of extend_to_line gives the per-circuit loop's l bit for bit, also when a
-    circuit number comes back after another one (the general fall-back)."""
+def test_extend_by_slices_equals_per_circuit_masks(vessel_job, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The slice form of extend_to_line (point by point, not circuit 0 turned) gives the per-circuit loop's
+    l bit for bit, also when a circuit number comes back after another one (the general fall-back)."""
     from dataclasses import replace
 
+    import engine.payout
+
+    monkeypatch.setattr(engine.payout, "REPLICATE_MIN_CIRCUITS", 10**9)
     job, mandrel, line = vessel_job
     eye1 = payout_for_job(job, line, mandrel)
     assert np.unique(line.circuit).size > 2

@@ -171,10 +171,11 @@ def test_deferred_line_fields_equal_materialised() -> None:
     from engine.winding import PER_POINT_FIELDS
 
     job = load_job(EX / "pressure_vessel.toml")
-    job = job.replace(winding={**job.winding.model_dump(), "circuits": DEFER_MIN_CIRCUITS + 3,
+    job = job.replace(winding={**job.winding.model_dump(), "circuits": max(DEFER_MIN_CIRCUITS, 60) + 3,
                                "points_per_pass": 100})
     line = winding_line_for_job(job, str(EX / "pressure_vessel.toml"))
     nc, m = line.circuits, line.points_per_circuit
+    assert nc > 57
     n = nc * m + 1
     assert all(isinstance(deferred(line, f), CircuitArray) for f in PER_POINT_FIELDS)
     summary = line.summary()
@@ -249,3 +250,33 @@ def test_circuit_array_rows_take_and_patches_equal_materialised(kind: str) -> No
     for a, b in ((0, ca.n), (m - 1, 2 * m + 2), (ca.n - 3, ca.n)):
         assert np.array_equal(ca.rows(a, b), full[a:b])
     assert ca.array() is ca.array() and np.array_equal(ca.array(), full)
+
+
+@pytest.mark.parametrize("name", ["pipe", "bottle"])
+def test_examples_replicated_are_the_same_motion(name: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The shipped examples (28-74 circuits) are computed as circuit 0 turned (REPLICATE_MIN_CIRCUITS and
+    DEFER_MIN_CIRCUITS = 8 since 2026-11-29; 100 before).  Against the point-by-point computation their NC
+    programs are the same motion: every line equal once the feed words are set aside (axis words, blocks,
+    comments), the program time equal to 1e-5 relative (the time law turns the eye path's ~1e-12 round-off
+    into feed words' last digits; docs/speed.md)."""
+    import re
+
+    import engine.payout
+    import engine.periodic
+    from engine.cli import main
+
+    src = EX / f"{name}.toml"
+    assert main(["run", str(src), "-o", str(tmp_path / "rep.ngc"), "--quiet", "-j", "1"]) == 0
+    monkeypatch.setattr(engine.payout, "REPLICATE_MIN_CIRCUITS", 10**9)
+    monkeypatch.setattr(engine.periodic, "DEFER_MIN_CIRCUITS", 10**9)
+    assert main(["run", str(src), "-o", str(tmp_path / "pt.ngc"), "--quiet", "-j", "1"]) == 0
+    rep, pt = ((tmp_path / f).read_text().splitlines() for f in ("rep.ngc", "pt.ngc"))
+
+    def time_s(lines: list[str]) -> float:
+        return float(re.search(r"program time ([0-9.]+) s", "\n".join(lines[:8])).group(1))
+
+    def motion(line: str) -> str:
+        return re.sub(r" F[-0-9.]+", "", re.sub(r"[0-9.]+ s\b", "", line))
+
+    assert len(rep) == len(pt) and [motion(a) for a in rep] == [motion(b) for b in pt]
+    assert time_s(rep) == pytest.approx(time_s(pt), rel=1e-5)
