@@ -174,6 +174,7 @@ def test_repeated_circuit_laws_match_the_whole_program_law(monkeypatch: pytest.M
     rep = run_pipeline(job, path, previous=base, upto="blocks")
     assert rep.timelaw["pieces"] == base.line.circuits and rep.timelaw["laws_computed"] == 3
     monkeypatch.setattr(pl, "_circuit_plan", lambda res, s, X: [(0, s.size - 1)])
+    monkeypatch.setattr(pl, "_periodic_pieces", lambda res: None)   # (a replicated axis path's circuits)
     whole = run_pipeline(job, path, previous=base, upto="blocks")
     assert whole.timelaw["pieces"] == 1 and whole.timelaw["boundary_speed_mm_s"] == 0.0
     t_rep, t_whole = rep.timelaw["total_time_s"], whole.timelaw["total_time_s"]
