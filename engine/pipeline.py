@@ -799,14 +799,14 @@ def _circuit_plan(res: PipelineResult, s: np.ndarray, X: np.ndarray) -> list[tup
     return pieces
 
 
-_BLOCKS_REPLICATE_MIN = 100   # circuits from which the blocks of the repeated circuit are computed once
+_BLOCKS_REPLICATE_MIN = 8   # circuits from which the blocks of the repeated circuit are computed once
+# (100 until 2026-11-29, which kept the shipped examples, 28-74 circuits, approximated as a whole)
 
 
 def _block_pieces(res: PipelineResult, X: np.ndarray | None = None) -> list[tuple[int, int]] | None:
     """The circuits for :func:`engine.blocks.make_blocks`'s replication, when the program has at
     least ``_BLOCKS_REPLICATE_MIN`` circuits and circuits 2 .. n-1 repeat circuit 1 up to a constant
-    mandrel angle only (to 1e-9 relative).  Smaller programs (every shipped example) are approximated
-    as a whole, as before."""
+    mandrel angle only (to 1e-9 relative).  Smaller programs are approximated as a whole."""
     if int(getattr(res.line, "circuits", 1) or 1) < _BLOCKS_REPLICATE_MIN or res.eye is None:
         return None
     periodic = _periodic_pieces(res)

@@ -305,10 +305,11 @@ def test_state_progress(state):
 
 
 def test_blocks_of_repeated_circuits_are_computed_once() -> None:
-    """Issue 16: from 100 circuits on, the blocks of circuits 2 .. n-1 are circuit 2's, replicated (the
-    mandrel angle differs, the eye error does not see it).  Every block still holds the tolerance
-    (measured independently on all points), every middle circuit has the same block pattern, and the
-    program is no longer than the whole-path approximation's (within 0.5 %)."""
+    """Issue 16: from 8 circuits on (100 until 2026-11-29), the blocks of circuits 2 .. n-1 are circuit
+    2's, replicated (the mandrel angle differs, the eye error does not see it).  Every block still holds
+    the tolerance (measured independently on all points), every middle circuit has the same block
+    pattern, and the program is no longer than the whole-path approximation's (within 0.5 %); so on
+    the shipped vessel itself (74 circuits)."""
     from pathlib import Path
 
     from engine.job import load_job
@@ -335,9 +336,18 @@ def test_blocks_of_repeated_circuits_are_computed_once() -> None:
     for a, b in pieces[2:-1]:
         assert np.array_equal(idx[(idx >= a) & (idx <= b)] - a, pat1)
     assert rep.t17.sum() <= whole.t17.sum() * 1.005
-    # the shipped examples (fewer than 100 circuits) are approximated as a whole, as before
-    small = run_pipeline(load_job(path), path, upto="axes")
-    assert _block_pieces(small) is None
+    # the shipped vessel's polar layer (74 circuits at its own points per pass): replicated too, and as good
+    ex = run_pipeline(load_job(path), path, upto="axes")
+    pieces = _block_pieces(ex)
+    assert pieces is not None and len(pieces) == ex.line.circuits == 74
+    rep = make_blocks(ex.machine, ex.axes, tol_mm=0.05, pieces=pieces)
+    whole = make_blocks(ex.machine, ex.axes, tol_mm=0.05)
+    err = _block_errors(ex.machine, dc_replace(ex.axes, circuits=None), np.asarray(rep.index))
+    assert err.max() <= 0.05 * (1 + 1e-9)
+    assert rep.t17.sum() <= whole.t17.sum() * 1.005
+    # below the threshold: approximated as a whole
+    few = job.replace(winding={**job.winding.model_dump(), "circuits": 6})
+    assert _block_pieces(run_pipeline(few, path, upto="axes")) is None
 
 
 def test_time_metric_is_the_17_metric_bit_for_bit():
