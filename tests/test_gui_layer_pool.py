@@ -60,13 +60,15 @@ def test_gui_run_uses_the_pool_and_exports_the_one_process_program(qtbot, tmp_pa
 
 
 def test_gui_cancel_stops_the_pool_workers(qtbot, tmp_path, pooled, monkeypatch: pytest.MonkeyPatch) -> None:
-    # the example vessel at 4x its points per pass: its layers take seconds in a worker, so the cancel
-    # below always meets them computing (at the example's own size a loaded machine could let the first
-    # layer finish - and its worker rightly stay, idle - before the cancel arrives)
+    # the example vessel at 4x its points per pass and payout grid points: its layers take seconds in a
+    # worker, so the cancel below always meets them computing (at the example's own size a loaded machine
+    # could let the first layer finish - and its worker rightly stay, idle - before the cancel arrives;
+    # the points per pass alone no longer do it since a layer computes one circuit and turns it)
     text = (EXAMPLES / "pressure_vessel.toml").read_text()
-    assert "points_per_pass = 2000" in text
+    assert "points_per_pass = 2000" in text and "\n[payout]\n" in text and "grid_points" not in text
     path = tmp_path / "vessel_heavy.toml"
-    path.write_text(text.replace("points_per_pass = 2000", "points_per_pass = 8000"))
+    path.write_text(text.replace("points_per_pass = 2000", "points_per_pass = 8000")
+                    .replace("\n[payout]\n", "\n[payout]\ngrid_points = 4000\n"))
     busy: list[int] = []
     orig = lam._pool_pipeline
 
