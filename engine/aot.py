@@ -207,6 +207,16 @@ def load() -> dict[str, _Guarded]:
     return out
 
 
+def raw_kernels(names: tuple[str, ...], cache: list[Any]) -> tuple[Any, ...] | None:
+    """The ahead-of-time kernels ``names`` without their argument checks (for callers that pass arrays they
+    made), or None where one of them does not run (not built, stale, switched off); remembered in
+    ``cache``, the calling module's list (a test sets it to ``[None]`` to switch the kernels off)."""
+    if not cache:
+        got = load()
+        cache.append(tuple(got[n].fn for n in names) if all(n in got for n in names) else None)
+    return cache[0]
+
+
 def _signature(spec: tuple[str, ...]) -> list[Any]:
     """numba argument types of ``spec``."""
     from numba import types

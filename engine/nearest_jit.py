@@ -122,12 +122,10 @@ _KERNEL: list[Any] = []
 
 def kernel() -> Any | None:
     """The ahead-of-time kernel ``nearest_vertex`` without its argument check, or None where it does not run."""
-    if not _KERNEL:
-        from engine import aot
+    from engine import aot
 
-        got = aot.load().get("nearest_vertex")
-        _KERNEL.append(got.fn if got is not None else None)
-    return _KERNEL[0]
+    got = aot.raw_kernels(("nearest_vertex",), _KERNEL)
+    return None if got is None else got[0]
 
 
 class NearestVertex:

@@ -96,12 +96,10 @@ _KERNEL: list[Any] = []
 
 def kernel() -> Any | None:
     """The ahead-of-time kernel ``nc_rows`` without its argument check, or None where it does not run."""
-    if not _KERNEL:
-        from engine import aot
+    from engine import aot
 
-        got = aot.load().get("nc_rows")
-        _KERNEL.append(got.fn if got is not None else None)
-    return _KERNEL[0]
+    got = aot.raw_kernels(("nc_rows",), _KERNEL)
+    return None if got is None else got[0]
 
 
 def join_rows(parts: list[tuple[Any, Any]], n: int) -> list[str] | None:

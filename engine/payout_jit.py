@@ -449,21 +449,13 @@ def _build_ipm() -> tuple[Any, Any, Any, Any, Any]:
     return _res, _fac, _rhs, _aff, _fin
 
 
-def _load(names: tuple[str, ...], cache: list[Any]) -> tuple[Any, ...] | None:
-    """The ahead-of-time kernels ``names`` without their argument checks, or None where one of them does not
-    run (not built, stale, switched off); remembered in ``cache``."""
-    if not cache:
-        from engine import aot
-
-        got = aot.load()
-        cache.append(tuple(got[n].fn for n in names) if all(n in got for n in names) else None)
-    return cache[0]
-
-
 def kernels() -> tuple[Any, ...] | None:
     """The kernels ``(pre, post, step, newton, edge_mid, edge_upd)`` of :class:`engine.payout._Tube` (its callers
     pass arrays they made: C-contiguous float64, int64 indices), or None: the numpy code runs."""
-    return _load(("tube_pre", "tube_post", "tube_step", "tube_newton", "tube_edge_mid", "tube_edge_upd"), _KERNELS)
+    from engine import aot
+
+    return aot.raw_kernels(("tube_pre", "tube_post", "tube_step", "tube_newton", "tube_edge_mid", "tube_edge_upd"),
+                           _KERNELS)
 
 
 _KERNELS: list[Any] = []
@@ -472,7 +464,9 @@ _KERNELS: list[Any] = []
 def ipm_kernels() -> tuple[Any, ...] | None:
     """The kernels ``(res, fac, rhs, aff, fin)`` of the (15) interior point (:func:`engine.payout._ipm_compiled`
     passes arrays it made), or None: the numpy code runs."""
-    return _load(("ipm_res", "ipm_fac", "ipm_rhs", "ipm_aff", "ipm_fin"), _IPM)
+    from engine import aot
+
+    return aot.raw_kernels(("ipm_res", "ipm_fac", "ipm_rhs", "ipm_aff", "ipm_fin"), _IPM)
 
 
 _IPM: list[Any] = []

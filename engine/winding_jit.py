@@ -85,12 +85,10 @@ _EMPTY = np.zeros(0)
 
 
 def _kernel() -> Any:
-    if not _KERNEL:
-        from engine import aot
+    from engine import aot
 
-        got = aot.load().get("clairaut_rk4")
-        _KERNEL.append(got.fn if got is not None else None)
-    return _KERNEL[0]
+    got = aot.raw_kernels(("clairaut_rk4",), _KERNEL)
+    return None if got is None else got[0]
 
 
 def rk4(grid: Any, i0: int, i1: int, c0: float, lam: float, sens: bool, lo: Any, hi: Any
