@@ -20,7 +20,8 @@ The same answer as the k-d tree:
   are flagged (``tie``) and the caller asks the tree for them (rare: a point exactly midway);
 - ``ub2``: only vertices with a squared distance below it count (the tree's ``distance_upper_bound``,
   strict); none found gives +inf and the index ``n`` (the tree's answer);
-- a query with a NaN or infinite coordinate is flagged too (the tree's answer is used).
+- a query with a NaN or infinite coordinate is flagged too and goes to the tree, which refuses it
+  (``ValueError``) as it always did.
 
 :class:`NearestVertex` is the caller's side: it runs the kernel where it is built (:mod:`engine.aot`; this
 module is one of its sources) and the k-d tree otherwise, built only when first needed.
