@@ -1,6 +1,6 @@
 """Issue 16: `winder run` of the shipped examples and `winder --version`, start-up included.
 
-Run: ``.venv/bin/python benchmarks/bench_examples_run.py [--repeat 5] [--quiet-only]``
+Run: ``.venv/bin/python benchmarks/bench_examples_run.py [--repeat 5]``
 
 Each case runs as a fresh process (``python -m engine ...``, as the ``winder`` script does), the cases
 interleaved, ``--repeat`` times; printed: the medians of wall and CPU time (user + system of the child
