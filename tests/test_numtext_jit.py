@@ -74,7 +74,9 @@ def test_what_the_loop_does_not_take_goes_to_numpy(monkeypatch: pytest.MonkeyPat
     _require()
     n = 5
     k = np.arange(n, dtype=np.int64) * 123 - 200
-    chars, show = nt.digit_matrix(k, 2)
+    chars = np.empty((n, nt.digit_width(k, 2)), np.uint8)    # the numbers as per-row bytes
+    show = np.empty(chars.shape, bool)
+    nt.write_digits(k, 2, False, chars, show)
     assert numtext_jit.join_rows([(chars, show)], n) is None
     assert nt.join_rows([(chars, show)], n) == nt.join_rows_reference([(chars, show)], n)
     for bad in ((("digits", k, 10, False), None), (("digits", k * 10**13, 2, False), None),

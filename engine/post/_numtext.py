@@ -109,18 +109,8 @@ def write_digits(k: np.ndarray, decimals: int, force_point: bool, chars: np.ndar
         show[:, 1 + nint] = force_point
 
 
-def digit_matrix(k: np.ndarray, decimals: int, force_point: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """``(chars, show)`` of :func:`write_digits` as new arrays: ``chars[show]`` row by row is the text."""
-    k = np.asarray(k, dtype=np.int64).ravel()
-    w = digit_width(k, decimals)
-    chars = np.empty((k.size, w), np.uint8)
-    show = np.empty((k.size, w), bool)
-    write_digits(k, decimals, force_point, chars, show)
-    return chars, show
-
-
 def texts_of_digits(k: np.ndarray, decimals: int, force_point: bool = False) -> list[str]:
-    """The text of every ``k / 10^decimals`` as :func:`digit_matrix` writes it, as a list of ``str``."""
+    """The text of every ``k / 10^decimals`` as :func:`write_digits` writes it, as a list of ``str``."""
     k = np.asarray(k, dtype=np.int64).ravel()
     if k.size == 0:
         return []
