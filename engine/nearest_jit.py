@@ -37,9 +37,10 @@ from numpy.typing import NDArray
 BLOCK = 16
 """Vertices per block (consecutive in z) of the search."""
 
-CHUNK = 8192
+CHUNK = 2048
 """Query points per kernel call: an ahead-of-time kernel does not release the GIL, so a long call would
-stall the GUI's thread (its heartbeat test allows 100 ms); a chunk takes ~1-5 ms."""
+stall the GUI's thread (its heartbeat test allows 100 ms; one run with 8 192-point chunks came to 104 ms
+under the CI's load); a chunk takes well under 2 ms."""
 
 
 def _build_nearest() -> Any:
